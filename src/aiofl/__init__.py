@@ -1,0 +1,40 @@
+"""aiofl: ESO-based active input-output feedback linearization (the core of ADRC).
+
+Design, simulate (compiled, batched), score, tune and analyse extended-state-observer
+controllers for nonlinear SISO plants, and reproduce Abdul-Adheem & Ibraheem,
+"On the Active Input-Output Feedback Linearization of Single-Link Flexible Joint
+Manipulator: an Extended State Observer Approach" (arXiv 1805.00222).
+
+Importing :mod:`aiofl` is cheap: numba compiles a plant's kernel on its first simulation.
+"""
+
+from __future__ import annotations
+
+from importlib import import_module
+from typing import Any
+
+__version__ = "0.1.0"
+
+_LAZY = {
+    "Controller": "aiofl.controller",
+    "controller_batch": "aiofl.controller",
+    "Plant": "aiofl.plant",
+    "PlantError": "aiofl.plant",
+    "get_plant": "aiofl.plants",
+    "register_plant": "aiofl.plants",
+    "Reference": "aiofl.scenario",
+    "Scenario": "aiofl.scenario",
+    "simulate": "aiofl.engine",
+    "simulate_batch": "aiofl.engine",
+    "OPIWeights": "aiofl.metrics",
+    "load_config": "aiofl.config",
+    "ConfigError": "aiofl.config",
+}
+
+__all__ = sorted([*_LAZY, "__version__"])
+
+
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(import_module(_LAZY[name]), name)
+    raise AttributeError(f"module 'aiofl' has no attribute {name!r}")

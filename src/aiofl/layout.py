@@ -1,0 +1,122 @@
+"""Flat numeric layout of one closed-loop member, shared by the host and the compiled engine.
+
+The engine runs a *batch* of closed loops; member ``m`` is described by one row of an
+integer array (component kinds, orders) and one row of a float array (every tunable
+number).  Component kinds are data, not code paths chosen in Python, so one compiled
+kernel serves every combination and a GA generation is a single call.
+
+The column names are the public vocabulary for addressing parameters (the tuner, the
+TOML configs and ``Controller.with_values`` all use them), e.g. ``"eso.omega0"``,
+``"eso.alpha3"`` or ``"sef.delta1"``.  Vector parameters are numbered from 1, as in the
+paper.
+"""
+
+from __future__ import annotations
+
+from types import MappingProxyType
+
+RHO_MAX = 8
+"""Largest controller order ρ the engine supports (ESO order ρ+1 ≤ 9)."""
+
+# ----------------------------------------------------------------------------- kinds
+ESO_LINEAR = 0  #: linear ESO, eqs. (5)/(16)
+ESO_IMPROVED = 1  #: improved nonlinear ESO (INLESO), eq. (19)
+ESO_KINDS = MappingProxyType({"linear": ESO_LINEAR, "improved": ESO_IMPROVED})
+
+TD_EXACT = 0  #: analytic reference derivatives (no differentiator)
+TD_HAN = 1  #: Han's nonlinear TD, eq. (18) with the 2R correction
+TD_IMPROVED = 2  #: improved TD (ITD), eq. (21)
+TD_LINEAR = 3  #: linear prefilter of order ρ with poles at -ω_r
+TD_KINDS = MappingProxyType(
+    {"exact": TD_EXACT, "han": TD_HAN, "improved": TD_IMPROVED, "linear": TD_LINEAR}
+)
+
+SEF_NONLINEAR = 0  #: NLSEF with fal, eq. (17)
+SEF_IMPROVED = 1  #: improved NLSEF (INLSEF), eq. (20)
+SEF_LINEAR = 2  #: linear full-state feedback with poles at -ω_c
+SEF_KINDS = MappingProxyType(
+    {"nonlinear": SEF_NONLINEAR, "improved": SEF_IMPROVED, "linear": SEF_LINEAR}
+)
+
+LAW_AIOFL = 0  #: u = v - ξ̂_{ρ+1}/b0, eq. (14)
+LAW_IOFL = 1  #: classical model-based IOFL, u = (-α(x) + v)/β(x)
+LAW_KINDS = MappingProxyType({"aiofl": LAW_AIOFL, "iofl": LAW_IOFL})
+
+REF_SINE = 0  #: r = A sin(ω t + φ) + offset
+REF_STEP = 1  #: r = offset + A·1(t ≥ t_step)
+REF_SAMPLES = 2  #: user samples on a uniform grid, linear interpolation
+REF_KINDS = MappingProxyType({"sine": REF_SINE, "step": REF_STEP, "samples": REF_SAMPLES})
+
+METHOD_RK4 = 0
+METHOD_EULER = 1
+METHODS = MappingProxyType({"rk4": METHOD_RK4, "euler": METHOD_EULER})
+
+STATUS_OK = 0
+STATUS_DIVERGED = 1
+
+# --------------------------------------------------------------------- integer row
+I_ESO, I_TD, I_SEF, I_LAW, I_RHO, I_NFB = range(6)
+N_INT = 6
+INT_NAMES = ("eso.kind", "td.kind", "sef.kind", "law.kind", "rho", "sef.n_feedback")
+
+
+def _float_columns() -> dict[str, int]:
+    names: list[str] = ["law.b0", "law.u_max", "eso.omega0"]
+    names += [f"eso.alpha{i}" for i in range(1, RHO_MAX + 2)]
+    names += ["eso.k_alpha", "eso.k_beta", "eso.g_alpha", "eso.g_beta"]
+    names += ["td.R", "td.a", "td.b", "td.c", "td.rho", "td.omega"]
+    for vec in ("k", "alpha", "delta", "kb", "mu"):
+        names += [f"sef.{vec}{i}" for i in range(1, RHO_MAX + 1)]
+    names += ["sef.v_limit", "sef.omega_c"]
+    return {name: i for i, name in enumerate(names)}
+
+
+FLOAT_COLUMNS: MappingProxyType[str, int] = MappingProxyType(_float_columns())
+"""Column index of every float parameter, by name."""
+N_FLOAT = len(FLOAT_COLUMNS)
+
+F_B0 = FLOAT_COLUMNS["law.b0"]
+F_UMAX = FLOAT_COLUMNS["law.u_max"]
+F_OMEGA0 = FLOAT_COLUMNS["eso.omega0"]
+F_ALPHA = FLOAT_COLUMNS["eso.alpha1"]
+F_KA = FLOAT_COLUMNS["eso.k_alpha"]
+F_KB = FLOAT_COLUMNS["eso.k_beta"]
+F_EA = FLOAT_COLUMNS["eso.g_alpha"]
+F_EB = FLOAT_COLUMNS["eso.g_beta"]
+F_TD_R = FLOAT_COLUMNS["td.R"]
+F_TD_A = FLOAT_COLUMNS["td.a"]
+F_TD_B = FLOAT_COLUMNS["td.b"]
+F_TD_C = FLOAT_COLUMNS["td.c"]
+F_TD_RHO = FLOAT_COLUMNS["td.rho"]
+F_TD_OMEGA = FLOAT_COLUMNS["td.omega"]
+F_SEF_K = FLOAT_COLUMNS["sef.k1"]
+F_SEF_ALPHA = FLOAT_COLUMNS["sef.alpha1"]
+F_SEF_DELTA = FLOAT_COLUMNS["sef.delta1"]
+F_SEF_KB = FLOAT_COLUMNS["sef.kb1"]
+F_SEF_MU = FLOAT_COLUMNS["sef.mu1"]
+F_SEF_DOUT = FLOAT_COLUMNS["sef.v_limit"]
+F_SEF_OMEGA_C = FLOAT_COLUMNS["sef.omega_c"]
+
+# ------------------------------------------------------------------- scenario row
+S_REF_KIND, S_REF_A, S_REF_OMEGA, S_REF_PHASE, S_REF_OFFSET, S_REF_TSTEP = range(6)
+S_DIST_AMP, S_DIST_TIME, S_PCHANGE_TIME, S_NOISE_STD, S_NOISE_HOLD = range(6, 11)
+S_REF_DT = 11  # sample spacing of a REF_SAMPLES reference
+N_SCEN = 12
+
+# ------------------------------------------------------------------ metric columns
+METRIC_NAMES = ("itae", "iae", "ise", "isu", "iau")
+M_ITAE, M_IAE, M_ISE, M_ISU, M_IAU = range(5)
+N_METRIC = len(METRIC_NAMES)
+
+
+def trajectory_columns(n_states: int) -> tuple[str, ...]:
+    """Names of the columns the engine stores per saved time point.
+
+    ``t, r, y, y_meas, u, d`` then the plant state ``x1..xn``, the observer state
+    ``xi_hat1..xi_hat{ρmax+1}`` and the differentiator state ``r1..r{ρmax}``.
+    """
+    cols = ["t", "r", "y", "y_meas", "u", "d"]
+    cols += [f"x{i}" for i in range(1, n_states + 1)]
+    cols += [f"xi_hat{i}" for i in range(1, RHO_MAX + 2)]
+    cols += [f"r{i}" for i in range(1, RHO_MAX + 1)]
+    return tuple(cols)

@@ -1,0 +1,137 @@
+"""Simulation scenarios as data: reference, disturbance, plant change, measurement noise.
+
+The paper's three scenarios (Section V) are instances of :class:`Scenario`:
+
+1. nominal tracking of :math:`r = \\tfrac{\\pi}{4}\\sin 2t` for 20 s;
+2. the same with a 0.5 N·m step load torque at t = 10 s and :math:`J_l \\times 1.4` in the
+   plant only (the controller is not told);
+3. the nominal case with Gaussian output noise of variance :math:`10^{-4}`, held over a
+   sample time (1 ms by default, not stated in the paper), seeded.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from types import MappingProxyType
+
+import numpy as np
+from numpy.typing import NDArray
+
+from aiofl import layout as L
+
+__all__ = ["Reference", "Scenario", "noise_sequence"]
+
+
+@dataclass(frozen=True)
+class Reference:
+    r"""The reference signal r(t).
+
+    ``kind="sine"``: :math:`r = A\sin(\omega t + \varphi) + r_0`;
+    ``kind="step"``: :math:`r = r_0 + A\cdot 1(t \ge t_{step})`;
+    ``kind="samples"``: linear interpolation of ``samples`` spaced ``sample_dt`` apart
+    (held at the last value).
+    """
+
+    kind: str = "sine"
+    amplitude: float = float(np.pi / 4)
+    omega: float = 2.0
+    phase: float = 0.0
+    offset: float = 0.0
+    t_step: float = 0.0
+    samples: tuple[float, ...] = ()
+    sample_dt: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.kind not in L.REF_KINDS:
+            raise ValueError(f"reference.kind = {self.kind!r}; allowed: {', '.join(L.REF_KINDS)}")
+        if self.kind == "samples" and (len(self.samples) < 2 or not self.sample_dt > 0):
+            raise ValueError(
+                "reference.samples needs at least 2 values and reference.sample_dt > 0"
+            )
+        object.__setattr__(self, "samples", tuple(float(s) for s in self.samples))
+
+    def evaluate(self, t: NDArray[np.float64] | float) -> NDArray[np.float64]:
+        """r(t), vectorised (the same formula the engine uses)."""
+        t = np.asarray(t, dtype=np.float64)
+        if self.kind == "sine":
+            return self.amplitude * np.sin(self.omega * t + self.phase) + self.offset
+        if self.kind == "step":
+            return self.offset + self.amplitude * (t >= self.t_step)
+        grid = np.arange(len(self.samples)) * self.sample_dt
+        return np.interp(t, grid, np.asarray(self.samples))
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """Everything about a run that is not the controller.
+
+    Parameters
+    ----------
+    name
+        Label.
+    reference
+        The reference r(t).
+    t_final
+        Horizon [s].
+    disturbance_amplitude, disturbance_time
+        Step input disturbance :math:`\\tau_d` through :math:`b_d` (N·m for the SLFJM).
+    plant_scale, plant_overrides
+        Changes to the *true* plant's parameters (e.g. ``{"J_l": 1.4}``), effective from
+        ``parameter_change_time``; the controller's nominal model is not changed.
+    noise_variance, noise_hold, noise_seed
+        Gaussian output noise, held constant over ``noise_hold`` seconds, seeded.
+    x0
+        Initial plant state (zeros if empty).
+    """
+
+    name: str = "custom"
+    reference: Reference = field(default_factory=Reference)
+    t_final: float = 20.0
+    disturbance_amplitude: float = 0.0
+    disturbance_time: float = 0.0
+    plant_scale: Mapping[str, float] = field(default_factory=dict)
+    plant_overrides: Mapping[str, float] = field(default_factory=dict)
+    parameter_change_time: float = 0.0
+    noise_variance: float = 0.0
+    noise_hold: float = 1e-3
+    noise_seed: int = 0
+    x0: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        if not self.t_final > 0:
+            raise ValueError(f"scenario.t_final = {self.t_final}; allowed: > 0")
+        if self.noise_variance < 0:
+            raise ValueError(f"scenario.noise_variance = {self.noise_variance}; allowed: >= 0")
+        if not self.noise_hold > 0:
+            raise ValueError(f"scenario.noise_hold = {self.noise_hold}; allowed: > 0")
+        object.__setattr__(self, "plant_scale", MappingProxyType(dict(self.plant_scale)))
+        object.__setattr__(self, "plant_overrides", MappingProxyType(dict(self.plant_overrides)))
+        object.__setattr__(self, "x0", tuple(float(v) for v in self.x0))
+
+    def row(self) -> NDArray[np.float64]:
+        """The engine's scenario row (:mod:`aiofl.layout` ``S_*`` columns)."""
+        ref = self.reference
+        row = np.zeros(L.N_SCEN)
+        row[L.S_REF_KIND] = L.REF_KINDS[ref.kind]
+        row[L.S_REF_A] = ref.amplitude
+        row[L.S_REF_OMEGA] = ref.omega
+        row[L.S_REF_PHASE] = ref.phase
+        row[L.S_REF_OFFSET] = ref.offset
+        row[L.S_REF_TSTEP] = ref.t_step
+        row[L.S_REF_DT] = ref.sample_dt
+        row[L.S_DIST_AMP] = self.disturbance_amplitude
+        row[L.S_DIST_TIME] = self.disturbance_time
+        row[L.S_PCHANGE_TIME] = self.parameter_change_time
+        row[L.S_NOISE_STD] = np.sqrt(self.noise_variance)
+        row[L.S_NOISE_HOLD] = self.noise_hold
+        return row
+
+
+def noise_sequence(seed: int, n: int) -> NDArray[np.float64]:
+    """``n`` standard normal samples from ``numpy.random.default_rng(seed)``.
+
+    The engine scales them by the scenario's standard deviation and holds sample k over
+    ``[k·hold, (k+1)·hold)``; the same seed always gives the same noise.
+    """
+    return np.random.default_rng(seed).standard_normal(n)
