@@ -1,0 +1,284 @@
+"""The ``aiofl`` command line (typer + rich).
+
+Commands
+--------
+``aiofl presets``
+    List the shipped presets.
+``aiofl show NAME``
+    Print a preset's TOML verbatim (copy it, edit it, pass the file to ``simulate``).
+``aiofl simulate CONFIG.toml|PRESET --out DIR``
+    One run: ``DIR/metrics.json``, ``DIR/trajectory.csv``, ``DIR/figure.png``.
+``aiofl reproduce --out DIR``
+    The paper's Tables I–III and Figures 3–5, and a self-contained HTML report.
+
+Bad input (a malformed or invalid config, an unknown preset, a missing file) prints one
+clear message to stderr and exits with status 2; nothing is written to ``DIR``.  Heavy
+modules (numba, matplotlib) are imported inside the commands so ``aiofl --help`` is fast.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+__all__ = ["app", "main"]
+
+app = typer.Typer(
+    name="aiofl",
+    help="ESO-based active input-output feedback linearization (ADRC): simulate, "
+    "reproduce the paper, tune, analyse.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+)
+
+EXIT_BAD_INPUT = 2
+
+
+def _input_errors() -> tuple[type[BaseException], ...]:
+    import tomllib
+
+    from aiofl.config import ConfigError
+    from aiofl.plant import PlantError
+
+    return (ConfigError, PlantError, ValueError, FileNotFoundError, tomllib.TOMLDecodeError)
+
+
+@contextmanager
+def bad_input_exits() -> Iterator[None]:
+    """Turn bad-input exceptions into one message on stderr and exit status 2."""
+    try:
+        yield
+    except _input_errors() as exc:
+        msg = str(exc).strip() or type(exc).__name__
+        typer.echo(f"aiofl: error: {msg}", err=True)
+        raise typer.Exit(EXIT_BAD_INPUT) from None
+
+
+def _stderr_console() -> Any:
+    from rich.console import Console
+
+    return Console(stderr=True)
+
+
+# ---------------------------------------------------------------------------- presets
+@app.command("presets")
+def presets_command() -> None:
+    """List the shipped presets (name and description)."""
+    import tomllib
+
+    from rich.console import Console
+    from rich.table import Table
+
+    from aiofl.config import list_presets, preset_text
+
+    table = Table(title="aiofl presets", show_lines=False)
+    table.add_column("name", style="bold cyan", no_wrap=True)
+    table.add_column("description")
+    for name in list_presets():
+        try:
+            desc = str(tomllib.loads(preset_text(name)).get("description", ""))
+        except tomllib.TOMLDecodeError:
+            desc = "(malformed TOML)"
+        table.add_row(name, desc)
+    Console().print(table)
+
+
+@app.command("show")
+def show_command(
+    name: Annotated[str, typer.Argument(help="Preset name, e.g. paper-s1-leso.")],
+) -> None:
+    """Print a preset's TOML verbatim, to copy and edit."""
+    from aiofl.config import preset_text
+
+    with bad_input_exits():
+        text = preset_text(name)
+    sys.stdout.write(text if text.endswith("\n") else text + "\n")
+
+
+# --------------------------------------------------------------------------- simulate
+def _trajectory_columns(result: Any, cfg: Any) -> list[str]:
+    """Signals written to trajectory.csv: t, r, y, y_meas, u, d, the plant state, and the
+    observer / differentiator states the controller actually uses."""
+    c = cfg.controller
+    n_td = 2 if c.td in ("han", "improved") else c.rho
+    cols = ["t", "r", "y", "y_meas", "u", "d"]
+    cols += [f"x{i}" for i in range(1, cfg.plant.n_states + 1)]
+    cols += [f"xi_hat{i}" for i in range(1, c.rho + 2)]
+    cols += [f"r{i}" for i in range(1, n_td + 1)]
+    return [col for col in cols if col == "t" or col in result.signals]
+
+
+def _csv_text(result: Any, columns: list[str]) -> str:
+    import io
+
+    import numpy as np
+
+    data = np.column_stack([result.t if c == "t" else result.signals[c] for c in columns])
+    buf = io.StringIO()
+    np.savetxt(buf, data, delimiter=",", header=",".join(columns), comments="", fmt="%.10g")
+    return buf.getvalue()
+
+
+def simulation_record(cfg: Any, result: Any, source_name: str) -> dict[str, Any]:
+    """The metrics.json record of ``aiofl simulate`` (keys as in reproduce's records).
+
+    ``scenario`` is the paper scenario number when the preset or config name encodes it
+    (``paper-s2-leso`` -> 2), else null; ``scenario_name`` is always the config's
+    ``[scenario] name``.  ``source`` is ``"config"``.
+    """
+    from aiofl.reproduce import computed_record, scenario_number
+
+    number = scenario_number(cfg.name) or scenario_number(Path(source_name).stem)
+    rec = computed_record(
+        result,
+        scenario=number,
+        structure=cfg.controller.structure,
+        source="config",
+        opi=result.opi(cfg.weights),
+        extra=True,
+    )
+    rec["scenario_name"] = cfg.scenario.name
+    rec["config"] = cfg.name
+    return rec
+
+
+@app.command("simulate")
+def simulate_command(
+    config: Annotated[str, typer.Argument(help="A TOML config file or a preset name.")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output directory.")],
+    dt: Annotated[
+        float | None, typer.Option(help="Override the fixed step [s] (0 < dt <= 0.1).")
+    ] = None,
+    method: Annotated[
+        str | None, typer.Option(help="Override the integrator: rk4 or euler.")
+    ] = None,
+) -> None:
+    """Simulate one config: metrics.json, trajectory.csv and figure.png in OUT.
+
+    A run that diverges is reported as diverged with the time (metrics null); it is not
+    an error.
+    """
+    import json
+    from dataclasses import replace
+
+    from aiofl.config import ConfigError, load_config
+    from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
+
+    console = _stderr_console()
+    with bad_input_exits():
+        cfg = load_config(config)
+        if dt is not None:
+            if not 0 < dt <= 0.1:
+                raise ConfigError(f"--dt = {dt}; allowed: 0 < dt <= 0.1 s")
+            cfg = replace(cfg, dt=dt)
+        if method is not None:
+            if method not in ("rk4", "euler"):
+                raise ConfigError(f"--method = {method!r}; allowed: rk4, euler")
+            cfg = replace(cfg, method=method)
+        with atomic_output_dir(out) as stage:
+            with console.status(f"simulating {cfg.name} (first run compiles the kernel)"):
+                result = cfg.simulate(store=True)
+            record = simulation_record(cfg, result, config)
+            atomic_write_text(stage / "metrics.json", json.dumps(record, indent=2) + "\n")
+            atomic_write_text(
+                stage / "trajectory.csv", _csv_text(result, _trajectory_columns(result, cfg))
+            )
+            from aiofl.figures import figure_png, result_figure
+
+            title = f"{cfg.name}: output vs reference and control signal"
+            fig = result_figure(
+                result,
+                title,
+                cfg.scenario.t_final,
+                cfg.controller.structure,
+                cfg.scenario.reference.evaluate,
+            )
+            atomic_write_bytes(stage / "figure.png", figure_png(fig))
+    _print_records([record], title=f"aiofl simulate {config}")
+    typer.echo(f"wrote {out}/metrics.json, trajectory.csv, figure.png")
+
+
+# -------------------------------------------------------------------------- reproduce
+def _short(x: float | None) -> str:
+    """4 significant digits, compact exponent (1.205e5), dash for None."""
+    from aiofl.report import fmt
+
+    return fmt(x, 4).replace("e+0", "e").replace("e-0", "e-").replace("e+", "e")
+
+
+def _print_records(records: list[dict[str, Any]], title: str) -> None:
+    from rich import box
+    from rich.console import Console
+    from rich.table import Table
+
+    table = Table(title=title, box=box.SIMPLE_HEAD, padding=(0, 1), collapse_padding=True)
+    for col in ("#", "structure", "source", "ITAE", "ISU", "IAU", "OPI", "status"):
+        table.add_column(col, justify="right" if col.isupper() else "left", no_wrap=True)
+    for r in records:
+        status = f"[red]diverged {r['diverged_at']:.2f} s[/red]" if r["diverged"] else "ok"
+        table.add_row(
+            str(r["scenario"]) if r["scenario"] is not None else "—",
+            str(r["structure"]),
+            str(r["source"]),
+            *(_short(r[k]) for k in ("itae", "isu", "iau", "opi")),
+            status,
+        )
+    Console().print(table)
+
+
+@app.command("reproduce")
+def reproduce_command(
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output directory.")] = Path("results"),
+) -> None:
+    """Reproduce the paper: Tables I–III, Figures 3–5 and report.html in OUT.
+
+    Runs the six paper cases (3 scenarios × LESO/INLESO, printed parameters) and any
+    shipped retuned-s*-* / iofl-s* presets, batched.  Writes metrics.json, tables.md,
+    fig3.png, fig4.png, fig5.png and report.html.
+    """
+    import time
+
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    from aiofl.reproduce import reproduce
+
+    t0 = time.perf_counter()
+    progress = Progress(
+        SpinnerColumn(),
+        TextColumn("{task.description}"),
+        TimeElapsedColumn(),
+        console=_stderr_console(),
+        transient=False,
+    )
+    with bad_input_exits(), progress:
+        task = progress.add_task("starting", total=None)
+        last: list[str] = []
+
+        def on_stage(msg: str) -> None:
+            if last:
+                progress.console.print(f"  [green]✓[/green] {last[-1]}")
+            last.append(msg)
+            progress.update(task, description=msg)
+
+        rep = reproduce(out, on_stage=on_stage)
+        on_stage("done")
+        progress.remove_task(task)
+    _print_records(rep.records, title="aiofl reproduce: paper vs computed")
+    typer.echo(
+        f"wrote {out}/metrics.json, tables.md, fig3.png, fig4.png, fig5.png, report.html "
+        f"in {time.perf_counter() - t0:.1f} s"
+    )
+
+
+def main() -> None:
+    """Entry point of the ``aiofl`` console script."""
+    app()
+
+
+# --- feature commands ---
