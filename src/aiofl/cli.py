@@ -128,13 +128,15 @@ def _csv_text(result: Any, columns: list[str]) -> str:
 def simulation_record(cfg: Any, result: Any, source_name: str) -> dict[str, Any]:
     """The metrics.json record of ``aiofl simulate`` (keys as in reproduce's records).
 
-    ``scenario`` is the paper scenario number when the preset or config name encodes it
-    (``paper-s2-leso`` -> 2), else null; ``scenario_name`` is always the config's
-    ``[scenario] name``.  ``source`` is ``"config"``.
+    ``scenario`` is the paper scenario number when a shipped preset was run whose name
+    encodes it (``paper-s2-leso`` -> 2), and null for a config file (its scenario may have
+    been edited); ``scenario_name`` is always the config's ``[scenario] name``.
+    ``source`` is ``"config"``.
     """
+    from aiofl.config import list_presets
     from aiofl.reproduce import computed_record, scenario_number
 
-    number = scenario_number(cfg.name) or scenario_number(Path(source_name).stem)
+    number = scenario_number(source_name) if source_name in list_presets() else None
     rec = computed_record(
         result,
         scenario=number,
@@ -281,4 +283,16 @@ def main() -> None:
     app()
 
 
+def register_feature(name: str, target: str) -> None:
+    """Add feature command ``name`` from ``"module:function"`` (one line per feature below).
+
+    The module is imported now, so it must keep its heavy imports inside the function.
+    """
+    from importlib import import_module
+
+    module, func = target.split(":")
+    app.command(name)(getattr(import_module(module), func))
+
+
 # --- feature commands ---
+register_feature("tune", "aiofl.tuning:tune_command")

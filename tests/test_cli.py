@@ -1,0 +1,192 @@
+"""The ``aiofl`` command line: presets, show, simulate and bad-input handling."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from aiofl.cli import app
+from aiofl.config import list_presets, load_config, parse_config, preset_text
+
+runner = CliRunner()
+PAPER_PRESETS = [f"paper-s{s}-{k}" for s in (1, 2, 3) for k in ("leso", "inleso")]
+
+
+def _leftovers(parent: Path, name: str) -> list[Path]:
+    """The output directory and any staging directory left next to it."""
+    return [p for p in parent.iterdir() if p.name == name or p.name.startswith(f".{name}.")]
+
+
+# --------------------------------------------------------------------------- basics
+def test_importing_the_cli_does_not_import_heavy_modules() -> None:
+    code = (
+        "import sys, aiofl.cli; "
+        "print([m for m in ('numba', 'matplotlib', 'scipy', 'pymoo', 'dask', 'sympy') "
+        "if m in sys.modules])"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+def test_help_lists_the_commands() -> None:
+    res = runner.invoke(app, ["--help"])
+    assert res.exit_code == 0
+    for cmd in ("presets", "show", "simulate", "reproduce"):
+        assert cmd in res.stdout
+
+
+def test_presets_lists_every_shipped_preset() -> None:
+    res = runner.invoke(app, ["presets"], env={"COLUMNS": "200"})
+    assert res.exit_code == 0
+    for name in list_presets():
+        assert name in res.stdout
+    assert set(PAPER_PRESETS) <= set(list_presets())
+
+
+@pytest.mark.parametrize("name", list_presets())
+def test_show_prints_the_toml_verbatim_and_it_round_trips(name: str) -> None:
+    res = runner.invoke(app, ["show", name])
+    assert res.exit_code == 0
+    assert res.stdout.rstrip("\n") == preset_text(name).rstrip("\n")
+    shown = parse_config(tomllib.loads(res.stdout), "shown")
+    loaded = load_config(name)
+    assert shown.raw == loaded.raw
+    assert dict(shown.controller.values) == dict(loaded.controller.values)
+    assert shown.scenario == loaded.scenario
+    assert (shown.dt, shown.method, shown.weights) == (loaded.dt, loaded.method, loaded.weights)
+
+
+def test_show_unknown_preset_exits_2_and_names_it() -> None:
+    res = runner.invoke(app, ["show", "no-such-preset"])
+    assert res.exit_code == 2
+    assert "no-such-preset" in res.stderr
+    assert "Traceback" not in res.stderr + res.stdout
+
+
+# ----------------------------------------------------------------------- bad inputs
+BAD_CONFIGS = {
+    "malformed": ('name = "x"\n[scenario\n', "malformed TOML"),
+    "unknown_key": ('name = "x"\ncolour = "red"\n', "colour"),
+    "negative_omega0": ("[controller.eso]\nomega0 = -1\n", "controller.eso.omega0"),
+    "x0_length": ("[scenario]\nx0 = [0.1, 0.2]\n", "scenario.x0"),
+    "bad_dt": ("[simulation]\ndt = 0.5\n", "simulation.dt"),
+}
+
+
+@pytest.mark.parametrize("case", sorted(BAD_CONFIGS))
+def test_bad_config_exits_2_names_the_field_and_writes_nothing(tmp_path: Path, case: str) -> None:
+    text, field = BAD_CONFIGS[case]
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text(text)
+    res = runner.invoke(app, ["simulate", str(cfg), "--out", str(tmp_path / "out")])
+    assert res.exit_code == 2
+    assert field in res.stderr
+    assert "Traceback" not in res.stderr + res.stdout
+    assert _leftovers(tmp_path, "out") == []
+
+
+@pytest.mark.parametrize(
+    ("args", "field"),
+    [
+        (["no-such-preset"], "no-such-preset"),
+        (["missing.toml"], "missing.toml"),
+        (["paper-s1-leso", "--dt", "-1"], "--dt"),
+        (["paper-s1-leso", "--method", "rk45"], "--method"),
+    ],
+)
+def test_bad_arguments_exit_2_and_write_nothing(
+    tmp_path: Path, args: list[str], field: str
+) -> None:
+    res = runner.invoke(app, ["simulate", *args, "--out", str(tmp_path / "out")])
+    assert res.exit_code == 2
+    assert field in res.stderr
+    assert _leftovers(tmp_path, "out") == []
+
+
+def test_bad_input_in_a_fresh_process_has_no_traceback(tmp_path: Path) -> None:
+    cfg = tmp_path / "bad.toml"
+    cfg.write_text("[controller.eso]\nomega0 = -1\n")
+    cmd = [sys.executable, "-c", "from aiofl.cli import main; main()", "simulate", str(cfg)]
+    out = subprocess.run(
+        [*cmd, "--out", str(tmp_path / "o")],
+        capture_output=True,
+        text=True,
+    )
+    assert out.returncode == 2
+    assert "Traceback" not in out.stderr
+    assert "controller.eso.omega0" in out.stderr
+
+
+# ------------------------------------------------------------------------- simulate
+@pytest.mark.slow
+def test_simulate_writes_the_engines_metrics(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    res = runner.invoke(app, ["simulate", "paper-s1-inleso", "--out", str(out)])
+    assert res.exit_code == 0, res.stderr
+    rec = json.loads((out / "metrics.json").read_text())
+    direct = load_config("paper-s1-inleso").simulate(store=False)
+    assert direct.metrics is not None
+    for key in ("itae", "isu", "iau", "iae", "ise"):
+        assert rec[key] == direct.metrics[key]
+    assert rec["opi"] == pytest.approx(
+        0.6 * direct.metrics["itae"] / 10
+        + 0.2 * direct.metrics["isu"] / 2
+        + 0.6 * direct.metrics["iau"] / 2.7,
+        rel=1e-12,
+    )
+    assert rec["scenario"] == 1
+    assert rec["scenario_name"] == "nominal"
+    assert (rec["structure"], rec["source"], rec["diverged"], rec["diverged_at"]) == (
+        "INLESO",
+        "config",
+        False,
+        None,
+    )
+    # trajectory: the used observer states (rho + 1 = 5) and TD states (the ITD has 2)
+    header = (out / "trajectory.csv").read_text().splitlines()[0].split(",")
+    assert header[:6] == ["t", "r", "y", "y_meas", "u", "d"]
+    assert [c for c in header if c.startswith("xi_hat")] == [f"xi_hat{i}" for i in range(1, 6)]
+    assert [c for c in header if c[0] == "r" and c[1:].isdigit()] == ["r1", "r2"]
+    data = np.loadtxt(out / "trajectory.csv", delimiter=",", skiprows=1)
+    assert data[-1, 0] == pytest.approx(20.0)
+    assert np.allclose(data[:, 1], np.pi / 4 * np.sin(2 * data[:, 0]))
+    assert (out / "figure.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.slow
+def test_simulate_reports_divergence_with_time_and_null_metrics(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    res = runner.invoke(app, ["simulate", "paper-s1-leso", "--out", str(out)])
+    assert res.exit_code == 0, res.stderr
+    text = (out / "metrics.json").read_text()
+    assert "NaN" not in text and "Infinity" not in text
+    rec = json.loads(text)
+    assert rec["diverged"] is True
+    assert rec["diverged_at"] == pytest.approx(12.42, abs=0.01)
+    for key in ("itae", "isu", "iau", "opi", "iae", "ise"):
+        assert rec[key] is None
+    data = np.loadtxt(out / "trajectory.csv", delimiter=",", skiprows=1)
+    assert data[-1, 0] <= rec["diverged_at"]
+    assert np.isfinite(data).all()
+    assert (out / "figure.png").exists()
+
+
+@pytest.mark.slow
+def test_simulate_dt_override_is_used(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    cfg = tmp_path / "short.toml"
+    text = preset_text("paper-s1-inleso").replace("t_final = 20.0", "t_final = 1.0")
+    cfg.write_text(text)
+    res = runner.invoke(app, ["simulate", str(cfg), "--out", str(out), "--dt", "2e-4"])
+    assert res.exit_code == 0, res.stderr
+    t = np.loadtxt(out / "trajectory.csv", delimiter=",", skiprows=1, usecols=0)
+    assert np.allclose(np.diff(t), 10 * 2e-4)  # decimation 10 of the preset
+    rec = json.loads((out / "metrics.json").read_text())
+    assert rec["scenario"] is None  # a custom file whose name encodes no paper scenario
