@@ -191,7 +191,7 @@ def simulate_command(
             atomic_write_text(
                 stage / "trajectory.csv", _csv_text(result, _trajectory_columns(result, cfg))
             )
-            from aiofl.figures import figure_png, result_figure
+            from aiofl.figures import figure_png, result_figure, scenario_events
 
             title = f"{cfg.name}: output vs reference and control signal"
             fig = result_figure(
@@ -200,6 +200,7 @@ def simulate_command(
                 cfg.scenario.t_final,
                 cfg.controller.structure,
                 cfg.scenario.reference.evaluate,
+                scenario_events(cfg.scenario),
             )
             atomic_write_bytes(stage / "figure.png", figure_png(fig))
     _print_records([record], title=f"aiofl simulate {config}")

@@ -25,8 +25,16 @@ if TYPE_CHECKING:
 
     from aiofl.engine import SimulationResult
     from aiofl.reproduce import Reproduction
+    from aiofl.scenario import Scenario
 
-__all__ = ["Panel", "figure_png", "result_figure", "runs_figure", "scenario_figure"]
+__all__ = [
+    "Panel",
+    "figure_png",
+    "result_figure",
+    "runs_figure",
+    "scenario_events",
+    "scenario_figure",
+]
 
 COLORS = {"LESO": "#1f77b4", "INLESO": "#d62728", "LADRC": "#2ca02c", "IOFL": "#9467bd"}
 _FALLBACK = ("#ff7f0e", "#8c564b", "#e377c2", "#17becf")
@@ -35,13 +43,15 @@ _FALLBACK = ("#ff7f0e", "#8c564b", "#e377c2", "#17becf")
 @dataclass(frozen=True)
 class Panel:
     """One row of a figure: a label, the run, a line colour, the horizon [s] and
-    optionally r(t), drawn over the whole horizon even when the run stopped early."""
+    optionally r(t), drawn over the whole horizon even when the run stopped early, and
+    scenario events ``(time, label)`` marked on both panels."""
 
     label: str
     result: SimulationResult
     color: str
     t_final: float
     reference: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None
+    events: tuple[tuple[float, str], ...] = ()
 
 
 def _color(structure: str, i: int) -> str:
@@ -103,7 +113,10 @@ def runs_figure(panels: Sequence[Panel], title: str) -> Figure:
                     color="0.3",
                 )
             if u.size and float(np.max(np.abs(u))) > 100.0:
+                from matplotlib.ticker import SymmetricalLogLocator
+
                 ax_u.set_yscale("symlog", linthresh=1.0)  # linear within ±1 V, log beyond
+                ax_u.yaxis.set_major_locator(SymmetricalLogLocator(linthresh=1.0, base=100.0))
                 ax_u.set_ylabel("u [V] (symlog)")
             for ax in (ax_y, ax_u):
                 ax.axvline(res.diverged_at, color="crimson", ls=":", lw=1.5)
@@ -118,6 +131,18 @@ def runs_figure(panels: Sequence[Panel], title: str) -> Figure:
                     color="crimson",
                     bbox={"facecolor": "white", "edgecolor": "crimson", "alpha": 0.85},
                 )
+        for t_ev, text in p.events:
+            for ax in (ax_y, ax_u):
+                ax.axvline(t_ev, color="0.45", ls="-.", lw=0.9)
+            ax_u.annotate(
+                text,
+                (t_ev, 0.02),
+                xycoords=("data", "axes fraction"),
+                xytext=(3, 0),
+                textcoords="offset points",
+                fontsize=8,
+                color="0.35",
+            )
         for ax in (ax_y, ax_u):
             ax.grid(True, alpha=0.3)
             ax.set_xlim(0.0, p.t_final)  # a diverged run keeps the full axis: the cut shows
@@ -125,6 +150,18 @@ def runs_figure(panels: Sequence[Panel], title: str) -> Figure:
     for ax in axes[-1]:
         ax.set_xlabel("time t [s]")
     return fig
+
+
+def scenario_events(scenario: Scenario) -> tuple[tuple[float, str], ...]:
+    """Events worth marking on a time axis: the disturbance step, a late parameter change."""
+    events = []
+    if scenario.disturbance_amplitude != 0.0:
+        events.append(
+            (scenario.disturbance_time, f"$\\tau_d$ = {scenario.disturbance_amplitude:g} step")
+        )
+    if (scenario.plant_scale or scenario.plant_overrides) and scenario.parameter_change_time > 0:
+        events.append((scenario.parameter_change_time, "plant change"))
+    return tuple(events)
 
 
 def scenario_figure(rep: Reproduction, scenario: int) -> Figure:
@@ -148,6 +185,7 @@ def scenario_figure(rep: Reproduction, scenario: int) -> Figure:
             _color(r.case.structure, i),
             r.case.config.scenario.t_final,
             r.case.config.scenario.reference.evaluate,
+            scenario_events(r.case.config.scenario),
         )
         for i, r in enumerate(runs)
     ]
@@ -162,9 +200,10 @@ def result_figure(
     t_final: float,
     structure: str = "",
     reference: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
+    events: tuple[tuple[float, str], ...] = (),
 ) -> Figure:
     """The figure of one simulation (``aiofl simulate``): output vs reference and control."""
-    panel = Panel(structure or "run", result, _color(structure, 0), t_final, reference)
+    panel = Panel(structure or "run", result, _color(structure, 0), t_final, reference, events)
     return runs_figure([panel], title)
 
 

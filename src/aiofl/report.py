@@ -141,7 +141,7 @@ def scenario_notes(rep: Reproduction, scenario: int) -> list[str]:
     paper = PAPER_TABLES[scenario]
     for run in rep.scenario_runs(scenario):
         rec = _computed(rep, run)
-        name = f"{run.case.label} ({run.case.preset})"
+        name = f"{run.case.label} [{run.case.preset}]"
         p = paper.get(run.case.structure) if run.case.source == "printed" else None
         if rec["diverged"]:
             tail = f" The paper reports ITAE {fmt(p['itae'])}." if p else ""

@@ -1,0 +1,157 @@
+"""``aiofl reproduce``: files, records, tables and the self-contained report.
+
+``aiofl reproduce`` runs once per test session (the ``reproduced`` fixture in conftest.py).
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import re
+
+import pytest
+
+from aiofl.config import list_presets, load_config
+from aiofl.reproduce import EXTRA_PRESETS, PAPER_TABLES, discover_cases, trivial_itae
+
+pytestmark = pytest.mark.slow
+
+FILES = ("metrics.json", "tables.md", "fig3.png", "fig4.png", "fig5.png", "report.html")
+KEYS = {"scenario", "structure", "source", "itae", "isu", "iau", "opi", "diverged", "diverged_at"}
+
+
+def _records(reproduced) -> list[dict]:
+    def no_nan(name: str) -> None:
+        raise AssertionError(f"metrics.json contains {name}")
+
+    return json.loads((reproduced.out / "metrics.json").read_text(), parse_constant=no_nan)
+
+
+def _one(records: list[dict], scenario: int, structure: str, source: str) -> dict:
+    (rec,) = [
+        r
+        for r in records
+        if (r["scenario"], r["structure"], r["source"]) == (scenario, structure, source)
+    ]
+    return rec
+
+
+def test_reproduce_succeeds_and_writes_every_file(reproduced) -> None:
+    assert reproduced.exit_code == 0, reproduced.stderr
+    for name in FILES:
+        assert (reproduced.out / name).is_file(), name
+    for n in (3, 4, 5):
+        assert (reproduced.out / f"fig{n}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert not [p for p in reproduced.out.parent.iterdir() if ".staging-" in p.name]
+
+
+def test_metrics_has_paper_and_printed_records_for_every_case(reproduced) -> None:
+    recs = _records(reproduced)
+    assert all(set(r) == KEYS for r in recs)
+    core = [r for r in recs if r["source"] in ("paper", "printed")]
+    assert len(core) == 12
+    assert {(r["scenario"], r["structure"], r["source"]) for r in core} == {
+        (s, k, src) for s in (1, 2, 3) for k in ("LESO", "INLESO") for src in ("paper", "printed")
+    }
+    n_extra = len(discover_cases()) - 6
+    assert len(recs) == 12 + n_extra
+
+
+def test_paper_records_carry_tables_I_to_III(reproduced) -> None:
+    recs = _records(reproduced)
+    for s, table in PAPER_TABLES.items():
+        for structure, vals in table.items():
+            rec = _one(recs, s, structure, "paper")
+            assert (rec["itae"], rec["isu"]) == (vals["itae"], vals["isu"])
+            assert (rec["iau"], rec["opi"], rec["diverged"], rec["diverged_at"]) == (
+                None,
+                None,
+                False,
+                None,
+            )
+    # an independent copy of two printed numbers (Table I LESO ITAE, Table III INLESO ISU)
+    assert _one(recs, 1, "LESO", "paper")["itae"] == 126.120273
+    assert _one(recs, 3, "INLESO", "paper")["isu"] == 19.959797
+
+
+def test_printed_records_match_single_runs(reproduced) -> None:
+    recs = _records(reproduced)
+    div = _one(recs, 1, "LESO", "printed")
+    assert div["diverged"] is True
+    assert div["diverged_at"] == pytest.approx(12.42, abs=0.01)
+    assert [div[k] for k in ("itae", "isu", "iau", "opi")] == [None] * 4
+    # batching in reproduce gives the numbers of a single run of the same preset
+    single = load_config("paper-s1-inleso").simulate(store=False)
+    rec = _one(recs, 1, "INLESO", "printed")
+    assert single.metrics is not None
+    assert rec["itae"] == single.metrics["itae"]
+    assert rec["isu"] == single.metrics["isu"]
+    assert rec["opi"] == pytest.approx(single.opi(), rel=1e-12)
+    for r in recs:
+        if r["source"] != "paper":
+            assert r["diverged"] == (r["itae"] is None) == (r["diverged_at"] is not None)
+
+
+def test_trivial_itae_equals_its_closed_form() -> None:
+    # int_0^T t |A sin(w t)| dt, piecewise between the zeros k pi / w
+    a, w, t_f = math.pi / 4, 2.0, 20.0
+
+    def prim(t: float) -> float:
+        return math.sin(w * t) / w**2 - t * math.cos(w * t) / w
+
+    edges = [k * math.pi / w for k in range(int(t_f * w / math.pi) + 1)] + [t_f]
+    exact = a * sum(abs(prim(b) - prim(c)) for c, b in itertools.pairwise(edges))
+    assert trivial_itae(load_config("paper-s1-leso")) == pytest.approx(exact, rel=1e-7)
+
+
+def test_tables_put_paper_beside_computed(reproduced) -> None:
+    md = (reproduced.out / "tables.md").read_text()
+    for numeral in ("Table I:", "Table II:", "Table III:"):
+        assert numeral in md
+    for table in PAPER_TABLES.values():
+        for vals in table.values():
+            assert f"{vals['itae']:.9g}" in md
+    recs = _records(reproduced)
+    for r in recs:
+        if r["source"] == "printed" and r["diverged"]:
+            assert f"diverged at t = {r['diverged_at']:.2f} s" in md
+    triv = trivial_itae(load_config("paper-s1-leso"))
+    assert md.count(f"| {triv:.6g} |") == 3  # the y = 0 row in each table
+    assert md.count("y ≡ 0 (no control") == 3
+
+
+def test_report_is_self_contained(reproduced) -> None:
+    page = (reproduced.out / "report.html").read_text()
+    assert "http://" not in page and "https://" not in page
+    srcs = re.findall(r'src="([^"]*)"', page)
+    assert len(srcs) == 3 and all(s.startswith("data:image/png;base64,") for s in srcs)
+    assert "<link" not in page and "<script" not in page
+    for heading in (
+        "What we found",
+        "Settings the paper leaves open and the choice made",
+        "Engine settings",
+        "Table I:",
+        "Table III:",
+    ):
+        assert heading in page
+    assert "0.0097 r" in page  # the ITD's steady state (1 - a) r / b with the printed a, b
+    assert "right half-plane" in page
+
+
+def test_terminal_summary_lists_every_case(reproduced) -> None:
+    assert "diverged 12.42 s" in reproduced.stdout
+    assert "printed" in reproduced.stdout
+
+
+def test_extra_preset_patterns() -> None:
+    names = {"retuned-s1-leso", "retuned-s2-inleso", "retuned-s3-ladrc", "iofl-s2"}
+    for name in names:
+        assert any(re.fullmatch(p, name) for p, _ in EXTRA_PRESETS), name
+    for name in ("retuned-s1-pid", "paper-s1-leso", "iofl-s1-extra"):
+        assert not any(re.fullmatch(p, name) for p, _ in EXTRA_PRESETS), name
+    cases = discover_cases()
+    extras = [c for c in cases if c.source != "printed"]
+    shipped = {n for n in list_presets() if any(re.fullmatch(p, n) for p, _ in EXTRA_PRESETS)}
+    assert {c.preset for c in extras} == shipped
+    assert all(c.structure == "IOFL" for c in extras if c.source == "model")
