@@ -1,0 +1,771 @@
+r"""Tuning controllers with a genetic algorithm (pymoo) on the paper's OPI, locally or on Dask.
+
+The paper tuned each controller with a GA on its objective performance index (22) over
+:math:`t_f = 6` s.  :func:`tune` does the same for any config: the ``[tune]`` table
+(:mod:`aiofl.tuning_space`) names the parameters, their bounds and the objective; each
+generation is evaluated by **one** batched engine call (:mod:`aiofl.tuning_eval`), or in
+chunks on a dask.distributed cluster, with identical numbers either way.
+
+Determinism and resuming
+    The algorithm's random stream is seeded (``seed``); pymoo 0.6.2 keeps it in the
+    algorithm (``np.random.default_rng(seed)``), the initial Latin-hypercube sample is
+    drawn from its own seeded generator, and CMA-ES is seeded with ``seed + 1`` (cma treats
+    0 as "use the clock").  The same seed therefore gives the same run bit for bit.  The
+    checkpoint written after every generation (``DIR/checkpoint.npz``, atomically) holds
+    every evaluated member (unit-cube coordinates and engine metrics).  ``resume`` rebuilds
+    the algorithm from the seed and *replays* the checkpointed generations, checking that
+    each re-asked population equals the stored one bit for bit and feeding back the stored
+    results instead of simulating; then it carries on.  A resumed run therefore ends with
+    exactly the result of an uninterrupted one, for every pymoo algorithm (including
+    CMA-ES, whose generator-based state cannot be pickled), and a finished run can be
+    extended by resuming with more generations.
+
+Outputs (:func:`write_outputs`)
+    ``best.toml`` (the input config with the best parameters, loadable by
+    ``aiofl simulate``; its ``[tune]`` table is kept so re-tuning from it is a warm
+    start), ``history.csv`` (per generation: evaluations, best, mean, median, best so far,
+    diverged count, time), ``evaluations.csv`` (every member), ``convergence.png`` and
+    ``summary.json`` (settings, budget, best values, and the best config's metrics over the
+    tuning horizon and over the config's own horizon).
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import json
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Annotated, Any
+
+import numpy as np
+import typer
+from numpy.typing import NDArray
+
+from aiofl.tuning_flat import (
+    ExactTracking,
+    exact_tracking,
+    exact_tracking_cost,
+    exact_tracking_input,
+)
+from aiofl.tuning_space import (
+    SearchSpace,
+    TuneSettings,
+    config_with_values,
+    objective_coefficients,
+    objective_values,
+    parse_tune_settings,
+    to_toml,
+    used_parameters,
+)
+
+if TYPE_CHECKING:  # pragma: no cover
+    from aiofl.config import RunConfig
+    from aiofl.tuning_eval import EvalSpec, PopulationResult
+
+__all__ = [
+    "ExactTracking",
+    "TuneResult",
+    "TuneSettings",
+    "exact_tracking",
+    "exact_tracking_cost",
+    "exact_tracking_input",
+    "parse_tune_settings",
+    "prepare",
+    "tune",
+    "tune_command",
+    "write_outputs",
+]
+
+CHECKPOINT = "checkpoint.npz"
+CHECKPOINT_FORMAT = 1
+
+
+# ------------------------------------------------------------------------ results
+@dataclass(frozen=True)
+class TuneResult:
+    """Outcome of :func:`tune`.
+
+    Attributes
+    ----------
+    settings
+        The validated ``[tune]`` settings used.
+    names
+        Tuned parameters (engine column names).
+    best_values
+        Best parameter values found (lowest objective; earliest on ties).
+    best_objective
+        Its objective over the tuning horizon.
+    best_metrics
+        Its ``itae, iae, ise, isu, iau`` over the tuning horizon (None if it diverged).
+    values, objective, generation, diverged
+        Every evaluated member, in evaluation order: parameter values (N, d), objective
+        (N,), generation index from 1 (N,), divergence flag (N,).
+    history
+        One dict per generation (see ``history.csv``).
+    config
+        The input config dict with the best values written in (``best.toml``'s data).
+    source
+        Where the input config came from (file or preset name).
+    evaluator
+        ``"local"`` or a description of the Dask cluster.
+    live_evaluations, live_seconds
+        Members simulated in this call (not replayed from a checkpoint) and the time spent.
+    """
+
+    settings: TuneSettings
+    names: tuple[str, ...]
+    best_values: dict[str, float]
+    best_objective: float
+    best_metrics: dict[str, float] | None
+    values: NDArray[np.float64]
+    objective: NDArray[np.float64]
+    generation: NDArray[np.int64]
+    diverged: NDArray[np.bool_]
+    history: list[dict[str, float]]
+    config: dict[str, Any]
+    source: str = ""
+    evaluator: str = "local"
+    live_evaluations: int = 0
+    live_seconds: float = 0.0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_evaluations(self) -> int:
+        """Members evaluated in the whole run (including replayed generations)."""
+        return int(self.objective.size)
+
+    @property
+    def evals_per_second(self) -> float:
+        """Simulated members per wall-clock second in this call (NaN if none were live)."""
+        if self.live_evaluations == 0 or self.live_seconds <= 0:
+            return float("nan")
+        return self.live_evaluations / self.live_seconds
+
+    def run_config(self) -> RunConfig:
+        """The best config, validated and built (its own horizon, e.g. the 20-s scenario)."""
+        from aiofl.config import parse_config
+
+        return parse_config(self.config, "tuned config")
+
+    def toml(self, header: str = "") -> str:
+        """``best.toml``'s text (the config with the best values), with an optional header."""
+        return to_toml(self.config, header or self.describe())
+
+    def describe(self) -> str:
+        """Provenance lines for the TOML header."""
+        s = self.settings
+        obj = s.objective if isinstance(s.objective, str) else json.dumps(s.objective)
+        return (
+            f"Tuned by `aiofl tune` from {self.source or 'a config'}: {s.budget()}, "
+            f"objective {obj} over t_f = {s.t_final:g} s.\n"
+            f"Best objective {self.best_objective:.6g} after {self.n_evaluations} evaluations "
+            f"({int(self.diverged.sum())} diverged)."
+        )
+
+
+# ---------------------------------------------------------------------- preparing
+@dataclass(frozen=True)
+class _Prepared:
+    config: RunConfig
+    settings: TuneSettings
+    space: SearchSpace
+    spec: EvalSpec
+    coefficients: NDArray[np.float64]
+    initial: NDArray[np.float64]  # initial population in the unit cube
+    fingerprint: str
+    source: str
+
+
+def _check_parameters(cfg: RunConfig, settings: TuneSettings) -> None:
+    from aiofl.config import ConfigError, parse_config
+
+    used = used_parameters(cfg.controller)
+    c = cfg.controller
+    for name, b in settings.parameters.items():
+        if name not in used:
+            raise ConfigError(
+                f"tune.parameters.{name!r}: has no effect on this controller (structure "
+                f"{c.structure}: eso={c.eso!r}, td={c.td!r}, sef={c.sef!r}, law={c.law!r}, "
+                f"rho={c.rho}, n_feedback={c.n_feedback}); allowed: {', '.join(sorted(used))}"
+            )
+        for which, val in (("lo", b.lo), ("hi", b.hi)):
+            try:
+                parse_config(config_with_values(cfg.raw, c, {name: val}), "tune bounds")
+            except ConfigError as exc:
+                detail = str(exc).split("\n", 1)[-1].strip()
+                raise ConfigError(
+                    f"tune.parameters.{name!r}.{which} = {val}: outside the range the config "
+                    f"allows for this parameter: {detail}"
+                ) from None
+
+
+def _initial_population(space: SearchSpace, cfg: RunConfig, settings: TuneSettings) -> Any:
+    from scipy.stats import qmc
+
+    rng = np.random.default_rng([settings.seed, 0x5EED])
+    pop = qmc.LatinHypercube(d=space.n_var, rng=rng).random(settings.population)
+    if settings.include_initial:
+        current = np.array([cfg.controller.value(n) for n in space.names])
+        pop[0] = space.encode(current[None, :])[0]
+    return pop
+
+
+def prepare(
+    run_config: RunConfig | str | Path,
+    settings: TuneSettings | Mapping[str, Any] | None = None,
+    **overrides: Any,
+) -> _Prepared:
+    """Validate a config and its tune settings before anything is run or written.
+
+    ``run_config`` is a :class:`~aiofl.config.RunConfig`, a TOML path or a preset name;
+    ``settings`` defaults to the config's ``[tune]`` table; ``overrides`` (e.g.
+    ``seed=3``) replace settings fields.  Raises :class:`aiofl.config.ConfigError`.
+    """
+    from aiofl.config import ConfigError, load_config
+    from aiofl.tuning_eval import EvalSpec
+
+    source = ""
+    if isinstance(run_config, (str, Path)):
+        source = str(run_config)
+        run_config = load_config(run_config)
+    cfg = run_config
+    source = source or cfg.name
+    st = parse_tune_settings(settings if settings is not None else cfg.raw.get("tune"))
+    overrides = {k: v for k, v in overrides.items() if v is not None}
+    if overrides:
+        st = parse_tune_settings({**st.model_dump(exclude_none=True), **overrides})
+    _check_parameters(cfg, st)
+    space = SearchSpace(st.parameters)
+    raw = {k: v for k, v in cfg.raw.items() if k != "tune"}
+    if not raw.get("plant", "slfjm"):
+        raise ConfigError("config.plant is empty")
+    spec = EvalSpec(
+        config=raw,
+        names=space.names,
+        t_final=st.t_final,
+        dt=st.dt or cfg.dt,
+        method=st.method or cfg.method,
+        divergence_threshold=cfg.divergence_threshold,
+    )
+    coeffs = objective_coefficients(st, cfg)
+    initial = _initial_population(space, cfg, st)
+    fp_data = {
+        "format": CHECKPOINT_FORMAT,
+        "spec": spec.key(),
+        "settings": st.model_dump(exclude={"generations", "chunks"}, mode="json"),
+        "initial": hashlib.sha256(initial.tobytes()).hexdigest(),
+        "coefficients": coeffs.tolist(),
+    }
+    fingerprint = hashlib.sha256(json.dumps(fp_data, sort_keys=True).encode()).hexdigest()
+    return _Prepared(cfg, st, space, spec, coeffs, initial, fingerprint, source)
+
+
+# --------------------------------------------------------------------- checkpoint
+def _save_checkpoint(path: Path, fingerprint: str, gens: list[dict[str, Any]]) -> None:
+    from aiofl.outputs import atomic_write_bytes
+
+    arrays: dict[str, Any] = {
+        "meta": np.array(
+            json.dumps(
+                {"format": CHECKPOINT_FORMAT, "fingerprint": fingerprint, "generations": len(gens)}
+            )
+        )
+    }
+    for i, g in enumerate(gens):
+        for key in ("s", "metrics", "diverged", "diverged_at"):
+            arrays[f"g{i}_{key}"] = g[key]
+        arrays[f"g{i}_seconds"] = np.array(g["seconds"])
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def _load_checkpoint(path: Path, fingerprint: str) -> list[dict[str, Any]]:
+    from aiofl.config import ConfigError
+
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            meta = json.loads(str(data["meta"]))
+            if meta.get("format") != CHECKPOINT_FORMAT:
+                raise ConfigError(f"checkpoint {path}: unsupported format {meta.get('format')}")
+            if meta["fingerprint"] != fingerprint:
+                raise ConfigError(
+                    f"checkpoint {path} belongs to a different tuning run (config, [tune] "
+                    "settings other than generations, or seed changed); use another --out "
+                    "or drop --resume to start over"
+                )
+            gens = []
+            for i in range(int(meta["generations"])):
+                g = {k: data[f"g{i}_{k}"] for k in ("s", "metrics", "diverged", "diverged_at")}
+                g["seconds"] = float(data[f"g{i}_seconds"])
+                gens.append(g)
+            return gens
+    except (OSError, ValueError, KeyError) as exc:
+        if isinstance(exc, ConfigError):
+            raise
+        raise ConfigError(f"checkpoint {path} is unreadable: {exc}") from None
+
+
+# -------------------------------------------------------------------------- runner
+def _algorithm(st: TuneSettings, initial: NDArray[np.float64]) -> Any:
+    if st.algorithm == "ga":
+        from pymoo.algorithms.soo.nonconvex.ga import GA
+
+        return GA(pop_size=st.population, sampling=initial, eliminate_duplicates=True)
+    if st.algorithm == "de":
+        from pymoo.algorithms.soo.nonconvex.de import DE
+
+        return DE(pop_size=st.population, sampling=initial, variant="DE/rand/1/bin", CR=0.7)
+    from pymoo.algorithms.soo.nonconvex.cmaes import CMAES
+
+    # the initial sample is evaluated as generation 1; CMA-ES starts from its best member
+    return CMAES(x0=initial, pop_size=st.population, sigma=0.2)
+
+
+def _problem(n_var: int, fn: Callable[[NDArray[np.float64]], NDArray[np.float64]]) -> Any:
+    from pymoo.core.problem import Problem
+
+    class TuningProblem(Problem):
+        """Vectorized problem in the unit cube: a whole population per call."""
+
+        def __init__(self) -> None:
+            super().__init__(n_var=n_var, n_obj=1, xl=0.0, xu=1.0, vtype=float)
+
+        def _evaluate(self, x: Any, out: dict[str, Any], *args: Any, **kwargs: Any) -> None:
+            out["F"] = fn(np.asarray(x, dtype=np.float64))[:, None]
+
+    return TuningProblem()
+
+
+def _generation_row(
+    gen: int,
+    obj: NDArray[np.float64],
+    div: NDArray[np.bool_],
+    total: int,
+    best_so_far: float,
+    seconds: float,
+) -> dict[str, float]:
+    ok = obj[~div]
+    return {
+        "generation": gen,
+        "evaluations": int(obj.size),
+        "total_evaluations": total,
+        "best": float(obj.min()) if obj.size else float("nan"),
+        "mean": float(ok.mean()) if ok.size else float("nan"),
+        "median": float(np.median(ok)) if ok.size else float("nan"),
+        "best_so_far": best_so_far,
+        "diverged": int(div.sum()),
+        "seconds": seconds,
+    }
+
+
+def _make_evaluator(scheduler: Any, n_workers: int | None, chunks: int | None) -> Any:
+    from aiofl.tuning_eval import DaskEvaluator, LocalEvaluator
+
+    if scheduler is None and not n_workers:
+        return LocalEvaluator()
+    return DaskEvaluator(scheduler, n_workers if scheduler is None else None, chunks=chunks)
+
+
+def tune(
+    run_config: RunConfig | str | Path,
+    tune_settings: TuneSettings | Mapping[str, Any] | None = None,
+    *,
+    progress: bool = True,
+    checkpoint_dir: str | Path | None = None,
+    resume: bool = False,
+    scheduler: Any = None,
+    n_workers: int | None = None,
+    evaluator: Any = None,
+    **overrides: Any,
+) -> TuneResult:
+    """Tune a controller with pymoo on the engine (the paper's GA procedure, Section V).
+
+    Parameters
+    ----------
+    run_config
+        The config (:class:`~aiofl.config.RunConfig`, TOML path or preset name): plant,
+        scenario (its horizon is replaced by ``t_final``), controller (untuned parameters
+        keep its values), integrator and OPI weights.
+    tune_settings
+        ``[tune]`` settings (a :class:`TuneSettings` or a dict); default: the config's
+        ``[tune]`` table.
+    progress
+        Show a rich progress bar (generation, best objective, evaluations per second).
+    checkpoint_dir
+        Write ``checkpoint.npz`` there (atomically) after every generation.
+    resume
+        Continue from ``checkpoint_dir``'s checkpoint (replayed bit for bit, see the module
+        notes); without one, start from scratch.
+    scheduler
+        A Dask scheduler address ``tcp://HOST:PORT`` (or a ``distributed.Client``): evaluate
+        each generation in chunks on that cluster.
+    n_workers
+        Start a local Dask cluster with this many worker processes instead.
+    evaluator
+        A ready evaluator (``callable(spec, values) -> PopulationResult``), e.g. a
+        :class:`~aiofl.tuning_eval.DaskEvaluator`; overrides ``scheduler``/``n_workers``.
+    **overrides
+        Settings fields to replace (``seed``, ``generations``, ``population`` ...).
+
+    Returns
+    -------
+    TuneResult
+    """
+    prep = prepare(run_config, tune_settings, **overrides)
+    st, space, spec = prep.settings, prep.space, prep.spec
+    ckpt = Path(checkpoint_dir) / CHECKPOINT if checkpoint_dir is not None else None
+    cached: list[dict[str, Any]] = []
+    if resume and ckpt is not None and ckpt.exists():
+        cached = _load_checkpoint(ckpt, prep.fingerprint)
+    own = evaluator is None
+    ev = evaluator or _make_evaluator(scheduler, n_workers, st.chunks)
+    gens: list[dict[str, Any]] = []
+    history: list[dict[str, float]] = []
+    state = {"best": np.inf, "total": 0, "live_n": 0, "live_s": 0.0}
+    bar = _Progress(st, ev, enabled=progress)
+
+    def evaluate(s: NDArray[np.float64]) -> NDArray[np.float64]:
+        g = len(gens)
+        t0 = time.perf_counter()
+        if g < len(cached):
+            c = cached[g]
+            if c["s"].shape != s.shape or not np.array_equal(c["s"], s):
+                from aiofl.config import ConfigError
+
+                raise ConfigError(
+                    f"checkpoint replay diverged at generation {g + 1}: the algorithm asked "
+                    "for other members than were stored (different pymoo version?); start over "
+                    "without --resume"
+                )
+            res_m, res_d, res_t, secs = c["metrics"], c["diverged"], c["diverged_at"], c["seconds"]
+            live = False
+        else:
+            res: PopulationResult = ev(spec, space.decode(s))
+            res_m, res_d, res_t = res.metrics, res.diverged, res.diverged_at
+            secs = time.perf_counter() - t0
+            live = True
+        obj = objective_values(
+            res_m, res_d, res_t, prep.coefficients, st.divergence_penalty, st.t_final
+        )
+        gens.append(
+            {
+                "s": s.copy(),
+                "metrics": res_m,
+                "diverged": res_d,
+                "diverged_at": res_t,
+                "seconds": secs,
+                "objective": obj,
+            }
+        )
+        state["total"] += obj.size
+        state["best"] = min(state["best"], float(obj.min()))
+        history.append(_generation_row(len(gens), obj, res_d, state["total"], state["best"], secs))
+        if live:
+            state["live_n"] += obj.size
+            state["live_s"] += secs
+            if ckpt is not None:
+                _save_checkpoint(ckpt, prep.fingerprint, gens)
+        bar.update(len(gens), state["best"], obj.size, secs, live)
+        return obj
+
+    try:
+        problem = _problem(space.n_var, evaluate)
+        algo = _algorithm(st, prep.initial)
+        algo.setup(problem, termination=("n_gen", st.generations), seed=st.seed, verbose=False)
+        if st.algorithm == "cmaes":
+            # cma seeds numpy's global generator from this; 0 would mean "from the clock"
+            algo.options["seed"] = st.seed + 1
+        with bar:
+            while algo.has_next() and len(gens) < st.generations:
+                algo.next()
+    finally:
+        if own:
+            ev.close()
+
+    s_all = np.concatenate([g["s"] for g in gens])
+    obj_all = np.concatenate([g["objective"] for g in gens])
+    div_all = np.concatenate([g["diverged"] for g in gens])
+    met_all = np.concatenate([g["metrics"] for g in gens])
+    gen_idx = np.concatenate([np.full(g["s"].shape[0], i + 1) for i, g in enumerate(gens)])
+    values = space.decode(s_all)
+    ib = int(np.argmin(obj_all))
+    best_values = {n: float(values[ib, j]) for j, n in enumerate(space.names)}
+    from aiofl import layout as L
+
+    best_metrics = (
+        None
+        if div_all[ib]
+        else {k: float(v) for k, v in zip(L.METRIC_NAMES, met_all[ib], strict=True)}
+    )
+    config = config_with_values(prep.config.raw, prep.config.controller, best_values)
+    return TuneResult(
+        settings=st,
+        names=space.names,
+        best_values=best_values,
+        best_objective=float(obj_all[ib]),
+        best_metrics=best_metrics,
+        values=values,
+        objective=obj_all,
+        generation=gen_idx.astype(np.int64),
+        diverged=div_all,
+        history=history,
+        config=config,
+        source=prep.source,
+        evaluator=getattr(ev, "description", type(ev).__name__),
+        live_evaluations=int(state["live_n"]),
+        live_seconds=float(state["live_s"]),
+    )
+
+
+class _Progress:
+    """A rich progress bar on stderr: generation, best objective, evaluations per second."""
+
+    def __init__(self, st: TuneSettings, ev: Any, *, enabled: bool) -> None:
+        self.enabled = enabled
+        self.total = st.generations
+        self.desc = f"{st.algorithm.upper()} {st.population}x{st.generations} " + getattr(
+            ev, "description", ""
+        )
+        self._p: Any = None
+        self._task: Any = None
+
+    def __enter__(self) -> _Progress:
+        if self.enabled:
+            from rich.console import Console
+            from rich.progress import (
+                BarColumn,
+                MofNCompleteColumn,
+                Progress,
+                TextColumn,
+                TimeElapsedColumn,
+                TimeRemainingColumn,
+            )
+
+            self._p = Progress(
+                TextColumn("[bold]{task.description}"),
+                BarColumn(),
+                MofNCompleteColumn(),
+                TextColumn("gen · best {task.fields[best]} · {task.fields[rate]} eval/s"),
+                TimeElapsedColumn(),
+                TimeRemainingColumn(),
+                console=Console(stderr=True),
+            )
+            self._p.__enter__()
+            self._task = self._p.add_task(self.desc, total=self.total, best="—", rate="—")
+        return self
+
+    def update(self, gen: int, best: float, n: int, secs: float, live: bool) -> None:
+        if self._p is None:
+            return
+        rate = f"{n / secs:.1f}" if live and secs > 0 else "replayed"
+        self._p.update(self._task, completed=gen, best=f"{best:.6g}", rate=rate)
+
+    def __exit__(self, *exc: Any) -> None:
+        if self._p is not None:
+            self._p.__exit__(*exc)
+
+
+# -------------------------------------------------------------------------- outputs
+def _history_csv(result: TuneResult) -> str:
+    buf = io.StringIO()
+    cols = list(result.history[0]) if result.history else []
+    w = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n")
+    w.writeheader()
+    for row in result.history:
+        w.writerow({k: (repr(v) if isinstance(v, float) else v) for k, v in row.items()})
+    return buf.getvalue()
+
+
+def _evaluations_csv(result: TuneResult) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["generation", "member", *result.names, "objective", "diverged"])
+    member = 0
+    last = 0
+    for i in range(result.n_evaluations):
+        g = int(result.generation[i])
+        member = member + 1 if g == last else 0
+        last = g
+        w.writerow(
+            [
+                g,
+                member,
+                *(repr(float(v)) for v in result.values[i]),
+                repr(float(result.objective[i])),
+                int(result.diverged[i]),
+            ]
+        )
+    return buf.getvalue()
+
+
+def convergence_png(result: TuneResult) -> bytes:
+    """The convergence plot: best-so-far, generation best and median vs generation."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    h = result.history
+    gen = [r["generation"] for r in h]
+    fig, ax = plt.subplots(figsize=(7, 4.2), dpi=110)
+    ax.plot(gen, [r["best_so_far"] for r in h], lw=2, label="best so far")
+    ax.plot(gen, [r["best"] for r in h], ".", ms=4, label="generation best")
+    ax.plot(gen, [r["median"] for r in h], lw=1, alpha=0.7, label="generation median (stable)")
+    vals = [v for r in h for v in (r["best"], r["median"]) if np.isfinite(v)]
+    if vals and min(vals) > 0:
+        ax.set_yscale("log")
+    st = result.settings
+    obj = st.objective if isinstance(st.objective, str) else "weighted sum"
+    ax.set_xlabel("generation")
+    ax.set_ylabel(f"objective ({obj}, t_f = {st.t_final:g} s)")
+    ax.set_title(f"{result.source}: {st.budget()}", fontsize=9)
+    ax.grid(True, alpha=0.3)
+    ax2 = ax.twinx()
+    ax2.bar(gen, [r["diverged"] for r in h], alpha=0.15, color="red", label="diverged")
+    ax2.set_ylabel("diverged members")
+    lines = ax.get_legend_handles_labels()
+    bars = ax2.get_legend_handles_labels()
+    ax.legend(lines[0] + bars[0], lines[1] + bars[1], fontsize=8, loc="upper right")
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def full_horizon_record(result: TuneResult) -> dict[str, Any]:
+    """The best config simulated over its own horizon (e.g. 20 s): itae, isu, iau, opi."""
+    cfg = result.run_config()
+    sim = cfg.simulate(store=False)
+    rec: dict[str, Any] = {
+        "t_final": cfg.scenario.t_final,
+        "diverged": sim.diverged,
+        "diverged_at": sim.diverged_at,
+    }
+    rec.update(sim.metrics or dict.fromkeys(("itae", "iae", "ise", "isu", "iau")))
+    rec["opi"] = sim.opi(cfg.weights)
+    return rec
+
+
+def write_outputs(result: TuneResult, out: str | Path, *, header: str = "") -> dict[str, Any]:
+    """Write best.toml, history.csv, evaluations.csv, convergence.png, summary.json to ``out``.
+
+    Files are staged and moved in together (:func:`aiofl.outputs.atomic_output_dir`); other
+    files in ``out`` (the checkpoint) are kept.  Returns the summary dict.
+    """
+    from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
+
+    summary = {
+        "source": result.source,
+        "budget": result.settings.budget(),
+        "settings": result.settings.model_dump(mode="json"),
+        "best_values": result.best_values,
+        "best_objective": result.best_objective,
+        "tuning_horizon_metrics": result.best_metrics,
+        "full_horizon": full_horizon_record(result),
+        "evaluations": result.n_evaluations,
+        "diverged": int(result.diverged.sum()),
+        "live_evaluations": result.live_evaluations,
+        "live_seconds": result.live_seconds,
+        "evals_per_second": result.evals_per_second,
+        "evaluator": result.evaluator,
+    }
+    text = result.toml(header)
+    with atomic_output_dir(out) as stage:
+        atomic_write_text(stage / "best.toml", text)
+        atomic_write_text(stage / "history.csv", _history_csv(result))
+        atomic_write_text(stage / "evaluations.csv", _evaluations_csv(result))
+        atomic_write_bytes(stage / "convergence.png", convergence_png(result))
+        atomic_write_text(
+            stage / "summary.json", json.dumps(summary, indent=2, default=_json_default) + "\n"
+        )
+    return summary
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.bool_):
+        return bool(o)
+    raise TypeError(type(o).__name__)
+
+
+# ------------------------------------------------------------------------------- CLI
+def tune_command(
+    config: Annotated[str, typer.Argument(help="A TOML config (or preset) with a tune table.")],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output directory.")],
+    resume: Annotated[
+        bool, typer.Option("--resume", help="Continue from OUT/checkpoint.npz (same result).")
+    ] = False,
+    scheduler: Annotated[
+        str | None,
+        typer.Option("--scheduler", help="Dask scheduler address tcp://HOST:PORT."),
+    ] = None,
+    dask_workers: Annotated[
+        int | None,
+        typer.Option("--dask-workers", help="Start a local Dask cluster with N workers."),
+    ] = None,
+    seed: Annotated[int | None, typer.Option("--seed", help="Override tune.seed.")] = None,
+    generations: Annotated[
+        int | None, typer.Option("--generations", help="Override tune.generations.")
+    ] = None,
+    population: Annotated[
+        int | None, typer.Option("--population", help="Override tune.population.")
+    ] = None,
+    quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
+) -> None:
+    """Tune a controller with a GA (pymoo) on the OPI of eq. (22), per the config's tune table.
+
+    Writes OUT/best.toml (runs with `aiofl simulate`), history.csv, evaluations.csv,
+    convergence.png and summary.json; OUT/checkpoint.npz is updated after every
+    generation so `--resume` continues a killed run with the same final result.
+    """
+    from aiofl.cli import bad_input_exits
+
+    with bad_input_exits():
+        if scheduler is not None and dask_workers is not None:
+            raise ValueError("give --scheduler or --dask-workers, not both")
+        if dask_workers is not None and dask_workers < 1:
+            raise ValueError(f"--dask-workers = {dask_workers}; allowed: >= 1")
+        prepare(config, None, seed=seed, generations=generations, population=population)
+        try:
+            result = tune(
+                config,
+                progress=not quiet,
+                checkpoint_dir=out,
+                resume=resume,
+                scheduler=scheduler,
+                n_workers=dask_workers,
+                seed=seed,
+                generations=generations,
+                population=population,
+            )
+        except KeyboardInterrupt:
+            typer.echo(
+                f"aiofl: interrupted; the checkpoint in {out} keeps the finished generations "
+                "(continue with --resume)",
+                err=True,
+            )
+            raise typer.Exit(130) from None
+        summary = write_outputs(result, out)
+    full = summary["full_horizon"]
+    status = (
+        f"diverged at {full['diverged_at']:.3g} s"
+        if full["diverged"]
+        else (
+            f"ITAE {full['itae']:.4g}, ISU {full['isu']:.4g}, IAU {full['iau']:.4g}, "
+            f"OPI {full['opi']:.4g}"
+        )
+    )
+    typer.echo(
+        f"best objective {result.best_objective:.6g} ({result.n_evaluations} evaluations, "
+        f"{int(result.diverged.sum())} diverged, {result.evals_per_second:.1f} eval/s)\n"
+        f"best config over {full['t_final']:g} s: {status}\n"
+        f"wrote {out}/best.toml, history.csv, evaluations.csv, convergence.png, summary.json"
+    )

@@ -1,0 +1,365 @@
+r"""The ``[tune]`` table: settings, search space, objective, and writing a tuned config.
+
+.. code-block:: toml
+
+    [tune]
+    algorithm = "ga"          # ga | de | cmaes (pymoo)
+    objective = "opi"         # opi | itae | iae | ise | isu | iau | {itae = 1.0, isu = 0.01}
+    t_final = 6.0             # tuning horizon [s] (paper: 6 s)
+    population = 64
+    generations = 50
+    seed = 1
+    divergence_penalty = 1e6  # objective of a member that diverged (see below)
+    [tune.parameters]
+    "eso.omega0" = { lo = 10.0, hi = 2000.0, log = true }
+    "law.b0" = { lo = 1.0, hi = 1e5, log = true }
+
+Parameter names are the engine's column names (:data:`aiofl.layout.FLOAT_COLUMNS`); the
+rest of the controller stays as the config's ``[controller]`` table sets it (e.g.
+``alpha = "binomial"`` there keeps Gao's fixed ratios while ω0 is tuned).  Each bound must
+lie in the range the config schema allows for that field, and a parameter must act on
+the configured structure (tuning ``td.R`` of a linear prefilter is rejected).
+
+The search runs in the unit cube: coordinate :math:`s\in[0,1]` maps to
+:math:`lo + s(hi-lo)`, or to :math:`lo\,(hi/lo)^s` with ``log = true``.
+
+The objective is linear in the engine's metrics, :math:`J = c^T m` with
+:math:`m = (\mathrm{ITAE}, \mathrm{IAE}, \mathrm{ISE}, \mathrm{ISU}, \mathrm{IAU})` over
+the tuning horizon; the OPI of eq. (22) is
+:math:`c = (w_1/N_1, 0, 0, w_2/N_2, w_3/N_3)` with the config's ``[metrics]`` weights.  A
+member that diverges at :math:`t_d` scores
+:math:`P\,(2 - t_d/t_f)` (P = ``divergence_penalty``): finite, worse than any stable
+member with J < P, and better the later it diverges, which steers the search towards
+stability.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Annotated, Any, Literal
+
+import numpy as np
+from numpy.typing import NDArray
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from aiofl import layout as L
+
+if TYPE_CHECKING:  # pragma: no cover
+    from aiofl.config import RunConfig
+    from aiofl.controller import Controller
+
+__all__ = [
+    "ParameterBounds",
+    "SearchSpace",
+    "TuneSettings",
+    "config_with_values",
+    "objective_coefficients",
+    "objective_values",
+    "parse_tune_settings",
+    "to_toml",
+    "used_parameters",
+]
+
+ALGORITHMS = ("ga", "de", "cmaes")
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class ParameterBounds(_Model):
+    """Search interval of one parameter: ``lo <= value <= hi``, optionally log-scaled."""
+
+    lo: Annotated[float, Field(allow_inf_nan=False)]
+    hi: Annotated[float, Field(allow_inf_nan=False)]
+    log: bool = False
+
+    @model_validator(mode="after")
+    def _order(self) -> ParameterBounds:
+        if not self.lo < self.hi:
+            raise ValueError(f"bounds reversed or empty: lo = {self.lo} must be < hi = {self.hi}")
+        if self.log and not self.lo > 0:
+            raise ValueError(f"log = true needs lo > 0 (got lo = {self.lo})")
+        return self
+
+
+class TuneSettings(_Model):
+    """Validated ``[tune]`` table (see the module docstring for the fields)."""
+
+    algorithm: Literal["ga", "de", "cmaes"] = "ga"
+    objective: str | dict[str, Annotated[float, Field(ge=0, allow_inf_nan=False)]] = "opi"
+    t_final: Annotated[float, Field(gt=0, le=1e4)] = 6.0
+    population: Annotated[int, Field(ge=2, le=1_000_000)] = 64
+    generations: Annotated[int, Field(ge=1, le=1_000_000)] = 50
+    seed: Annotated[int, Field(ge=0, lt=2**32)] = 1
+    divergence_penalty: Annotated[float, Field(gt=0, le=1e300, allow_inf_nan=False)] = 1e6
+    include_initial: bool = True
+    dt: Annotated[float, Field(gt=0, le=0.1)] | None = None
+    method: Literal["rk4", "euler"] | None = None
+    chunks: Annotated[int, Field(ge=1, le=100_000)] | None = None
+    parameters: dict[str, ParameterBounds]
+
+    @field_validator("objective")
+    @classmethod
+    def _objective(cls, v: str | dict[str, float]) -> str | dict[str, float]:
+        allowed = ("opi", *L.METRIC_NAMES)
+        if isinstance(v, str):
+            if v not in allowed:
+                raise ValueError(f"objective {v!r}; allowed: {', '.join(allowed)} or a table")
+            return v
+        if not v:
+            raise ValueError("objective table is empty; give weights such as {itae = 1.0}")
+        bad = sorted(set(v) - set(L.METRIC_NAMES))
+        if bad:
+            raise ValueError(
+                f"objective table has unknown metric(s) {', '.join(bad)}; allowed: "
+                f"{', '.join(L.METRIC_NAMES)}"
+            )
+        if not any(w > 0 for w in v.values()):
+            raise ValueError("objective table needs at least one weight > 0")
+        return v
+
+    @field_validator("parameters")
+    @classmethod
+    def _parameters(cls, v: dict[str, ParameterBounds]) -> dict[str, ParameterBounds]:
+        if not v:
+            raise ValueError('no parameters to tune; add e.g. "eso.omega0" = {lo=10, hi=1000}')
+        unknown = sorted(set(v) - set(L.FLOAT_COLUMNS))
+        if unknown:
+            raise ValueError(
+                f"unknown parameter name(s) {', '.join(repr(u) for u in unknown)}; allowed: "
+                "the engine columns, e.g. " + ", ".join(list(L.FLOAT_COLUMNS)[:8]) + ", ..."
+            )
+        return v
+
+    def budget(self) -> str:
+        """One-line description of the search budget."""
+        return (
+            f"{self.algorithm.upper()} population {self.population} x {self.generations} "
+            f"generations, seed {self.seed}"
+        )
+
+
+def parse_tune_settings(
+    data: Mapping[str, Any] | TuneSettings | None, source: str = "[tune]"
+) -> TuneSettings:
+    """Validate a ``[tune]`` table; raises :class:`aiofl.config.ConfigError` naming the field."""
+    from aiofl.config import ConfigError
+
+    if isinstance(data, TuneSettings):
+        return data
+    if data is None:
+        raise ConfigError(f"{source}: the config has no [tune] table (needed by `aiofl tune`)")
+    try:
+        return TuneSettings.model_validate(dict(data))
+    except ValidationError as exc:
+        lines = [f"invalid {source}:"]
+        for err in exc.errors():
+            loc = ".".join(str(p) for p in err["loc"])
+            msg = err["msg"]
+            if err["type"] == "extra_forbidden":
+                msg = "unknown key"
+            msg = msg.removeprefix("Value error, ")
+            where = f"tune.{loc}" if loc else "tune"
+            got = repr(err.get("input"))
+            got = got if len(got) <= 100 else got[:97] + "..."
+            lines.append(f"  {where}: {msg} (got {got})")
+        raise ConfigError("\n".join(lines)) from None
+
+
+# ------------------------------------------------------------------- objective
+def objective_coefficients(settings: TuneSettings, config: RunConfig) -> NDArray[np.float64]:
+    """Coefficients c over :data:`aiofl.layout.METRIC_NAMES` with objective :math:`J = c^T m`."""
+    c = np.zeros(L.N_METRIC)
+    obj = settings.objective
+    if obj == "opi":
+        w = config.weights
+        c[L.M_ITAE] = w.w_itae / w.n_itae
+        c[L.M_ISU] = w.w_isu / w.n_isu
+        c[L.M_IAU] = w.w_iau / w.n_iau
+    elif isinstance(obj, str):
+        c[L.METRIC_NAMES.index(obj)] = 1.0
+    else:
+        for name, weight in obj.items():
+            c[L.METRIC_NAMES.index(name)] = weight
+    return c
+
+
+def objective_values(
+    metrics: NDArray[np.float64],
+    diverged: NDArray[np.bool_],
+    diverged_at: NDArray[np.float64],
+    coefficients: NDArray[np.float64],
+    penalty: float,
+    t_final: float,
+) -> NDArray[np.float64]:
+    r"""Objective of each member: :math:`c^T m`, or :math:`P(2 - t_d/t_f)` if it diverged.
+
+    A non-finite :math:`c^T m` also scores :math:`2P`.  Every value is finite.
+    """
+    with np.errstate(all="ignore"):
+        j = metrics @ coefficients
+    frac = np.clip(np.nan_to_num(diverged_at / t_final, nan=0.0), 0.0, 1.0)
+    pen = penalty * (2.0 - frac)
+    j = np.where(diverged, pen, j)
+    return np.where(np.isfinite(j), j, 2.0 * penalty)
+
+
+# ---------------------------------------------------------------- search space
+class SearchSpace:
+    """Unit-cube encoding of the tuned parameters (linear or log per parameter)."""
+
+    def __init__(self, parameters: Mapping[str, ParameterBounds]) -> None:
+        self.names: tuple[str, ...] = tuple(parameters)
+        b = [parameters[n] for n in self.names]
+        self.log = np.array([p.log for p in b], dtype=bool)
+        lo = np.array([p.lo for p in b], dtype=np.float64)
+        hi = np.array([p.hi for p in b], dtype=np.float64)
+        self.lo, self.hi = lo, hi
+        with np.errstate(divide="ignore", invalid="ignore"):
+            self._a = np.where(self.log, np.log(np.where(self.log, lo, 1.0)), lo)
+            self._b = np.where(self.log, np.log(np.where(self.log, hi, 1.0)), hi)
+
+    @property
+    def n_var(self) -> int:
+        """Number of tuned parameters."""
+        return len(self.names)
+
+    def decode(self, s: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Parameter values (B, d) of unit-cube points s (B, d)."""
+        s = np.clip(np.asarray(s, dtype=np.float64), 0.0, 1.0)
+        z = self._a + s * (self._b - self._a)
+        v = np.where(self.log, np.exp(z), z)
+        # land exactly on the bounds at s = 0, 1 (exp(log(x)) may differ from x in the last bit)
+        v = np.where(s == 0.0, self.lo, v)
+        return np.where(s == 1.0, self.hi, v)
+
+    def encode(self, values: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Unit-cube points of parameter values (clipped into the bounds)."""
+        v = np.clip(np.asarray(values, dtype=np.float64), self.lo, self.hi)
+        z = np.where(self.log, np.log(np.where(self.log, v, 1.0)), v)
+        return np.clip((z - self._a) / (self._b - self._a), 0.0, 1.0)
+
+
+# ----------------------------------------------------------- structure checks
+def used_parameters(controller: Controller) -> set[str]:
+    """Engine columns that influence ``controller``'s closed loop (for its kinds and orders)."""
+    rho, m = controller.rho, controller.n_feedback
+    used = {"law.u_max"}
+    if controller.law == "aiofl":
+        used.add("law.b0")
+    used |= {"eso.omega0", *(f"eso.alpha{i}" for i in range(1, rho + 2))}
+    if controller.eso == "improved":
+        used |= {"eso.k_alpha", "eso.k_beta", "eso.g_alpha", "eso.g_beta"}
+    td = {"han": ["td.R"], "improved": ["td.a", "td.b", "td.c", "td.rho"], "linear": ["td.omega"]}
+    used |= set(td.get(controller.td, []))
+    if controller.law == "iofl" or controller.sef == "linear":
+        used.add("sef.omega_c")
+    elif controller.sef == "nonlinear":
+        used |= {f"sef.{v}{i}" for v in ("k", "alpha", "delta") for i in range(1, m + 1)}
+    else:
+        used |= {f"sef.{v}{i}" for v in ("k", "kb", "mu", "alpha") for i in range(1, m + 1)}
+        used.add("sef.v_limit")
+    return used
+
+
+# ------------------------------------------------------ writing tuned configs
+_VECTOR_KEYS = {"eso": ("alpha",), "sef": ("k", "kb", "alpha", "delta", "mu")}
+
+
+def _config_path(name: str) -> tuple[str, str, int | None]:
+    """(table, key, index) of an engine column in the [controller] table."""
+    table, key = name.split(".", 1)
+    for vec in _VECTOR_KEYS.get(table, ()):
+        tail = key[len(vec) :]
+        if key.startswith(vec) and tail.isdigit():
+            return table, vec, int(tail) - 1
+    return table, key, None
+
+
+def config_with_values(
+    raw: Mapping[str, Any], controller: Controller, values: Mapping[str, float]
+) -> dict[str, Any]:
+    """A copy of the config dict ``raw`` with controller parameters set to ``values``.
+
+    Vector entries (``sef.k2``, ``eso.alpha3``) are written into their lists, which are
+    filled from ``controller``'s current values where the config left them out.
+    """
+    out = copy.deepcopy(dict(raw))
+    ctrl = out.setdefault("controller", {})
+    for name, val in values.items():
+        table, key, idx = _config_path(name)
+        sub = ctrl.setdefault(table, {})
+        if idx is None:
+            sub[key] = float(val)
+            continue
+        cur = sub.get(key)
+        if not isinstance(cur, list):
+            cur = []
+        need = max(idx + 1, len(cur))
+        if table == "eso":
+            need = max(need, controller.rho + 1)
+        cur = [
+            float(cur[i]) if i < len(cur) else controller.value(f"{table}.{key}{i + 1}")
+            for i in range(need)
+        ]
+        cur[idx] = float(val)
+        sub[key] = cur
+    return out
+
+
+def _toml_key(k: str) -> str:
+    return k if k.replace("_", "").replace("-", "").isalnum() and k.isascii() else repr(k)
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if math.isnan(v):
+            return "nan"
+        if math.isinf(v):
+            return "inf" if v > 0 else "-inf"
+        return repr(v)
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    if isinstance(v, Mapping):
+        return "{ " + ", ".join(f"{_toml_key(k)} = {_toml_value(x)}" for k, x in v.items()) + " }"
+    raise TypeError(f"cannot write {type(v).__name__} to TOML")
+
+
+def to_toml(data: Mapping[str, Any], header: str = "") -> str:
+    """Write a config dict as TOML (tables as ``[a.b]`` sections; floats round-trip exactly).
+
+    Leaf tables of ``[tune.parameters]`` (``{lo, hi, log}``) are written inline.
+    """
+    lines = [f"# {h}" if h else "#" for h in header.splitlines()] if header else []
+
+    def emit(table: Mapping[str, Any], path: list[str]) -> None:
+        scalars = [
+            (k, v) for k, v in table.items() if not isinstance(v, Mapping) or _inline(path, k)
+        ]
+        subs = [(k, v) for k, v in table.items() if isinstance(v, Mapping) and not _inline(path, k)]
+        if path and (scalars or not subs):
+            lines.append("")
+            lines.append("[" + ".".join(_toml_key(p) for p in path) + "]")
+        for k, v in scalars:
+            lines.append(f"{_toml_key(k)} = {_toml_value(v)}")
+        for k, v in subs:
+            emit(v, [*path, k])
+
+    def _inline(path: list[str], key: str) -> bool:
+        return (
+            (len(path) >= 2 and path[-2:] == ["tune", "parameters"])
+            or (path == ["tune"] and key == "objective")
+            or (path == ["scenario"] and key in ("plant_scale", "plant_overrides"))
+        )
+
+    emit(data, [])
+    return "\n".join(lines).lstrip("\n") + "\n"
