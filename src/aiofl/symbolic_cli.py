@@ -1,0 +1,128 @@
+"""``aiofl analyze``: symbolic analysis of a plant, or closed-loop linearisation of a config.
+
+* ``aiofl analyze PLANT`` (a built-in plant such as ``slfjm``, a symbolic-plant TOML, or a
+  run config whose plant is analysed): Lie derivatives, relative degree and where it is
+  defined, α, β, the normal-form coordinates ξ and, where ρ < n, the zero dynamics with a
+  stability verdict (Section III).  ``--latex`` prints LaTeX, ``--json`` JSON.
+* ``aiofl analyze CONFIG.toml|PRESET --closed-loop``: eigenvalues of the closed loop
+  linearised at its operating point, slowest / fastest modes and a verdict
+  (:mod:`aiofl.linearize`); ``--json`` prints ``{"verdict": ..., "eigenvalues": [[re, im],
+  ...], ...}``.
+
+sympy, numpy and the engine are imported inside the command, so registering it keeps
+``aiofl --help`` fast.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any
+
+import typer
+
+__all__ = ["analysis_to_dict", "analyze_command"]
+
+
+def analysis_to_dict(a: Any) -> dict[str, Any]:
+    """JSON-ready form of an :class:`aiofl.symbolic.Analysis`."""
+    import sympy as sp
+
+    zd = a.zero_dynamics
+    lie = {}
+    for k in range(a.rho + 1):
+        lie[f"L_f^{k} h"] = sp.sstr(a.lf_h[k])
+        if k < a.rho:
+            lie[f"L_g L_f^{k} h"] = sp.sstr(a.lg_lf_h[k])
+    return {
+        "plant": a.plant.name,
+        "n": a.plant.n,
+        "rho": a.rho,
+        "lie_derivatives": lie,
+        "alpha": sp.sstr(a.alpha),
+        "beta": sp.sstr(a.beta),
+        "beta_constant": a.beta_constant,
+        "beta_nominal": a.beta_nominal,
+        "region": a.region,
+        "xi": [sp.sstr(e) for e in a.xi],
+        "zero_dynamics": None
+        if zd is None
+        else {
+            "eta": [sp.sstr(e) for e in zd.eta],
+            "f0": None if zd.f0 is None else [sp.sstr(e) for e in zd.f0],
+            "eta_dot": [sp.sstr(e) for e in zd.eta_dot],
+            "equilibrium": list(zd.equilibrium),
+            "eigenvalues": [[float(z.real), float(z.imag)] for z in zd.eigenvalues],
+            "verdict": zd.verdict,
+        },
+        "zero_dynamics_note": a.zero_dynamics_note,
+    }
+
+
+def analyze_command(
+    target: Annotated[
+        str,
+        typer.Argument(
+            help="Plant name (e.g. slfjm), symbolic-plant TOML, or with --closed-loop a "
+            "config TOML / preset name."
+        ),
+    ],
+    closed_loop: Annotated[
+        bool,
+        typer.Option("--closed-loop", help="Linearise the whole closed loop of a config."),
+    ] = False,
+    latex: Annotated[bool, typer.Option("--latex", help="Print LaTeX (plant analysis).")] = False,
+    as_json: Annotated[bool, typer.Option("--json", help="Print JSON.")] = False,
+    amplitude: Annotated[
+        float,
+        typer.Option(
+            help="Error amplitude ε for the secant gains of fal / g(e) / INLSEF (--closed-loop)."
+        ),
+    ] = 1e-3,
+    r_op: Annotated[
+        float | None,
+        typer.Option(help="Reference value held at the operating point (--closed-loop)."),
+    ] = None,
+) -> None:
+    """Analyse a plant symbolically (Section III) or a closed loop by linearisation."""
+    import json
+
+    from rich.console import Console
+
+    from aiofl.cli import bad_input_exits
+
+    console = Console(highlight=False, markup=False, soft_wrap=True)
+    with bad_input_exits():
+        if not amplitude > 0:
+            raise ValueError(f"--amplitude = {amplitude}; allowed: > 0")
+        if closed_loop:
+            if latex:
+                raise ValueError("--latex applies to the plant analysis, not to --closed-loop")
+            from aiofl.config import load_config
+            from aiofl.linearize import (
+                closed_loop_verdict,
+                format_linearization_text,
+                linearize_closed_loop,
+            )
+
+            cfg = load_config(target)
+            lin = linearize_closed_loop(cfg, amplitude=amplitude, r_op=r_op)
+            info = closed_loop_verdict(cfg, amplitude=amplitude) if r_op is None else lin.to_dict()
+            if as_json:
+                typer.echo(json.dumps(info if r_op is None else lin.to_dict(), indent=2))
+            else:
+                console.print(format_linearization_text(lin, cfg.name, info))
+            return
+        if r_op is not None:
+            raise ValueError("--r-op applies only with --closed-loop")
+        from aiofl.symbolic import (
+            format_analysis_latex,
+            format_analysis_text,
+            load_symbolic_plant,
+        )
+
+        analysis = load_symbolic_plant(target).analyze()
+        if as_json:
+            typer.echo(json.dumps(analysis_to_dict(analysis), indent=2))
+        elif latex:
+            typer.echo(format_analysis_latex(analysis))
+        else:
+            console.print(format_analysis_text(analysis))
