@@ -305,3 +305,4 @@ def register_feature(name: str, target: str) -> None:
 
 # --- feature commands ---
 register_feature("tune", "aiofl.tuning:tune_command")
+register_feature("analyze", "aiofl.symbolic_cli:analyze_command")
