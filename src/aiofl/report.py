@@ -340,14 +340,15 @@ def findings(rep: Reproduction) -> list[str]:
             f"share of the reference's: {', '.join(seen)}."
         )
 
-    # observer error polynomial
+    # observer error polynomial (only where the ESO is in the loop: the AIOFL law)
+    in_loop = [r for r in rep.runs if r.case.config.controller.law == "aiofl"]
     seen_sets: dict[tuple[float, ...], list[str]] = {}
-    for r in rep.runs:
+    for r in in_loop:
         roots = observer_roots(r.case.config)
         key = (r.case.config.controller.eso, *np.round(np.sort_complex(roots), 9).view(float))
         seen_sets.setdefault(key, []).append(r.case.preset)
     done: set[tuple[float, ...]] = set()
-    for r in rep.runs:
+    for r in in_loop:
         roots = observer_roots(r.case.config)
         key = (r.case.config.controller.eso, *np.round(np.sort_complex(roots), 9).view(float))
         if key in done:
@@ -422,10 +423,20 @@ def findings(rep: Reproduction) -> list[str]:
                 + "."
             )
 
-    # closed-loop analysis
+    # closed-loop analysis (aiofl.linearize), grouped by verdict
+    by_verdict: dict[str, list[str]] = {}
     for preset, v in rep.verdicts.items():
-        if v is not None:
-            out.append(f"{preset}: closed-loop linearisation: {v.get('verdict', DASH)}.")
+        if v is None:
+            continue
+        mr = _max_real(v)
+        tail = f" (max Re λ = {mr:.3g} 1/s)" if mr is not None else ""
+        by_verdict.setdefault(str(v.get("verdict", DASH)), []).append(preset + tail)
+    if by_verdict:
+        out.append(
+            "Closed loop linearised about its operating point (aiofl.linearize): "
+            + "; ".join(f"{k}: {', '.join(v)}" for k, v in by_verdict.items())
+            + "."
+        )
     return out
 
 
@@ -466,21 +477,33 @@ def _html_table(
     return "".join(parts)
 
 
+def _max_real(v: Mapping[str, Any]) -> float | None:
+    if v.get("max_real") is not None:
+        return float(v["max_real"])
+    eig = v.get("eigenvalues") or []
+    return max((float(e[0]) for e in eig), default=None)
+
+
 def _verdict_table(rep: Reproduction) -> str:
     rows = []
     for preset, v in rep.verdicts.items():
         if v is None:
             continue
-        eig = v.get("eigenvalues") or []
-        max_re = max((float(e[0]) for e in eig), default=float("nan"))
-        rows.append([preset, str(v.get("verdict", DASH)), fmt(max_re, 4) if eig else DASH])
+        mr = _max_real(v)
+        sweep = v.get("verdicts_by_amplitude") or {}
+        notes = list(v.get("notes") or [])
+        if sweep:
+            notes.append("by amplitude ε: " + ", ".join(f"{k}: {w}" for k, w in sweep.items()))
+        rows.append(
+            [preset, str(v.get("verdict", DASH)), fmt(mr, 4), "; ".join(str(n) for n in notes)]
+        )
     if not rows:
         return (
             '<p class="muted">Closed-loop linearisation (<code>aiofl.linearize</code>) is not '
             "available in this installation.</p>"
         )
     return _html_table(
-        ["Case", "Verdict", "max Re(eigenvalue)"], rows, cls="settings", context_last=False
+        ["Case", "Verdict", "max Re λ [1/s]", "Notes"], rows, cls="settings", context_last=False
     )
 
 
