@@ -110,6 +110,17 @@ def test_bad_arguments_exit_2_and_write_nothing(
     assert _leftovers(tmp_path, "out") == []
 
 
+@pytest.mark.parametrize("command", [["simulate", "paper-s1-leso"], ["reproduce"]])
+def test_out_that_is_a_file_exits_2(tmp_path: Path, command: list[str]) -> None:
+    out = tmp_path / "taken"
+    out.write_text("not a directory")
+    res = runner.invoke(app, [*command, "--out", str(out)])
+    assert res.exit_code == 2
+    assert "not a directory" in res.stderr
+    assert out.read_text() == "not a directory"
+    assert [p.name for p in tmp_path.iterdir()] == ["taken"]
+
+
 def test_bad_input_in_a_fresh_process_has_no_traceback(tmp_path: Path) -> None:
     cfg = tmp_path / "bad.toml"
     cfg.write_text("[controller.eso]\nomega0 = -1\n")

@@ -46,7 +46,15 @@ def _input_errors() -> tuple[type[BaseException], ...]:
     from aiofl.config import ConfigError
     from aiofl.plant import PlantError
 
-    return (ConfigError, PlantError, ValueError, FileNotFoundError, tomllib.TOMLDecodeError)
+    return (ConfigError, PlantError, ValueError, OSError, tomllib.TOMLDecodeError)
+
+
+def _check_out(out: Path) -> None:
+    """Reject an output path that exists and is not a directory (before any work)."""
+    from aiofl.config import ConfigError
+
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out {str(out)!r} exists and is not a directory")
 
 
 @contextmanager
@@ -174,6 +182,7 @@ def simulate_command(
 
     console = _stderr_console()
     with bad_input_exits():
+        _check_out(out)
         cfg = load_config(config)
         if dt is not None:
             if not 0 < dt <= 0.1:
@@ -259,6 +268,8 @@ def reproduce_command(
         console=_stderr_console(),
         transient=False,
     )
+    with bad_input_exits():
+        _check_out(out)
     with bad_input_exits(), progress:
         task = progress.add_task("starting", total=None)
         last: list[str] = []
