@@ -363,6 +363,24 @@ class ClosedLoop:
         """A starting point for the operating-point search (plant at x0, TD settled)."""
         z = np.zeros(self.n_z)
         x0 = np.array(self.scenario.x0 or [0.0] * self.n, dtype=np.float64)
+        # move x0 onto the output level h(x) = r* (Gauss-Newton steps along ∇h)
+        for _ in range(20):
+            hx = float(np.asarray(self.plant.h(x0, self.p_true)).reshape(()))
+            if abs(hx - self.r_op) < 1e-12 * (1.0 + abs(self.r_op)):
+                break
+            grad = np.array(
+                [
+                    (
+                        float(np.asarray(self.plant.h(x0 + dx, self.p_true)).reshape(()))
+                        - float(np.asarray(self.plant.h(x0 - dx, self.p_true)).reshape(()))
+                    )
+                    / 2e-6
+                    for dx in np.eye(self.n) * 1e-6
+                ]
+            )
+            if not np.any(grad):
+                break
+            x0 = x0 + (self.r_op - hx) * grad / float(grad @ grad)
         z[: self.n] = x0
         c, r = self.controller, self.r_op
         if c.td == "improved":

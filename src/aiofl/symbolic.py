@@ -840,7 +840,8 @@ def _internal_coordinates(plant: SymbolicPlant, xi: tuple[Any, ...], rho: int) -
             "∂φ/∂x·g(x) ≡ 0, eq. 3)"
         )
     basis = direction.T.nullspace()
-    x0 = _equilibrium_guess(plant)
+    # choose by the generic rank (at a pseudo-random point); x_e is checked later
+    x0 = tuple(np.random.default_rng(0).uniform(0.3, 0.9, plant.n))
     dxi = np.array(
         sp.Matrix(xi).jacobian(states).subs(plant.nominal).subs(dict(zip(states, x0, strict=True))),
         dtype=np.float64,
