@@ -155,3 +155,25 @@ def test_extra_preset_patterns() -> None:
     shipped = {n for n in list_presets() if any(re.fullmatch(p, n) for p, _ in EXTRA_PRESETS)}
     assert {c.preset for c in extras} == shipped
     assert all(c.structure == "IOFL" for c in extras if c.source == "model")
+
+
+def test_an_extra_preset_becomes_an_extra_row_everywhere(monkeypatch) -> None:
+    import aiofl.reproduce as rp
+    from aiofl.figures import scenario_figure
+    from aiofl.report import findings, tables_markdown
+
+    real = rp.load_config
+    # pretend a re-tuned preset is shipped: the printed INLESO set under another name
+    monkeypatch.setattr(
+        rp, "load_config", lambda n: real("paper-s1-inleso" if n == "retuned-s1-inleso" else n)
+    )
+    rep = rp.compute(available=["retuned-s1-inleso", "not-an-extra"])
+    (extra,) = [r for r in rep.records if r["source"] == "retuned"]
+    printed = _one(rep.records, 1, "INLESO", "printed")
+    assert (extra["scenario"], extra["structure"]) == (1, "INLESO")
+    assert extra["itae"] == printed["itae"]
+    assert len(rep.records) == 13
+    md = tables_markdown(rep)
+    assert "| INLESO (retuned) | retuned-s1-inleso |" in md
+    assert any("retuned-s1-inleso" in f for f in findings(rep))
+    assert len(scenario_figure(rep, 1).axes) == 2 * len(rep.scenario_runs(1)) == 2 * 3

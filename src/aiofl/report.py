@@ -67,16 +67,8 @@ def _roots_text(roots: np.ndarray) -> str:
     return ", ".join(parts)
 
 
-def _record(rep: Reproduction, scenario: int, structure: str, source: str) -> dict[str, Any]:
-    return next(
-        r
-        for r in rep.records
-        if r["scenario"] == scenario and r["structure"] == structure and r["source"] == source
-    )
-
-
 def _computed(rep: Reproduction, run: CaseRun) -> dict[str, Any]:
-    return _record(rep, run.case.scenario, run.case.structure, run.case.source)
+    return run.record
 
 
 # ---------------------------------------------------------------------------- tables

@@ -186,6 +186,17 @@ class CaseRun:
         """Whether the run diverged."""
         return self.result.diverged
 
+    @property
+    def record(self) -> dict[str, Any]:
+        """This run's metrics.json record (see :func:`computed_record`)."""
+        return computed_record(
+            self.result,
+            scenario=self.case.scenario,
+            structure=self.case.structure,
+            source=self.case.source,
+            opi=self.opi,
+        )
+
 
 def _batch_key(cfg: RunConfig) -> tuple[Any, ...]:
     return (
@@ -307,16 +318,7 @@ def paper_records() -> list[dict[str, Any]]:
 
 def build_records(runs: Sequence[CaseRun]) -> list[dict[str, Any]]:
     """Paper records and computed records, ordered by scenario, source, structure."""
-    recs = paper_records() + [
-        computed_record(
-            r.result,
-            scenario=r.case.scenario,
-            structure=r.case.structure,
-            source=r.case.source,
-            opi=r.opi,
-        )
-        for r in runs
-    ]
+    recs = paper_records() + [r.record for r in runs]
 
     def key(rec: dict[str, Any]) -> tuple[int, int, int]:
         src = rec["source"]
@@ -327,7 +329,7 @@ def build_records(runs: Sequence[CaseRun]) -> list[dict[str, Any]]:
             STRUCTURE_ORDER.index(st) if st in STRUCTURE_ORDER else 99,
         )
 
-    return sorted(recs, key=key)
+    return sorted(recs, key=key)  # stable: runs keep their order within a key
 
 
 # ----------------------------------------------------------------------------- facts
