@@ -57,8 +57,8 @@ def test_input_first_appears_in_the_rho_th_output_derivative(name: str) -> None:
 @pytest.mark.parametrize("name", EXTRA_PLANTS)
 def test_aiofl_tracks_each_extra_plant_knowing_only_rho_and_b0(name: str) -> None:
     """The shipped preset (linear ESO + linear feedback, b0 off by 20–25 %) tracks: no
-    divergence, ITAE below 5 % of that of an output left at its initial value, and the late error below 5 % of
-    the reference amplitude."""
+    divergence, ITAE below 5 % of that of an output left at its initial value, and the late
+    error below 5 % of the reference amplitude."""
     cfg = load_config(PRESETS[name])
     assert cfg.plant.name == name
     assert cfg.controller.rho == cfg.plant.relative_degree

@@ -728,7 +728,12 @@ def format_linearization_text(
     out.append(f"  z* = [{', '.join(f'{v:.6g}' for v in lin.z_op)}]")
     out.append(f"  eigenvalues ({len(lin.eigenvalues)}):")
     for z in lin.eigenvalues:
-        tau = f"   τ = {1 / abs(z.real):.4g} s" if z.real != 0 else ""
+        if z.real < 0:
+            tau = f"   decays, τ = {1 / abs(z.real):.4g} s"
+        elif z.real > 0:
+            tau = f"   GROWS, τ = {1 / z.real:.4g} s"
+        else:
+            tau = ""
         out.append(f"    {_fmt(z)}{tau}")
     out.append(f"  slowest mode: {_fmt(lin.slowest)}   fastest mode: {_fmt(lin.fastest)}")
     out.append(f"  verdict: {lin.verdict().upper()} (max Re = {lin.max_real:.6g})")
