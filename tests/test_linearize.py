@@ -221,24 +221,38 @@ def _python_trajectory(loop: ClosedLoop, z0: np.ndarray, t_end: float, dt: float
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("preset", ["paper-s1-leso", "paper-s2-inleso", "iofl-s2"])
-def test_python_closed_loop_matches_the_engine(preset: str) -> None:
+@pytest.mark.parametrize(
+    ("preset", "td"),
+    [
+        ("paper-s1-leso", None),  # LESO, Han TD, NLSEF
+        ("paper-s2-inleso", None),  # INLESO, ITD, INLSEF, J_l x 1.4, disturbance
+        ("iofl-s2", None),  # IOFL, exact derivatives, nominal model vs changed plant
+        ("dcmotor-arm-ladrc", "linear"),  # linear ESO, linear prefilter, linear SEF, rho = 3
+    ],
+)
+def test_python_closed_loop_matches_the_engine(preset: str, td: str | None) -> None:
     """ClosedLoop(mode="exact") integrates to the engine's state (same equations)."""
     from dataclasses import replace
 
     from aiofl.engine import simulate
 
     cfg = load_config(preset)
-    scen = replace(cfg.scenario, t_final=0.03, disturbance_time=0.0)  # disturbance on
-    loop = ClosedLoop(cfg.plant, cfg.controller, scen, mode="exact")
+    ctrl = cfg.controller
+    if td is not None:
+        ctrl = replace(ctrl, td=td).with_values(**{"td.omega": 25.0})
+    n = cfg.plant.n_states
+    x0 = (0.01,) + (0.0,) * (n - 1)  # start off the reference so every block is exercised
+    scen = replace(cfg.scenario, t_final=0.03, disturbance_time=0.0, x0=x0)  # disturbance on
+    if preset.startswith("dcmotor"):
+        scen = replace(scen, disturbance_amplitude=0.2)
+    loop = ClosedLoop(cfg.plant, ctrl, scen, mode="exact")
     z0 = np.zeros(loop.n_z)
-    z0[0] = 0.01  # start off the reference so every block is exercised
-    scen = replace(scen, x0=(0.01, 0.0, 0.0, 0.0))
-    res = simulate(cfg.plant, cfg.controller, scen, dt=1e-4, decimation=1)
+    z0[:n] = x0
+    res = simulate(cfg.plant, ctrl, scen, dt=1e-4, decimation=1)
     z = _python_trajectory(loop, z0, 0.03, 1e-4)
-    engine = [res[f"x{i}"][-1] for i in range(1, 5)]
+    engine = [res[f"x{i}"][-1] for i in range(1, n + 1)]
     engine += [res[f"r{i}"][-1] for i in range(1, loop.n_td + 1)]
-    engine += [res[f"xi_hat{i}"][-1] for i in range(1, cfg.controller.rho + 2)]
+    engine += [res[f"xi_hat{i}"][-1] for i in range(1, ctrl.rho + 2)]
     assert np.allclose(z, engine, rtol=1e-8, atol=1e-10)
 
 
