@@ -1061,6 +1061,13 @@ def load_symbolic_plant(target: str | Path) -> SymbolicPlant:
         if "f" not in data and isinstance(data.get("plant"), str):
             return load_symbolic_plant(data["plant"])
         return SymbolicPlant.from_dict(data, str(path))
+    from aiofl.plants import available_plants
+
+    if text in available_plants():
+        raise SymbolicPlantError(
+            f"plant {text!r} is registered from Python functions and has no symbolic model; "
+            "write it as a symbolic-plant TOML file (see aiofl.symbolic.SymbolicPlant.from_dict)"
+        )
     raise SymbolicPlantError(
         f"unknown plant {text!r}: not a built-in symbolic plant "
         f"({', '.join(symbolic_plant_names())}) nor a TOML file"
