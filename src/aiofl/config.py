@@ -8,7 +8,7 @@ rejects unknown keys; every number is range-checked; a bad file raises
 .. code-block:: toml
 
     name = "my-run"
-    plant = "slfjm"                  # a built-in plant name
+    plant = "slfjm"                  # a registered plant, or a symbolic-plant .toml file
 
     [scenario]
     t_final = 20.0
@@ -73,6 +73,7 @@ __all__ = [
     "load_config",
     "parse_config",
     "preset_text",
+    "resolve_plant",
 ]
 
 PosFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
@@ -254,8 +255,11 @@ class ConfigModel(_Model):
     def _plant_name(cls, v: str) -> str:
         from aiofl.plants import available_plants
 
-        if v not in available_plants():
-            raise ValueError(f"unknown plant {v!r}; allowed: {', '.join(available_plants())}")
+        if v not in available_plants() and not v.endswith(".toml"):
+            raise ValueError(
+                f"unknown plant {v!r}; allowed: a symbolic-plant .toml file or one of "
+                f"{', '.join(available_plants())}"
+            )
         return v
 
 
@@ -302,15 +306,48 @@ def _format_error(exc: ValidationError, source: str) -> str:
     return "\n".join(lines)
 
 
-def parse_config(data: dict[str, Any], source: str = "<dict>") -> RunConfig:
-    """Validate a config dict and build the engine objects; raises :class:`ConfigError`."""
+_FILE_PLANTS: dict[tuple[str, int], Plant] = {}
+
+
+def resolve_plant(name_or_file: str, base_dir: str | Path | None = None) -> Plant:
+    """A registered plant by name, or a symbolic-plant TOML file compiled to a :class:`Plant`.
+
+    A relative file path is taken relative to ``base_dir`` (the config's folder).  A file
+    plant is built once per process (per path and modification time), so its kernel
+    compiles once.  See :meth:`aiofl.symbolic.SymbolicPlant.from_dict` for the format.
+    """
+    from aiofl.plants import get_plant
+
+    if not name_or_file.endswith(".toml"):
+        return get_plant(name_or_file)
+    path = Path(name_or_file)
+    if not path.is_absolute() and base_dir is not None:
+        path = Path(base_dir) / path
+    if not path.is_file():
+        raise ConfigError(f"plant: file {str(path)!r} does not exist")
+    key = (str(path.resolve()), path.stat().st_mtime_ns)
+    if key not in _FILE_PLANTS:
+        from aiofl.symbolic import SymbolicPlant, SymbolicPlantError
+
+        try:
+            _FILE_PLANTS[key] = SymbolicPlant.from_toml(path).to_plant()
+        except SymbolicPlantError as exc:
+            raise ConfigError(f"plant: {exc}") from None
+    return _FILE_PLANTS[key]
+
+
+def parse_config(
+    data: dict[str, Any], source: str = "<dict>", base_dir: str | Path | None = None
+) -> RunConfig:
+    """Validate a config dict and build the engine objects; raises :class:`ConfigError`.
+
+    ``base_dir`` resolves a relative ``plant = "file.toml"`` (defaults to the working folder).
+    """
     try:
         model = ConfigModel.model_validate(data)
     except ValidationError as exc:
         raise ConfigError(_format_error(exc, source)) from None
-    from aiofl.plants import get_plant
-
-    plant = get_plant(model.plant)
+    plant = resolve_plant(model.plant, base_dir)
     try:
         plant.param_vector(model.scenario.plant_overrides, model.scenario.plant_scale)
         controller = model.controller.build(plant.relative_degree or 1)
@@ -366,11 +403,11 @@ def load_config(path_or_preset: str | Path) -> RunConfig:
     if p.suffix == ".toml" or p.exists():
         if not p.is_file():
             raise ConfigError(f"config file {str(p)!r} does not exist")
-        text, source = p.read_text(encoding="utf-8"), str(p)
+        text, source, base = p.read_text(encoding="utf-8"), str(p), p.parent
     else:
-        text, source = preset_text(str(path_or_preset)), f"preset {path_or_preset!r}"
+        text, source, base = preset_text(str(path_or_preset)), f"preset {path_or_preset!r}", None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"malformed TOML in {source}: {exc}") from None
-    return parse_config(data, source)
+    return parse_config(data, source, base)
