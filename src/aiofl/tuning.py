@@ -529,8 +529,9 @@ class _Progress:
     def __init__(self, st: TuneSettings, ev: Any, *, enabled: bool) -> None:
         self.enabled = enabled
         self.total = st.generations
-        self.desc = f"{st.algorithm.upper()} {st.population}x{st.generations} " + getattr(
-            ev, "description", ""
+        where = getattr(ev, "description", "")
+        self.desc = f"{st.algorithm.upper()} {st.population}x{st.generations}" + (
+            " dask" if where.startswith("dask") else ""
         )
         self._p: Any = None
         self._task: Any = None
@@ -629,6 +630,11 @@ def convergence_png(result: TuneResult) -> bytes:
     ax2 = ax.twinx()
     ax2.bar(gen, [r["diverged"] for r in h], alpha=0.15, color="red", label="diverged")
     ax2.set_ylabel("diverged members")
+    ax.set_zorder(ax2.get_zorder() + 1)  # lines over the bars
+    ax.patch.set_visible(False)
+    from matplotlib.ticker import MaxNLocator
+
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     lines = ax.get_legend_handles_labels()
     bars = ax2.get_legend_handles_labels()
     ax.legend(lines[0] + bars[0], lines[1] + bars[1], fontsize=8, loc="upper right")
