@@ -21,6 +21,13 @@ stages, so the integrator never straddles a noise jump inside a step.
 
 from __future__ import annotations
 
+import hashlib
+import itertools
+import math
+import os
+import sys
+import threading
+import types
 from collections.abc import Sequence
 from dataclasses import dataclass
 from math import ceil
@@ -37,364 +44,691 @@ from aiofl.scenario import Scenario, noise_sequence
 
 __all__ = ["BatchResult", "SimulationResult", "simulate", "simulate_batch"]
 
-_KERNELS: dict[int, Any] = {}
+# ----------------------------------------------------------------------------- layout
+# Per-member packed parameters (thread-local inside the kernel): the controller's float row
+# followed by quantities derived from it once per member.
+Q_BETA = L.N_FLOAT  #: observer gains β_i = α_i ω0^i, i = 1..ρ+1
+Q_LINK = Q_BETA + L.RHO_MAX + 1  #: feedback gains k_i (linear SEF / IOFL) or sef.k_i
+Q_SLOPE = Q_LINK + L.RHO_MAX  #: fal inner slopes δ_i^(α_i - 1)
+Q_PF = Q_SLOPE + L.RHO_MAX  #: linear prefilter coefficients ω^ρ, C(ρ,i) ω^(ρ-i)
+N_Q = Q_PF + L.RHO_MAX
+# Per-member integers: kinds, ρ, m, offsets of the TD and ESO blocks in z, active length.
+IQ_ESO, IQ_TD, IQ_SEF, IQ_LAW, IQ_RHO, IQ_M, IQ_OTD, IQ_OESO, IQ_NZ, IQ_NTD = range(10)
+N_IQ = 10
+N_SIG = 6  # t, r, y, y_meas, u, d
+
+FASTMATH = {"contract", "arcp", "nsz", "afn", "reassoc"}
+"""LLVM fast-math flags of the time loop.  ``nnan``/``ninf`` are deliberately absent:
+divergence detection relies on NaN and infinity behaving as IEEE 754 says."""
+
+# Placeholders for the names a kernel instance binds (see _instantiate); the template
+# functions below are plain Python until _build_kernel compiles them for one plant.
+_N = 1  # plant states
+_N_P = 1  # plant parameters
+_NZ = 1  # longest member state
+_PF = _PG = _PH = _PBD = _PNF = None  # the plant's compiled f, g, h, b_d, normal form
+_SETUP = _REFERENCE = _DERIV = None  # sibling compiled functions
+_UNMANAGED = _KEEP_ALIVE = None  # see _unmanaged_intrinsic
+_ABSPOW = _TANH = None  # _abspow, _tanh, compiled
+_HAN_TD = None  # aiofl.differentiators.han_td_rhs
 
 
-def _build_kernel(plant: Plant) -> Any:
-    """Compile the closed-loop kernel for one plant (memoised per plant object)."""
-    import numba
-    from numba import njit, prange
+def _abspow(x, a, log_x):  # pragma: no cover - compiled
+    """:math:`x^a` for :math:`x = |e| \\ge 0` given :math:`\\log x`, as ``exp(a log x)``.
 
-    from aiofl.differentiators import han_td_rhs, improved_td_rhs, linear_prefilter_rhs
-    from aiofl.feedback import improved_sef, nonlinear_sef
-    from aiofl.law import aiofl_law, iofl_law, saturate
-    from aiofl.observers import eso_rhs
+    Cheaper than ``pow`` and lets two powers of the same x share one logarithm; the result
+    differs from ``pow`` by a few ulp (exact for a = 0 and 1).  0^a = 0 for a > 0
+    (exp(-inf) = 0); inf and NaN propagate.
+    """
+    if a == 1.0:
+        return x
+    if a == 0.0:
+        return 1.0
+    return np.exp(a * log_x)
 
-    f, g, h, bd, nf = plant.compiled
-    n = plant.n_states
-    rmax = L.RHO_MAX
-    o_td = n
-    o_eso = n + rmax
-    o_met = n + 2 * rmax + 1
-    nz = o_met + L.N_METRIC
-    n_sig = 6  # t, r, y, y_meas, u, d
-    n_cols = n_sig + n + (rmax + 1) + rmax
 
-    @njit
-    def reference(t, sc, ref_samples, derivs, nd):
-        """r(t) and its derivatives 0..nd into derivs."""
-        kind = int(sc[L.S_REF_KIND])
-        for k in range(nd + 1):
-            derivs[k] = 0.0
-        if kind == L.REF_SINE:
-            a = sc[L.S_REF_A]
-            w = sc[L.S_REF_OMEGA]
-            ph = w * t + sc[L.S_REF_PHASE]
-            wk = 1.0
-            for k in range(nd + 1):
-                derivs[k] = a * wk * np.sin(ph + 0.5 * np.pi * k)
+# Cephes' rational approximation of tanh on |x| < 0.625: tanh x = x + x z P(z)/Q(z), z = x²
+_TANH_P = (-9.64399179425052238628e-1, -9.92877231001918586564e1, -1.61468768441708447952e3)
+_TANH_Q = (1.12811678491632931402e2, 2.23548839060100448583e3, 4.84406305325125486048e3)
+
+
+def _tanh(x):  # pragma: no cover - compiled
+    """tanh x within 2 ulp of libm's, at a third of its cost on small arguments.
+
+    A rational approximation for |x| < 0.625 (Cephes), ``1 - 2/(exp(2|x|) + 1)`` up to 20,
+    and 1 beyond (tanh 20 rounds to 1); odd; NaN propagates.
+    """
+    ax = abs(x)
+    if ax >= 20.0:
+        t = 1.0
+    elif ax >= 0.625:
+        t = 1.0 - 2.0 / (np.exp(2.0 * ax) + 1.0)
+    else:
+        p0, p1, p2 = _TANH_P
+        q0, q1, q2 = _TANH_Q
+        zz = ax * ax
+        t = ax + ax * zz * ((p0 * zz + p1) * zz + p2) / (((zz + q0) * zz + q1) * zz + q2)
+    return math.copysign(t, x)
+
+
+def _tpl_setup(ip, fp, q, iq):  # pragma: no cover - compiled
+    """Fill the packed per-member parameters ``q`` and integers ``iq`` from one member's
+    integer row ``ip`` and float row ``fp``."""
+    rho = ip[L.I_RHO]
+    for i in range(L.N_FLOAT):
+        q[i] = fp[i]
+    for i in range(L.N_FLOAT, N_Q):
+        q[i] = 0.0
+    w0 = fp[L.F_OMEGA0]
+    for i in range(rho + 1):
+        q[Q_BETA + i] = fp[L.F_ALPHA + i] * w0 ** (i + 1)
+    if ip[L.I_SEF] == L.SEF_LINEAR or ip[L.I_LAW] == L.LAW_IOFL:
+        wc = fp[L.F_SEF_OMEGA_C]
+        binom = 1.0
+        for i in range(rho):  # k_{i+1} = C(rho, i) wc^(rho - i)
+            q[Q_LINK + i] = binom * wc ** (rho - i)
+            binom = binom * (rho - i) / (i + 1)
+    else:
+        for i in range(L.RHO_MAX):
+            q[Q_LINK + i] = fp[L.F_SEF_K + i]
+    for i in range(L.RHO_MAX):  # fal (17), continuous form: e / δ^(1-α) = e δ^(α-1)
+        q[Q_SLOPE + i] = fp[L.F_SEF_DELTA + i] ** (fp[L.F_SEF_ALPHA + i] - 1.0)
+    wr = fp[L.F_TD_OMEGA]
+    q[Q_PF] = wr**rho
+    binom = 1.0
+    for i in range(1, rho):  # state i -> C(rho, i) wr^(rho - i)
+        binom = binom * (rho - i + 1) / i
+        q[Q_PF + i] = binom * wr ** (rho - i)
+    td = ip[L.I_TD]
+    if td == L.TD_EXACT:
+        ntd = 0
+    elif td == L.TD_LINEAR:
+        ntd = rho
+    else:
+        ntd = 2
+    iq[IQ_ESO] = ip[L.I_ESO]
+    iq[IQ_TD] = td
+    iq[IQ_SEF] = ip[L.I_SEF]
+    iq[IQ_LAW] = ip[L.I_LAW]
+    iq[IQ_RHO] = rho
+    iq[IQ_M] = ip[L.I_NFB]
+    iq[IQ_OTD] = _N + L.N_METRIC
+    iq[IQ_OESO] = _N + L.N_METRIC + ntd
+    iq[IQ_NZ] = _N + L.N_METRIC + ntd + rho + 1
+    iq[IQ_NTD] = ntd
+
+
+def _tpl_reference(t, sc, ref_table, ref_row, out, oi, nd):  # pragma: no cover - compiled
+    """r(t) and its derivatives 0..nd into ``out[oi]`` (nd > 0 only for the exact TD)."""
+    kind = int(sc[L.S_REF_KIND])
+    for k in range(nd + 1):
+        out[oi, k] = 0.0
+    if kind == L.REF_SINE:
+        a = sc[L.S_REF_A]
+        w = sc[L.S_REF_OMEGA]
+        ph = w * t + sc[L.S_REF_PHASE]
+        sn = np.sin(ph)
+        out[oi, 0] = a * sn + sc[L.S_REF_OFFSET]
+        if nd > 0:
+            cs = np.cos(ph)
+            wk = a
+            for k in range(1, nd + 1):  # d^k/dt^k sin = sin(ph + k π/2)
                 wk *= w
-            derivs[0] += sc[L.S_REF_OFFSET]
-        elif kind == L.REF_STEP:
-            derivs[0] = sc[L.S_REF_OFFSET] + (sc[L.S_REF_A] if t >= sc[L.S_REF_TSTEP] else 0.0)
+                j = k % 4
+                out[oi, k] = wk * (cs if j == 1 else (-sn if j == 2 else (-cs if j == 3 else sn)))
+    elif kind == L.REF_STEP:
+        out[oi, 0] = sc[L.S_REF_OFFSET] + (sc[L.S_REF_A] if t >= sc[L.S_REF_TSTEP] else 0.0)
+    else:
+        dtr = sc[L.S_REF_DT]
+        ns = ref_table.shape[1]
+        s = t / dtr
+        k0 = int(s)
+        if k0 >= ns - 1:
+            out[oi, 0] = ref_table[ref_row, ns - 1]
         else:
-            dtr = sc[L.S_REF_DT]
-            ns = ref_samples.shape[0]
-            s = t / dtr
-            k0 = int(s)
-            if k0 >= ns - 1:
-                derivs[0] = ref_samples[ns - 1]
-            else:
-                frac = s - k0
-                derivs[0] = ref_samples[k0] + frac * (ref_samples[k0 + 1] - ref_samples[k0])
-                if nd >= 1:
-                    derivs[1] = (ref_samples[k0 + 1] - ref_samples[k0]) / dtr
+            lo = ref_table[ref_row, k0]
+            hi = ref_table[ref_row, k0 + 1]
+            out[oi, 0] = lo + (s - k0) * (hi - lo)
+            if nd >= 1:
+                out[oi, 1] = (hi - lo) / dtr
 
-    @njit
-    def closed_loop(
-        t, z, dz, ints, fp, betas, lin_k, p_true, p_nom, sc, ref_samples, noise_val, sig, rd, e
-    ):
-        """F(t, z) of one member; writes dz and the signals (r, y, y_meas, u, d) into sig."""
-        eso_kind = ints[L.I_ESO]
-        td_kind = ints[L.I_TD]
-        sef_kind = ints[L.I_SEF]
-        law_kind = ints[L.I_LAW]
-        rho = ints[L.I_RHO]
-        m = ints[L.I_NFB]
-        x = z[0:n]
-        td = z[o_td : o_td + rmax]
-        xi = z[o_eso : o_eso + rmax + 1]
-        dtd = dz[o_td : o_td + rmax]
-        dxi = dz[o_eso : o_eso + rmax + 1]
 
-        # reference and the differentiator's profile r_1..r_rho, feed-forward r^(rho)
-        reference(t, sc, ref_samples, rd, rho if td_kind == L.TD_EXACT else 0)
-        r = rd[0]
-        rff = 0.0
-        for i in range(rmax):
-            dtd[i] = 0.0
-        if td_kind == L.TD_EXACT:
-            for i in range(rho):
-                td[i] = rd[i]
-            rff = rd[rho]
-        elif td_kind == L.TD_HAN:
-            dtd[0], dtd[1] = han_td_rhs(td[0], td[1], r, fp[L.F_TD_R])
-        elif td_kind == L.TD_IMPROVED:
-            dtd[0], dtd[1] = improved_td_rhs(
-                td[0], td[1], r, fp[L.F_TD_A], fp[L.F_TD_B], fp[L.F_TD_C], fp[L.F_TD_RHO]
-            )
-        else:
-            rff = linear_prefilter_rhs(td, dtd, rho, r, fp[L.F_TD_OMEGA])
+def _tpl_deriv(t, z, dz, iq, q, p, p_nom, sc, rr, ri, noise_val, xb, sig):  # pragma: no cover
+    """F(t, z) of one member: writes ``dz[:nz]`` and the signals r, y, y_meas, u, d.
 
-        # plant output and measurement
-        y = h(x, p_true)
-        y_meas = y + noise_val
-        b0 = fp[L.F_B0]
+    ``rr[ri]`` holds r(t) (and, for the exact TD, its derivatives); ``p`` is the true plant's
+    parameter vector at t, ``p_nom`` the nominal one (for the IOFL law); ``xb`` is scratch
+    for the plant state.
+    """
+    rho = iq[IQ_RHO]
+    m = iq[IQ_M]
+    o_td = iq[IQ_OTD]
+    o_eso = iq[IQ_OESO]
+    td_kind = iq[IQ_TD]
+    exact = td_kind == L.TD_EXACT
+    for i in range(_N):
+        xb[i] = z[i]
 
-        # state error feedback and law
-        if law_kind == L.LAW_AIOFL:
+    # reference and the differentiator's profile r_1..r_rho; feed-forward r^(rho)
+    r = rr[ri, 0]
+    rff = 0.0
+    if td_kind == L.TD_HAN:
+        dz[o_td], dz[o_td + 1] = _HAN_TD(z[o_td], z[o_td + 1], r, q[L.F_TD_R])
+    elif td_kind == L.TD_IMPROVED:
+        # eq. (21), as aiofl.differentiators.improved_td_rhs
+        r2 = z[o_td + 1]
+        w = q[L.F_TD_RHO]
+        arg = (q[L.F_TD_B] * z[o_td] - (1.0 - q[L.F_TD_A]) * r) / q[L.F_TD_C]
+        dz[o_td] = r2
+        dz[o_td + 1] = -w * w * _TANH(arg) - w * r2
+    elif td_kind == L.TD_LINEAR:
+        acc = q[Q_PF] * (r - z[o_td])
+        for i in range(1, rho):
+            dz[o_td + i - 1] = z[o_td + i]
+            acc -= q[Q_PF + i] * z[o_td + i]
+        dz[o_td + rho - 1] = acc
+        rff = acc
+    else:
+        rff = rr[ri, rho]
+
+    # plant output and measurement
+    y = _PH(xb, p)
+    y_meas = y + noise_val
+    b0 = q[L.F_B0]
+
+    # state error feedback and law
+    if iq[IQ_LAW] == L.LAW_AIOFL:
+        sef_kind = iq[IQ_SEF]
+        if sef_kind == L.SEF_NONLINEAR:  # eq. (17)
+            v = 0.0
             for i in range(m):
-                e[i] = td[i] - xi[i]
-            if sef_kind == L.SEF_NONLINEAR:
-                v = nonlinear_sef(e, m, fp[L.F_SEF_K :], fp[L.F_SEF_ALPHA :], fp[L.F_SEF_DELTA :])
-            elif sef_kind == L.SEF_IMPROVED:
-                v = improved_sef(
-                    e,
-                    m,
-                    fp[L.F_SEF_K :],
-                    fp[L.F_SEF_KB :],
-                    fp[L.F_SEF_MU :],
-                    fp[L.F_SEF_ALPHA :],
-                    fp[L.F_SEF_DOUT],
-                )
-            else:
-                acc = rff
-                for i in range(m):
-                    acc += lin_k[i] * e[i]
-                v = acc / b0
-            u = aiofl_law(v, xi[rho], b0)
-        else:
-            nfx = nf(x, p_nom)
+                ei = (rr[ri, i] if exact else z[o_td + i]) - z[o_eso + i]
+                ae = abs(ei)
+                a = q[L.F_SEF_ALPHA + i]
+                if ae <= q[L.F_SEF_DELTA + i]:
+                    fe = ei * q[Q_SLOPE + i]
+                elif a == 1.0:
+                    fe = ei
+                else:
+                    fe = np.exp(a * np.log(ae)) * (1.0 if ei > 0.0 else -1.0)  # |e|^a, |e| > δ
+                v += q[L.F_SEF_K + i] * fe
+        elif sef_kind == L.SEF_IMPROVED:  # eq. (20)
+            acc = 0.0
+            for i in range(m):
+                ei = (rr[ri, i] if exact else z[o_td + i]) - z[o_eso + i]
+                ae = abs(ei)
+                sgn = 1.0 if ei > 0.0 else (-1.0 if ei < 0.0 else 0.0)
+                a = q[L.F_SEF_ALPHA + i]
+                gain = q[L.F_SEF_K + i]
+                kb = q[L.F_SEF_KB + i]
+                if kb != 0.0:
+                    gain += kb / (1.0 + np.exp(q[L.F_SEF_MU + i] * ei * ei))
+                acc += gain * _ABSPOW(ae, a, np.log(ae)) * sgn
+            dl = q[L.F_SEF_DOUT]
+            v = dl * _TANH(acc / dl)
+        else:  # linear full-state feedback of the chain (14)
             acc = rff
             for i in range(m):
-                acc += lin_k[i] * (td[i] - nfx[i])
-            u = iofl_law(acc, nfx[rho], nfx[rho + 1])
-        u = saturate(u, fp[L.F_UMAX])
+                acc += q[Q_LINK + i] * ((rr[ri, i] if exact else z[o_td + i]) - z[o_eso + i])
+            v = acc / b0
+        u = v - z[o_eso + rho] / b0  # eq. (14)
+    else:  # classical IOFL on the nominal model
+        nfx = _PNF(xb, p_nom)
+        acc = rff
+        for i in range(m):
+            acc += q[Q_LINK + i] * ((rr[ri, i] if exact else z[o_td + i]) - nfx[i])
+        u = (-nfx[rho] + acc) / nfx[rho + 1]
+    u_max = q[L.F_UMAX]
+    if u > u_max:
+        u = u_max
+    elif u < -u_max:
+        u = -u_max
 
-        # observer (always integrated: its estimates are part of the output)
-        for i in range(rmax + 1):
-            dxi[i] = 0.0
-        eso_rhs(
-            xi,
-            dxi,
-            rho,
-            betas,
-            b0,
-            y_meas,
-            u,
-            eso_kind == L.ESO_IMPROVED,
-            fp[L.F_KA],
-            fp[L.F_KB],
-            fp[L.F_EA],
-            fp[L.F_EB],
-        )
+    # observer, eqs. (5)/(16) or (19)
+    e = y_meas - z[o_eso]
+    if iq[IQ_ESO] == L.ESO_IMPROVED:
+        ae = abs(e)
+        sgn = 1.0 if e > 0.0 else (-1.0 if e < 0.0 else 0.0)
+        la = np.log(ae)  # shared by both powers
+        ge = q[L.F_KA] * _ABSPOW(ae, q[L.F_EA], la) * sgn
+        kb = q[L.F_KB]
+        if kb != 0.0:
+            ge += kb * _ABSPOW(ae, q[L.F_EB], la) * e
+        e = ge
+    for i in range(rho):
+        dz[o_eso + i] = z[o_eso + i + 1] + q[Q_BETA + i] * e
+    dz[o_eso + rho - 1] += b0 * u
+    dz[o_eso + rho] = q[Q_BETA + rho] * e
 
-        # plant
-        d = sc[L.S_DIST_AMP] if t >= sc[L.S_DIST_TIME] else 0.0
-        fx = f(x, p_true)
-        gx = g(x, p_true)
-        for i in range(n):
-            dz[i] = fx[i] + gx[i] * u
-        if d != 0.0:
-            bdx = bd(x, p_true)
-            for i in range(n):
-                dz[i] += bdx[i] * d
+    # plant
+    d = sc[L.S_DIST_AMP] if t >= sc[L.S_DIST_TIME] else 0.0
+    fx = _PF(xb, p)
+    gx = _PG(xb, p)
+    for i in range(_N):
+        dz[i] = fx[i] + gx[i] * u
+    if d != 0.0:
+        bdx = _PBD(xb, p)
+        for i in range(_N):
+            dz[i] += bdx[i] * d
 
-        # performance integrals (eq. 22)
-        err = abs(y - r)
-        dz[o_met + L.M_ITAE] = t * err
-        dz[o_met + L.M_IAE] = err
-        dz[o_met + L.M_ISE] = err * err
-        dz[o_met + L.M_ISU] = u * u
-        dz[o_met + L.M_IAU] = abs(u)
-        sig[0] = r
-        sig[1] = y
-        sig[2] = y_meas
-        sig[3] = u
-        sig[4] = d
+    # performance integrals (eq. 22)
+    err = abs(y - r)
+    dz[_N + L.M_ITAE] = t * err
+    dz[_N + L.M_IAE] = err
+    dz[_N + L.M_ISE] = err * err
+    dz[_N + L.M_ISU] = u * u
+    dz[_N + L.M_IAU] = abs(u)
+    sig[0] = r
+    sig[1] = y
+    sig[2] = y_meas
+    sig[3] = u
+    sig[4] = d
 
-    @njit(parallel=True)
-    def kernel(
-        ints,
-        floats,
-        p_before,
-        p_after,
-        p_nom,
-        scen,
-        x0,
-        ref_table,
-        ref_row,
-        noise_table,
-        noise_row,
-        dt,
-        n_steps,
-        method,
-        decimation,
-        store,
-        threshold,
-        metrics,
-        status,
-        t_div,
-        traj,
-    ):
-        n_members = ints.shape[0]
-        for mi in prange(n_members):
-            ip = ints[mi]
-            fp = floats[mi]
-            sc = scen[mi]
-            rho = ip[L.I_RHO]
-            ref_samples = ref_table[ref_row[mi]]
-            noise = noise_table[noise_row[mi]]
-            n_noise = noise.shape[0]
-            betas = np.zeros(rmax + 1)
-            w0 = fp[L.F_OMEGA0]
-            for i in range(rho + 1):
-                betas[i] = fp[L.F_ALPHA + i] * w0 ** (i + 1)
-            lin_k = np.zeros(rmax)
-            wc = fp[L.F_SEF_OMEGA_C]
-            if ip[L.I_SEF] == L.SEF_LINEAR or ip[L.I_LAW] == L.LAW_IOFL:
-                binom = 1.0
-                for i in range(rho):  # k_{i+1} = C(rho, i) wc^(rho - i)
-                    lin_k[i] = binom * wc ** (rho - i)
-                    binom = binom * (rho - i) / (i + 1)
+
+def _tpl_member(  # pragma: no cover - compiled
+    mi,
+    ints,
+    floats,
+    p_before,
+    p_after,
+    p_nom,
+    scen,
+    x0,
+    ref_table,
+    ref_row,
+    noise_table,
+    noise_row,
+    dt,
+    n_steps,
+    method,
+    decimation,
+    store,
+    threshold,
+    metrics,
+    status,
+    t_div,
+    traj,
+):
+    """Integrate member ``mi`` over the horizon; every array it touches in the time loop is
+    its own (thread-local), so parallel members never share a cache line or a refcount."""
+    # Every array the time loop touches is reached through an unmanaged view (see
+    # _unmanaged): no reference counting in the loop, nothing shared between threads.
+    nr = L.RHO_MAX + 2
+    work_owner = np.zeros(N_Q + 4 * _NZ + _N + 5 + 4 * _N_P + L.N_SCEN)
+    iq_owner = np.zeros(N_IQ, dtype=np.int64)
+    rr_owner = np.zeros((3, nr))  # r and derivatives at t, t + dt/2, t + dt
+    w = _UNMANAGED(work_owner)
+    iq = _UNMANAGED(iq_owner)
+    rrs = _UNMANAGED(rr_owner)
+    ref_t = _UNMANAGED(ref_table)
+    noise_t = _UNMANAGED(noise_table)
+    tr = _UNMANAGED(traj)
+    o = 0
+    q = w[o : o + N_Q]
+    o += N_Q
+    z = w[o : o + _NZ]  # the state
+    o += _NZ
+    zt = w[o : o + _NZ]  # the state a stage is evaluated at
+    o += _NZ
+    kd = w[o : o + _NZ]  # F at the current stage
+    o += _NZ
+    acc = w[o : o + _NZ]  # k1 + 2 k2 + 2 k3 + k4
+    o += _NZ
+    xb = w[o : o + _N]  # plant state handed to f, g, h
+    o += _N
+    sig = w[o : o + 5]  # r, y, y_meas, u, d
+    o += 5
+    pb = w[o : o + _N_P]  # true plant parameters before / after the change
+    o += _N_P
+    pa = w[o : o + _N_P]
+    o += _N_P
+    pn = w[o : o + _N_P]  # nominal parameters (IOFL law)
+    o += _N_P
+    p = w[o : o + _N_P]  # true parameters now: pb, switched to pa at t_change
+    o += _N_P
+    sc = w[o : o + L.N_SCEN]
+    _SETUP(ints[mi], floats[mi], q, iq)
+    rho = iq[IQ_RHO]
+    nza = iq[IQ_NZ]
+    o_td = iq[IQ_OTD]
+    o_eso = iq[IQ_OESO]
+    ntd = iq[IQ_NTD]
+    exact = iq[IQ_TD] == L.TD_EXACT
+    nd = rho if exact else 0
+    for j in range(_N_P):
+        pb[j] = p_before[mi, j]
+        pa[j] = p_after[mi, j]
+        pn[j] = p_nom[mi, j]
+        p[j] = pb[j]
+    for j in range(L.N_SCEN):
+        sc[j] = scen[mi, j]
+    rrow = ref_row[mi]
+    nrow = noise_row[mi]
+    n_noise = noise_table.shape[1]
+    for i in range(_N):
+        z[i] = x0[mi, i]
+        zt[i] = z[i]
+    switched = False
+    std = sc[L.S_NOISE_STD]
+    hold = sc[L.S_NOISE_HOLD]
+    t_change = sc[L.S_PCHANGE_TIME]
+    n_stages = 4 if method == L.METHOD_RK4 else 1
+    hdt = 0.5 * dt
+    sixth = dt / 6.0
+    status[mi] = L.STATUS_OK
+    t_div[mi] = np.nan
+    row = 0
+    save_in = 0
+    _REFERENCE(0.0, sc, ref_t, rrow, rrs, 0, nd)
+    for k in range(n_steps + 1):
+        t = k * dt
+        if n_stages == 1 and k > 0:  # RK4 carries r(t) over from the previous step's t + dt
+            _REFERENCE(t, sc, ref_t, rrow, rrs, 0, nd)
+        noise_val = 0.0
+        if std > 0.0:  # held over [i hold, (i+1) hold): one value for all stages
+            idx = int(t / hold + 1e-9)
+            noise_val = std * noise_t[nrow, idx if idx < n_noise else n_noise - 1]
+        for s in range(n_stages):
+            if s == 0:
+                ts = t
+                ri = 0
+            elif s == 3:
+                ts = (k + 1) * dt
+                ri = 2
             else:
-                for i in range(rmax):
-                    lin_k[i] = fp[L.F_SEF_K + i]
-            z = np.zeros(nz)
-            for i in range(n):
-                z[i] = x0[mi, i]
-            k1 = np.zeros(nz)
-            k2 = np.zeros(nz)
-            k3 = np.zeros(nz)
-            k4 = np.zeros(nz)
-            zt = np.zeros(nz)
-            sig = np.zeros(5)
-            rd = np.zeros(rmax + 2)
-            e = np.zeros(rmax)
-            std = sc[L.S_NOISE_STD]
-            hold = sc[L.S_NOISE_HOLD]
-            t_change = sc[L.S_PCHANGE_TIME]
-            status[mi] = L.STATUS_OK
-            t_div[mi] = np.nan
-            row = 0
-            for k in range(n_steps + 1):
-                t = k * dt
-                p_true = p_after[mi] if t >= t_change else p_before[mi]
-                noise_val = 0.0
-                if std > 0.0:
-                    idx = int(t / hold + 1e-9)
-                    noise_val = std * noise[idx if idx < n_noise else n_noise - 1]
-                closed_loop(
-                    t,
-                    z,
-                    k1,
-                    ip,
-                    fp,
-                    betas,
-                    lin_k,
-                    p_true,
-                    p_nom[mi],
-                    sc,
-                    ref_samples,
-                    noise_val,
-                    sig,
-                    rd,
-                    e,
-                )
-                if store and k % decimation == 0:
-                    tr = traj[mi, row]
-                    tr[0] = t
+                ts = (k + 0.5) * dt
+                ri = 1
+                if s == 1:
+                    _REFERENCE(ts, sc, ref_t, rrow, rrs, 1, nd)
+                    _REFERENCE((k + 1) * dt, sc, ref_t, rrow, rrs, 2, nd)
+            if not switched and ts >= t_change:
+                for j in range(_N_P):
+                    p[j] = pa[j]
+                switched = True
+            _DERIV(ts, zt, kd, iq, q, p, pn, sc, rrs, ri, noise_val, xb, sig)
+            if s == 0:
+                if store and save_in == 0:
+                    tr[mi, row, 0] = t
                     for j in range(5):
-                        tr[1 + j] = sig[j]
-                    for j in range(n):
-                        tr[n_sig + j] = z[j]
-                    for j in range(rmax + 1):
-                        tr[n_sig + n + j] = z[o_eso + j]
-                    for j in range(rmax):
-                        tr[n_sig + n + rmax + 1 + j] = z[o_td + j]
+                        tr[mi, row, 1 + j] = sig[j]
+                    for j in range(_N):
+                        tr[mi, row, N_SIG + j] = z[j]
+                    c0 = N_SIG + _N
+                    for j in range(L.RHO_MAX + 1):
+                        tr[mi, row, c0 + j] = z[o_eso + j] if j <= rho else 0.0
+                    c0 += L.RHO_MAX + 1
+                    for j in range(L.RHO_MAX):
+                        val = 0.0
+                        if exact and j < rho:
+                            val = rrs[0, j]
+                        elif j < ntd:
+                            val = z[o_td + j]
+                        tr[mi, row, c0 + j] = val
                     row += 1
+                    save_in = decimation
+                save_in -= 1
                 if k == n_steps:
                     break
-                if method == L.METHOD_EULER:
-                    for j in range(nz):
-                        z[j] += dt * k1[j]
+                if n_stages == 1:  # forward Euler
+                    for j in range(nza):
+                        z[j] += dt * kd[j]
+                        zt[j] = z[j]
                 else:
-                    th = t + 0.5 * dt
-                    ph = p_after[mi] if th >= t_change else p_before[mi]
-                    for j in range(nz):
-                        zt[j] = z[j] + 0.5 * dt * k1[j]
-                    closed_loop(
-                        th,
-                        zt,
-                        k2,
-                        ip,
-                        fp,
-                        betas,
-                        lin_k,
-                        ph,
-                        p_nom[mi],
-                        sc,
-                        ref_samples,
-                        noise_val,
-                        sig,
-                        rd,
-                        e,
-                    )
-                    for j in range(nz):
-                        zt[j] = z[j] + 0.5 * dt * k2[j]
-                    closed_loop(
-                        th,
-                        zt,
-                        k3,
-                        ip,
-                        fp,
-                        betas,
-                        lin_k,
-                        ph,
-                        p_nom[mi],
-                        sc,
-                        ref_samples,
-                        noise_val,
-                        sig,
-                        rd,
-                        e,
-                    )
-                    t1 = t + dt
-                    p1 = p_after[mi] if t1 >= t_change else p_before[mi]
-                    for j in range(nz):
-                        zt[j] = z[j] + dt * k3[j]
-                    closed_loop(
-                        t1,
-                        zt,
-                        k4,
-                        ip,
-                        fp,
-                        betas,
-                        lin_k,
-                        p1,
-                        p_nom[mi],
-                        sc,
-                        ref_samples,
-                        noise_val,
-                        sig,
-                        rd,
-                        e,
-                    )
-                    for j in range(nz):
-                        z[j] += dt / 6.0 * (k1[j] + 2.0 * k2[j] + 2.0 * k3[j] + k4[j])
-                bad = False
-                for j in range(nz):
-                    if not abs(z[j]) < threshold:  # also catches NaN
-                        bad = True
-                        break
-                if bad:
-                    status[mi] = L.STATUS_DIVERGED
-                    t_div[mi] = (k + 1) * dt
-                    break
-            for j in range(L.N_METRIC):
-                metrics[mi, j] = z[o_met + j]
-
-    kernel.n_cols = n_cols  # type: ignore[attr-defined]
-    _ = numba  # imported for side effects of configuration only
-    return kernel
+                    for j in range(nza):
+                        acc[j] = kd[j]
+                        zt[j] = z[j] + hdt * kd[j]
+            elif s == 1:
+                for j in range(nza):
+                    acc[j] += 2.0 * kd[j]
+                    zt[j] = z[j] + hdt * kd[j]
+            elif s == 2:
+                for j in range(nza):
+                    acc[j] += 2.0 * kd[j]
+                    zt[j] = z[j] + dt * kd[j]
+            else:
+                for j in range(nza):
+                    z[j] += sixth * (acc[j] + kd[j])
+                    zt[j] = z[j]
+                for j in range(nd + 1):
+                    rrs[0, j] = rrs[2, j]
+        if k == n_steps:
+            break
+        bad = False
+        for j in range(nza):
+            if not abs(z[j]) < threshold:  # also catches NaN
+                bad = True
+        if bad:
+            status[mi] = L.STATUS_DIVERGED
+            t_div[mi] = (k + 1) * dt
+            break
+    for j in range(L.N_METRIC):
+        metrics[mi, j] = z[_N + j]
+    if store:
+        for rw in range(row, tr.shape[1]):
+            for j in range(tr.shape[2]):
+                tr[mi, rw, j] = np.nan
+    _KEEP_ALIVE(work_owner, iq_owner, rr_owner)  # the owners outlive their views
 
 
-def kernel_for(plant: Plant) -> Any:
-    """The compiled kernel of ``plant`` (built on first use, then reused)."""
+def _tpl_keep_alive(a, b, c):  # pragma: no cover - compiled
+    """A use of the arrays that own the memory of unmanaged views, so they live until here."""
+    return a.size + b.size + c.size
+
+
+def _tpl_eval(
+    ints, floats, p, p_nom, scen, ref_table, t, z, noise_val, dz, sig
+):  # pragma: no cover
+    """One evaluation of F(t, z) for member 0 (for cross-checks, see closed_loop_rhs)."""
+    q = np.empty(N_Q)
+    iq = np.empty(N_IQ, dtype=np.int64)
+    _SETUP(ints[0], floats[0], q, iq)
+    rr = np.zeros((1, L.RHO_MAX + 2))
+    nd = iq[IQ_RHO] if iq[IQ_TD] == L.TD_EXACT else 0
+    _REFERENCE(t, scen[0], ref_table, 0, rr, 0, nd)
+    xb = np.zeros(_N)
+    _DERIV(t, z, dz, iq, q, p, p_nom, scen[0], rr, 0, noise_val, xb, sig)
+    return iq[IQ_OTD], iq[IQ_OESO], iq[IQ_NZ]
+
+
+# ----------------------------------------------------------------------- compilation
+@dataclass(frozen=True)
+class _Kernel:
+    """The compiled functions of one plant."""
+
+    member: Any  # integrates one member of a batch (releases the GIL)
+    evaluate: Any  # one F(t, z) evaluation (compiled lazily by closed_loop_rhs)
+    n_cols: int
+    cached: bool
+
+
+_KERNELS: dict[int, tuple[Plant, _Kernel]] = {}
+
+
+def _source_digest(path: str) -> str:
+    with open(path, "rb") as fh:
+        return hashlib.sha256(fh.read()).hexdigest()
+
+
+def _function_fingerprint(fn: Any) -> str | None:
+    """What identifies a plant function's code for the on-disk kernel cache, or None if it
+    cannot be identified (no source file, or a closure over non-scalar values)."""
+    fn = getattr(fn, "py_func", fn)
+    code = getattr(fn, "__code__", None)
+    if code is None:
+        return None
+    path = code.co_filename
+    if not os.path.isfile(path):
+        return None
+    extra: list[Any] = []
+    for cell in fn.__closure__ or ():
+        val = cell.cell_contents
+        if not isinstance(val, (int, float, str, bool, tuple)):
+            return None
+        extra.append(repr(val))
+    if fn.__defaults__:
+        extra.append(repr(fn.__defaults__))
+    return "|".join([path, fn.__qualname__, _source_digest(path), *extra])
+
+
+def _kernel_fingerprint(plant: Plant) -> str | None:
+    """A digest of everything the compiled kernel of ``plant`` depends on, or None if a
+    plant function cannot be fingerprinted (the kernel is then compiled every process)."""
+    parts = [sys.version, __import__("numba").__version__, str(plant.n_states)]
+    for mod in (L, sys.modules[__name__], _differentiators_module()):
+        parts.append(_source_digest(mod.__file__))
+    for fname in ("f", "g", "h", "bd", "normal_form"):
+        fn = getattr(plant, fname)
+        if fn is None:
+            parts.append(f"{fname}=None")
+            continue
+        fp = _function_fingerprint(fn)
+        if fp is None:
+            return None
+        parts.append(f"{fname}={fp}")
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:20]
+
+
+def _differentiators_module() -> Any:
+    from aiofl import differentiators
+
+    return differentiators
+
+
+def _instantiate(tpl: Any, ns: dict[str, Any], suffix: str, **jit_options: Any) -> Any:
+    """Compile template ``tpl`` with the globals ``ns`` (which bind one plant's functions).
+
+    The qualified name carries the plant fingerprint so that numba's on-disk cache keeps
+    one entry per plant (its index is keyed by file and qualified name).
+    """
+    from numba import njit
+
+    fn = types.FunctionType(tpl.__code__, ns, tpl.__name__, tpl.__defaults__, None)
+    fn.__qualname__ = f"{tpl.__name__}_{suffix}"
+    fn.__doc__ = tpl.__doc__
+    return njit(**jit_options)(fn)
+
+
+def _build_kernel(plant: Plant, *, cache: bool | None = None) -> _Kernel:
+    """Compile the closed-loop functions for one plant (see the module notes)."""
+
+    f, g, h, bd, nf = plant.compiled
+    fingerprint = _kernel_fingerprint(plant)
+    use_cache = _cache_enabled() if cache is None else cache
+    use_cache = use_cache and fingerprint is not None
+    n = plant.n_states
+    ns = dict(globals())
+    ns.update(
+        _N=n,
+        _N_P=len(plant.params),
+        _NZ=n + L.N_METRIC + 2 * L.RHO_MAX + 1,
+        _PF=f,
+        _PG=g,
+        _PH=h,
+        _PBD=bd,
+        _PNF=nf,
+        _HAN_TD=_differentiators_module().han_td_rhs,
+    )
+    suffix = fingerprint or f"nocache{id(plant):x}"
+    opts = {"fastmath": FASTMATH, "error_model": "numpy"}
+    ns["_UNMANAGED"] = _unmanaged_intrinsic()
+    ns["_ABSPOW"] = _instantiate(_abspow, ns, suffix, **opts)
+    ns["_TANH"] = _instantiate(_tanh, ns, suffix, **opts)
+    ns["_KEEP_ALIVE"] = _instantiate(_tpl_keep_alive, ns, suffix)
+    ns["_SETUP"] = _instantiate(_tpl_setup, ns, suffix, **opts)
+    ns["_REFERENCE"] = _instantiate(_tpl_reference, ns, suffix, **opts)
+    # one call site in the stage loop: inlined, so the compiler sees the whole step
+    ns["_DERIV"] = _instantiate(_tpl_deriv, ns, suffix, inline="always", **opts)
+    member = _instantiate(_tpl_member, ns, suffix, nogil=True, cache=use_cache, **opts)
+    evaluate = _instantiate(_tpl_eval, ns, suffix, **opts)
+    n_cols = N_SIG + n + (L.RHO_MAX + 1) + L.RHO_MAX
+    return _Kernel(member=member, evaluate=evaluate, n_cols=n_cols, cached=use_cache)
+
+
+def _unmanaged_intrinsic() -> Any:
+    """A numba intrinsic returning a view of an array without a memory-info pointer.
+
+    numba reference-counts arrays with atomic increments whenever an array is passed to a
+    compiled function or bound to a new name; in a loop that calls the plant's f, g and h
+    four times per step this dominated the run time, and on a *shared* input array the
+    atomics made parallel members contend for one cache line.  A view whose meminfo is
+    NULL is never counted (numba's incref/decref return at once on NULL and LLVM removes
+    them).  The caller must keep the owning array alive while the view is used (the
+    kernel passes the owners to ``_KEEP_ALIVE`` after its loop).
+    """
+    from numba.core import cgutils
+    from numba.core import types as nbtypes
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def unmanaged(typingctx: Any, arr: Any) -> Any:
+        if not isinstance(arr, nbtypes.Array):
+            return None
+
+        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+            src = context.make_array(sig.args[0])(context, builder, value=args[0])
+            dst = context.make_array(sig.return_type)(context, builder)
+            for name in ("nitems", "itemsize", "data", "shape", "strides"):
+                setattr(dst, name, getattr(src, name))
+            dst.meminfo = cgutils.get_null_value(dst.meminfo.type)
+            dst.parent = cgutils.get_null_value(dst.parent.type)
+            return dst._getvalue()
+
+        return arr(arr), codegen
+
+    return unmanaged
+
+
+def _cache_enabled() -> bool:
+    """On-disk kernel cache, on unless ``AIOFL_NO_CACHE=1`` (or numba's caching is off)."""
+    return os.environ.get("AIOFL_NO_CACHE", "") not in ("1", "true", "yes")
+
+
+def kernel_for(plant: Plant) -> _Kernel:
+    """The compiled kernel of ``plant`` (built on first use, then reused in this process;
+    across processes numba's on-disk cache skips the compilation of built-in and
+    file-defined plants)."""
     key = id(plant)
-    if key not in _KERNELS:
+    if key not in _KERNELS or _KERNELS[key][0] is not plant:
         _KERNELS[key] = (plant, _build_kernel(plant))
     return _KERNELS[key][1]
+
+
+def _run_members(member: Any, n_members: int, *args: Any) -> None:
+    """Run ``member(i, *args)`` for every member, on ``numba.get_num_threads()`` threads.
+
+    The compiled member function releases the GIL, so Python threads run members truly in
+    parallel; each thread takes the next unclaimed member (dynamic scheduling, so members
+    that diverge early do not leave a core idle).  Members are independent: the numbers do
+    not depend on the thread count or on which thread ran which member.
+    """
+    import numba
+
+    n_threads = max(1, min(numba.get_num_threads(), n_members))
+    if n_threads == 1:
+        for i in range(n_members):
+            member(i, *args)
+        return
+    claim = itertools.count()  # next() on a count is atomic under the GIL
+    errors: list[BaseException] = []
+
+    def work() -> None:
+        try:
+            while not errors:
+                i = next(claim)
+                if i >= n_members:
+                    return
+                member(i, *args)
+        except BaseException as exc:  # pragma: no cover - re-raised below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=work, daemon=True) for _ in range(n_threads - 1)]
+    for th in threads:
+        th.start()
+    work()
+    for th in threads:
+        th.join()
+    if errors:
+        raise errors[0]
 
 
 # ---------------------------------------------------------------------------- results
@@ -572,11 +906,13 @@ def simulate_batch(
 
     kernel = kernel_for(plant)
     n_save = n_steps // decimation + 1 if store else 0
-    traj = np.full((b, n_save, kernel.n_cols), np.nan)
+    traj = np.empty((b, n_save, kernel.n_cols))  # rows after a divergence are set to NaN
     metrics = np.zeros((b, L.N_METRIC))
     status = np.zeros(b, dtype=np.int64)
     t_div = np.zeros(b)
-    kernel(
+    _run_members(
+        kernel.member,
+        b,
         batch.ints,
         batch.floats,
         np.ascontiguousarray(p_before_d[rows]),
