@@ -740,6 +740,8 @@ def tune_command(
         if dask_workers is not None and dask_workers < 1:
             raise ValueError(f"--dask-workers = {dask_workers}; allowed: >= 1")
         prepare(config, None, seed=seed, generations=generations, population=population)
+        if resume and not (out / CHECKPOINT).is_file():
+            typer.echo(f"aiofl: no checkpoint in {out}; starting from scratch", err=True)
         try:
             result = tune(
                 config,
