@@ -123,6 +123,22 @@ def table_rows(rep: Reproduction, scenario: int) -> list[list[str]]:
             fmt(w.w_itae * triv / w.n_itae),
         ]
     )
+    # the least ISU any controller needs to keep y = r (helper C, aiofl.tuning_flat)
+    from aiofl.tuning_flat import exact_tracking_cost
+
+    ex = exact_tracking_cost(rep.scenario_runs(scenario)[0].case.config)
+    rows.append(
+        [
+            "y ≡ r exactly (least ISU: model inversion from x*(0), for context)",
+            DASH,
+            DASH,
+            "0",
+            DASH,
+            fmt(ex["isu"]),
+            fmt(ex["iau"]),
+            fmt(w.w_isu * ex["isu"] / w.n_isu + w.w_iau * ex["iau"] / w.n_iau),
+        ]
+    )
     return rows
 
 
