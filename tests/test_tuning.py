@@ -490,3 +490,21 @@ def test_exact_tracking_cost_of_the_paper_scenarios() -> None:
     # scenario 2 holds 0.5 N·m for 10 s: ~ (0.5·R_m/(K_m K_g))² · 10 s more energy
     extra = (0.5 * 2.6 / (0.00767 * 70)) ** 2 * 10
     assert s2["isu"] > s1["isu"] + 0.8 * extra
+
+
+def test_retuned_presets_state_their_recipe_and_load() -> None:
+    from aiofl.config import list_presets
+    from aiofl.tuning import describe_tuning
+
+    names = [n for n in list_presets() if n.startswith("retuned-")]
+    assert len(names) == 9
+    for name in names:
+        cfg = load_config(name)
+        prep = prepare(cfg)  # its [tune] table is valid for its structure
+        assert prep.settings.include_initial is False  # re-running reproduces the preset
+        assert cfg.scenario.t_final == 20.0
+        assert "seed 1" in describe_tuning(cfg)
+        for pname in prep.space.names:  # the tuned values lie inside the bounds
+            b = prep.settings.parameters[pname]
+            assert b.lo <= cfg.controller.value(pname) <= b.hi
+    assert describe_tuning(load_config("paper-s1-leso")) is None

@@ -177,6 +177,13 @@ def scenario_notes(rep: Reproduction, scenario: int) -> list[str]:
         f"the paper's own ITAE values relative to it: {rel}."
     )
     notes.append(msg)
+    # how the re-tuned rows were tuned (budget, seed, objective), from their [tune] tables
+    from aiofl.tuning import describe_tuning
+
+    for run in rep.scenario_runs(scenario):
+        how = describe_tuning(run.case.config) if run.case.source == "retuned" else None
+        if how:
+            notes.append(f"{run.case.label} [{run.case.preset}] was re-tuned with {how}.")
     return notes
 
 

@@ -70,6 +70,7 @@ __all__ = [
     "ExactTracking",
     "TuneResult",
     "TuneSettings",
+    "describe_tuning",
     "exact_tracking",
     "exact_tracking_cost",
     "exact_tracking_input",
@@ -165,6 +166,21 @@ class TuneResult:
             f"Best objective {self.best_objective:.6g} after {self.n_evaluations} evaluations "
             f"({int(self.diverged.sum())} diverged)."
         )
+
+
+def describe_tuning(run_config: RunConfig) -> str | None:
+    """One line stating how a config was tuned (budget, seed, objective, horizon), read from
+    its ``[tune]`` table, or None if it has none (e.g. for the report's re-tuned rows)."""
+    data = run_config.raw.get("tune")
+    if not data:
+        return None
+    st = parse_tune_settings(data)
+    obj = st.objective
+    if isinstance(obj, str):
+        obj_text = obj.upper()
+    else:
+        obj_text = " + ".join(("" if w == 1 else f"{w:g}·") + k.upper() for k, w in obj.items())
+    return f"{st.budget()}, objective {obj_text} over {st.t_final:g} s (aiofl tune)"
 
 
 # ---------------------------------------------------------------------- preparing
