@@ -193,6 +193,8 @@ class DaskEvaluator:
             self._own_client = True
             self.description = f"dask LocalCluster({n} {'processes' if processes else 'threads'})"
         self.chunks = chunks
+        self._spec_key: str | None = None
+        self._spec_future: Any = None
 
     def n_chunks(self) -> int:
         """Chunks per generation: ``chunks`` if given, else the number of workers."""
@@ -204,8 +206,11 @@ class DaskEvaluator:
         values = np.asarray(values, dtype=np.float64)
         k = min(self.n_chunks(), max(1, values.shape[0]))
         parts = np.array_split(values, k)
-        spec_future = self.client.scatter(spec, broadcast=True, hash=False)
-        futures = self.client.map(evaluate_chunk, [spec_future] * k, parts, pure=False)
+        key = spec.key()
+        if self._spec_key != key:  # send the spec to the workers once per tuning run
+            self._spec_future = self.client.scatter(spec, broadcast=True, hash=False)
+            self._spec_key = key
+        futures = self.client.map(evaluate_chunk, [self._spec_future] * k, parts, pure=False)
         return PopulationResult.concatenate(self.client.gather(futures))
 
     def close(self) -> None:
