@@ -2,21 +2,41 @@ r"""The compiled, batched closed-loop engine.
 
 Plant, tracking differentiator, ESO, state error feedback, linearizing law and the
 performance integrals form one ODE :math:`\dot z = F(t, z)`, integrated with fixed-step
-RK4 (or forward Euler) inside one numba kernel, with no Python in the time loop.  The
-kernel takes a *batch* of members (one row each of controller, plant-parameter and
-scenario arrays) and runs them in parallel (``prange``); one simulation is a batch of one.
+RK4 (or forward Euler) inside one compiled numba function per plant, with no Python in the
+time loop.  A call takes a *batch* of members (one row each of controller,
+plant-parameter and scenario arrays); one simulation is a batch of one.  Members run in
+parallel on ``numba.get_num_threads()`` threads: the compiled member function releases the
+GIL and each thread claims the next unclaimed member, so a member that diverges early
+frees its core at once.  Members are independent, so a member's numbers do not depend on
+the batch it is in, the thread count or the scheduling (bitwise).
 
-State of one member::
+State of one member (only the active part is integrated)::
 
-    z = [ x (n) | TD state (RHO_MAX) | ESO state ξ̂ (RHO_MAX+1) | ITAE IAE ISE ISU IAU ]
+    z = [ x (n) | ITAE IAE ISE ISU IAU | TD state (0, 2 or ρ) | ESO state ξ̂ (ρ+1) ]
 
 Component kinds come from the integer row (data), so every structure shares one compiled
-kernel per plant.  A member whose state becomes non-finite or exceeds
+function per plant.  A member whose state becomes non-finite or exceeds
 ``divergence_threshold`` stops; it is reported as diverged with the time, the others carry
 on.  Trajectories are stored only when asked for, every ``decimation``-th step.
 
-Held signals (measurement noise) take the value at the start of each step for all RK4
-stages, so the integrator never straddles a noise jump inside a step.
+Piecewise-constant inputs (measurement noise, the step disturbance, the plant-parameter
+change and a step reference) are held over each step at their value at its start, so the
+integrator never straddles a jump inside a step: a switch on the time grid is exact, one
+between grid points acts from the next step (see :data:`SWITCH_RTOL`).
+
+Speed notes.  The time loop touches only thread-local memory reached through *unmanaged*
+array views (no reference counting, see :func:`_unmanaged_intrinsic`), evaluates r(t) once
+per distinct stage time, skips the power function for exponents 0 and 1, and uses cheaper
+forms of tanh and :math:`|e|^a` that agree with libm to a few ulp.  LLVM fast-math flags
+are on except ``nnan``/``ninf`` (divergence detection relies on IEEE NaN/inf).
+
+Compilation.  The kernel is built from the template functions below with the plant's
+compiled f, g, h, b_d bound as globals.  When every plant function comes from a source
+file (built-in plants, user plants defined in a module or script), the compiled kernel is
+cached on disk by numba under a name that carries a fingerprint of those files and of the
+engine's own sources, so later processes load it instead of compiling (about 6 s).  Set
+``AIOFL_NO_CACHE=1`` to disable the cache.  A plant whose functions are generated at run
+time (no source file) is compiled in every process.
 """
 
 from __future__ import annotations
@@ -42,7 +62,7 @@ from aiofl.metrics import OPIWeights, opi
 from aiofl.plant import Plant
 from aiofl.scenario import Scenario, noise_sequence
 
-__all__ = ["BatchResult", "SimulationResult", "simulate", "simulate_batch"]
+__all__ = ["BatchResult", "SimulationResult", "closed_loop_rhs", "simulate", "simulate_batch"]
 
 # ----------------------------------------------------------------------------- layout
 # Per-member packed parameters (thread-local inside the kernel): the controller's float row
@@ -56,6 +76,10 @@ N_Q = Q_PF + L.RHO_MAX
 IQ_ESO, IQ_TD, IQ_SEF, IQ_LAW, IQ_RHO, IQ_M, IQ_OTD, IQ_OESO, IQ_NZ, IQ_NTD = range(10)
 N_IQ = 10
 N_SIG = 6  # t, r, y, y_meas, u, d
+SWITCH_RTOL = 1e-12
+"""A switching time t_s (step disturbance, parameter change, step reference) acts from the
+first step whose start k·dt >= t_s (1 - SWITCH_RTOL): the tolerance absorbs the rounding of
+k·dt, so a switch on the grid happens exactly at its step boundary."""
 
 FASTMATH = {"contract", "arcp", "nsz", "afn", "reassoc"}
 """LLVM fast-math flags of the time loop.  ``nnan``/``ninf`` are deliberately absent:
@@ -158,8 +182,11 @@ def _tpl_setup(ip, fp, q, iq):  # pragma: no cover - compiled
     iq[IQ_NTD] = ntd
 
 
-def _tpl_reference(t, sc, ref_table, ref_row, out, oi, nd):  # pragma: no cover - compiled
-    """r(t) and its derivatives 0..nd into ``out[oi]`` (nd > 0 only for the exact TD)."""
+def _tpl_reference(t, t_hold, sc, ref_table, ref_row, out, oi, nd):  # pragma: no cover - compiled
+    """r(t) and its derivatives 0..nd into ``out[oi]`` (nd > 0 only for the exact TD).
+
+    ``t_hold`` is the start of the current step: a step reference is held over the step.
+    """
     kind = int(sc[L.S_REF_KIND])
     for k in range(nd + 1):
         out[oi, k] = 0.0
@@ -177,7 +204,9 @@ def _tpl_reference(t, sc, ref_table, ref_row, out, oi, nd):  # pragma: no cover 
                 j = k % 4
                 out[oi, k] = wk * (cs if j == 1 else (-sn if j == 2 else (-cs if j == 3 else sn)))
     elif kind == L.REF_STEP:
-        out[oi, 0] = sc[L.S_REF_OFFSET] + (sc[L.S_REF_A] if t >= sc[L.S_REF_TSTEP] else 0.0)
+        # a step switches at a step boundary, like every piecewise-constant input
+        on = t_hold >= sc[L.S_REF_TSTEP] * (1.0 - SWITCH_RTOL)
+        out[oi, 0] = sc[L.S_REF_OFFSET] + (sc[L.S_REF_A] if on else 0.0)
     else:
         dtr = sc[L.S_REF_DT]
         ns = ref_table.shape[1]
@@ -193,12 +222,13 @@ def _tpl_reference(t, sc, ref_table, ref_row, out, oi, nd):  # pragma: no cover 
                 out[oi, 1] = (hi - lo) / dtr
 
 
-def _tpl_deriv(t, z, dz, iq, q, p, p_nom, sc, rr, ri, noise_val, xb, sig):  # pragma: no cover
+def _tpl_deriv(t, z, dz, iq, q, p, p_nom, sc, rr, ri, noise_val, d, xb, sig):  # pragma: no cover
     """F(t, z) of one member: writes ``dz[:nz]`` and the signals r, y, y_meas, u, d.
 
     ``rr[ri]`` holds r(t) (and, for the exact TD, its derivatives); ``p`` is the true plant's
-    parameter vector at t, ``p_nom`` the nominal one (for the IOFL law); ``xb`` is scratch
-    for the plant state.
+    parameter vector at t, ``p_nom`` the nominal one (for the IOFL law); ``noise_val`` and
+    ``d`` are the measurement noise and the input disturbance (held over the step); ``xb``
+    is scratch for the plant state.
     """
     rho = iq[IQ_RHO]
     m = iq[IQ_M]
@@ -301,7 +331,6 @@ def _tpl_deriv(t, z, dz, iq, q, p, p_nom, sc, rr, ri, noise_val, xb, sig):  # pr
     dz[o_eso + rho] = q[Q_BETA + rho] * e
 
     # plant
-    d = sc[L.S_DIST_AMP] if t >= sc[L.S_DIST_TIME] else 0.0
     fx = _PF(xb, p)
     gx = _PG(xb, p)
     for i in range(_N):
@@ -419,15 +448,24 @@ def _tpl_member(  # pragma: no cover - compiled
     t_div[mi] = np.nan
     row = 0
     save_in = 0
-    _REFERENCE(0.0, sc, ref_t, rrow, rrs, 0, nd)
+    step_ref = sc[L.S_REF_KIND] == L.REF_STEP
+    t_dist = sc[L.S_DIST_TIME] * (1.0 - SWITCH_RTOL)
+    t_change *= 1.0 - SWITCH_RTOL
     for k in range(n_steps + 1):
         t = k * dt
-        if n_stages == 1 and k > 0:  # RK4 carries r(t) over from the previous step's t + dt
-            _REFERENCE(t, sc, ref_t, rrow, rrs, 0, nd)
+        # r(t): RK4 carries it over from the previous step's t + dt (not a held step)
+        if k == 0 or n_stages == 1 or step_ref:
+            _REFERENCE(t, t, sc, ref_t, rrow, rrs, 0, nd)
+        # piecewise-constant inputs are held over the step, switching at its start
         noise_val = 0.0
-        if std > 0.0:  # held over [i hold, (i+1) hold): one value for all stages
+        if std > 0.0:  # held over [i hold, (i+1) hold)
             idx = int(t / hold + 1e-9)
             noise_val = std * noise_t[nrow, idx if idx < n_noise else n_noise - 1]
+        d = sc[L.S_DIST_AMP] if t >= t_dist else 0.0
+        if not switched and t >= t_change:
+            for j in range(_N_P):
+                p[j] = pa[j]
+            switched = True
         for s in range(n_stages):
             if s == 0:
                 ts = t
@@ -439,13 +477,9 @@ def _tpl_member(  # pragma: no cover - compiled
                 ts = (k + 0.5) * dt
                 ri = 1
                 if s == 1:
-                    _REFERENCE(ts, sc, ref_t, rrow, rrs, 1, nd)
-                    _REFERENCE((k + 1) * dt, sc, ref_t, rrow, rrs, 2, nd)
-            if not switched and ts >= t_change:
-                for j in range(_N_P):
-                    p[j] = pa[j]
-                switched = True
-            _DERIV(ts, zt, kd, iq, q, p, pn, sc, rrs, ri, noise_val, xb, sig)
+                    _REFERENCE(ts, t, sc, ref_t, rrow, rrs, 1, nd)
+                    _REFERENCE((k + 1) * dt, t, sc, ref_t, rrow, rrs, 2, nd)
+            _DERIV(ts, zt, kd, iq, q, p, pn, sc, rrs, ri, noise_val, d, xb, sig)
             if s == 0:
                 if store and save_in == 0:
                     tr[mi, row, 0] = t
@@ -524,9 +558,11 @@ def _tpl_eval(
     _SETUP(ints[0], floats[0], q, iq)
     rr = np.zeros((1, L.RHO_MAX + 2))
     nd = iq[IQ_RHO] if iq[IQ_TD] == L.TD_EXACT else 0
-    _REFERENCE(t, scen[0], ref_table, 0, rr, 0, nd)
+    _REFERENCE(t, t, scen[0], ref_table, 0, rr, 0, nd)
     xb = np.zeros(_N)
-    _DERIV(t, z, dz, iq, q, p, p_nom, scen[0], rr, 0, noise_val, xb, sig)
+    sc = scen[0]
+    d = sc[L.S_DIST_AMP] if t >= sc[L.S_DIST_TIME] * (1.0 - SWITCH_RTOL) else 0.0
+    _DERIV(t, z, dz, iq, q, p, p_nom, sc, rr, 0, noise_val, d, xb, sig)
     return iq[IQ_OTD], iq[IQ_OESO], iq[IQ_NZ]
 
 
@@ -968,3 +1004,83 @@ def simulate(
         divergence_threshold=divergence_threshold,
     )
     return res.member(0)
+
+
+def closed_loop_rhs(
+    plant: Plant,
+    controller: Controller,
+    scenario: Scenario,
+    t: float,
+    x: Sequence[float],
+    td: Sequence[float] = (),
+    xi: Sequence[float] = (),
+    *,
+    noise: float = 0.0,
+    changed: bool = False,
+) -> dict[str, Any]:
+    """One evaluation of the engine's compiled right-hand side :math:`F(t, z)`.
+
+    For cross-checks against an independent implementation (:mod:`aiofl.reference_ode`):
+    the same compiled code the time loop runs, at a chosen state.
+
+    Parameters
+    ----------
+    plant, controller, scenario
+        As for :func:`simulate`.
+    t
+        Time [s].
+    x, td, xi
+        Plant state (n), differentiator state (0, 2 or ρ entries; missing ones are 0) and
+        observer state ξ̂ (ρ+1 entries; missing ones are 0).
+    noise
+        Measurement noise added to y at this instant.
+    changed
+        Use the changed plant parameters (``scenario.plant_scale``/``plant_overrides``).
+
+    Returns
+    -------
+    dict
+        ``dx``, ``dtd``, ``dxi``, ``dmetrics`` (ITAE, IAE, ISE, ISU, IAU integrands) and the
+        signals ``r``, ``y``, ``y_meas``, ``u``, ``d``.
+    """
+    kernel = kernel_for(plant)
+    n = plant.n_states
+    rho = controller.rho
+    n_td = {"exact": 0, "han": 2, "improved": 2, "linear": rho}[controller.td]
+    batch = controller_batch(controller)
+    p_nom = plant.param_vector()
+    p = plant.param_vector(scenario.plant_overrides, scenario.plant_scale) if changed else p_nom
+    samples = list(scenario.reference.samples) or [0.0, 0.0]
+    nz = n + L.N_METRIC + 2 * L.RHO_MAX + 1
+    z = np.zeros(nz)
+    z[:n] = np.asarray(x, dtype=float)
+    o_td = n + L.N_METRIC
+    o_eso = o_td + n_td
+    td_v = np.asarray(td, dtype=float)
+    xi_v = np.asarray(xi, dtype=float)
+    if td_v.size > n_td or xi_v.size > rho + 1:
+        raise ValueError(f"td has at most {n_td} entries and xi at most {rho + 1}")
+    z[o_td : o_td + td_v.size] = td_v
+    z[o_eso : o_eso + xi_v.size] = xi_v
+    dz = np.zeros(nz)
+    sig = np.zeros(5)
+    kernel.evaluate(
+        batch.ints,
+        batch.floats,
+        p,
+        p_nom,
+        scenario.row()[None, :],
+        np.asarray([samples], dtype=float),
+        float(t),
+        z,
+        float(noise),
+        dz,
+        sig,
+    )
+    return {
+        "dx": dz[:n].copy(),
+        "dmetrics": dz[n : n + L.N_METRIC].copy(),
+        "dtd": dz[o_td:o_eso].copy(),
+        "dxi": dz[o_eso : o_eso + rho + 1].copy(),
+        **dict(zip(("r", "y", "y_meas", "u", "d"), (float(v) for v in sig), strict=True)),
+    }

@@ -42,7 +42,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from itertools import pairwise
-from math import comb
+from math import comb, exp
 
 import numpy as np
 from numpy.typing import NDArray
@@ -52,7 +52,7 @@ from aiofl.controller import Controller
 from aiofl.plant import Plant
 from aiofl.scenario import Scenario, noise_sequence
 
-__all__ = ["ReferenceResult", "closed_loop", "reference_simulate"]
+__all__ = ["LoopSetup", "ReferenceResult", "closed_loop", "reference_simulate", "setup_loop"]
 
 METRICS = ("itae", "iae", "ise", "isu", "iau")
 
@@ -69,7 +69,7 @@ def _fal(e: float, alpha: float, delta: float) -> float:
 
 
 @dataclass(frozen=True)
-class _Setup:
+class LoopSetup:
     """Everything about the loop that is fixed for a run, precomputed once."""
 
     plant: Plant
@@ -90,7 +90,8 @@ class _Setup:
         return self.n + self.n_td + self.rho + 1 + len(METRICS)
 
 
-def _setup(plant: Plant, controller: Controller, scenario: Scenario) -> _Setup:
+def setup_loop(plant: Plant, controller: Controller, scenario: Scenario) -> LoopSetup:
+    """Precompute the gains and parameter vectors of one closed loop (for :func:`closed_loop`)."""
     c = controller
     rho = c.rho
     n_td = {"exact": 0, "han": 2, "improved": 2, "linear": rho}[c.td]
@@ -103,7 +104,7 @@ def _setup(plant: Plant, controller: Controller, scenario: Scenario) -> _Setup:
         k_lin = np.array([c.value(f"sef.k{i}") for i in range(1, rho + 1)])
     # (s + ω)^ρ = s^ρ + a_1 s^(ρ-1) + ... + a_ρ, from its roots
     prefilter_poly = np.real(np.poly(np.full(rho, -c.value("td.omega"))))
-    return _Setup(
+    return LoopSetup(
         plant=plant,
         controller=c,
         scenario=scenario,
@@ -145,7 +146,7 @@ def _reference_derivatives(scenario: Scenario, t: float, count: int, step_on: bo
 
 
 def closed_loop(
-    s: _Setup,
+    s: LoopSetup,
     t: float,
     z: NDArray[np.float64],
     *,
@@ -221,9 +222,8 @@ def closed_loop(
             for i in range(s.m):
                 k1, k2 = c.value(f"sef.k{i + 1}"), c.value(f"sef.kb{i + 1}")
                 mu, alpha = c.value(f"sef.mu{i + 1}"), c.value(f"sef.alpha{i + 1}")
-                total += (
-                    (k1 + k2 / (1.0 + np.exp(mu * e[i] ** 2))) * abs(e[i]) ** alpha * _sign(e[i])
-                )
+                logistic = 1.0 / (1.0 + exp(min(mu * e[i] ** 2, 700.0)))  # exp(700) ~ 1e304
+                total += (k1 + k2 * logistic) * abs(e[i]) ** alpha * _sign(e[i])
             v_limit = c.value("sef.v_limit")
             v = v_limit * np.tanh(total / v_limit)
         else:
@@ -337,9 +337,13 @@ def reference_simulate(
     ReferenceResult
         States and signals at ``t_eval`` and the metrics (22) at ``t_final``.
     """
-    s = _setup(plant, controller, scenario)
+    s = setup_loop(plant, controller, scenario)
     t_end = float(scenario.t_final if t_final is None else t_final)
     t_out = np.linspace(0.0, t_end, 201) if t_eval is None else np.asarray(t_eval, dtype=float)
+    # grids built as k·dt may overshoot the horizon by an ulp: treat those points as t_end
+    t_out = np.where(np.abs(t_out - t_end) <= 1e-12 * max(1.0, t_end), t_end, t_out)
+    if t_out.size and (t_out.min() < 0.0 or t_out.max() > t_end):
+        raise ValueError(f"t_eval must lie in [0, {t_end}]")
     sc = scenario
     noise = (
         np.sqrt(sc.noise_variance)
