@@ -201,7 +201,7 @@ def test_improved_sef_is_eq20_bounded_and_odd(e1, e2, v_limit, mu):
     alpha = np.array([0.8244, 1.8079])
     v = improved_sef(e, 2, k1, k2, mus, alpha, v_limit)
     total = sum(
-        (k1[i] + k2[i] / (1.0 + math.exp(mus[i] * e[i] ** 2)))
+        (k1[i] + k2[i] / (1.0 + math.exp(min(mus[i] * e[i] ** 2, 700.0))))
         * abs(e[i]) ** alpha[i]
         * np.sign(e[i])
         for i in range(2)

@@ -103,6 +103,7 @@ _KINDS = [
 ]
 
 
+@pytest.mark.slow  # compiles the engine's single-evaluation entry point (~5 s) on first use
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(kinds=st.sampled_from(_KINDS), seed=st.integers(0, 2**32 - 1))
 def test_compiled_rhs_equals_the_oracle_rhs(kinds, seed):
@@ -267,6 +268,7 @@ CHAIN = Plant(
 )
 
 
+@pytest.mark.slow  # compiles a kernel for its own plant (~6 s unless cached on disk)
 def test_eso_estimates_states_and_total_disturbance():
     """On a plant that *is* a chain of ρ = 3 integrators, ξ̂_i → x_i and ξ̂_4 → the total
     disturbance f_T = -a sin x1 - c x3 + (b - b0) u, with errors shrinking like
