@@ -578,6 +578,7 @@ class _Kernel:
 
 
 _KERNELS: dict[int, tuple[Plant, _Kernel]] = {}
+_KERNELS_LOCK = threading.Lock()
 
 
 def _source_digest(path: str) -> str:
@@ -724,9 +725,10 @@ def kernel_for(plant: Plant) -> _Kernel:
     across processes numba's on-disk cache skips the compilation of built-in and
     file-defined plants)."""
     key = id(plant)
-    if key not in _KERNELS or _KERNELS[key][0] is not plant:
-        _KERNELS[key] = (plant, _build_kernel(plant))
-    return _KERNELS[key][1]
+    with _KERNELS_LOCK:  # two threads asking for a new plant's kernel build it once
+        if key not in _KERNELS or _KERNELS[key][0] is not plant:
+            _KERNELS[key] = (plant, _build_kernel(plant))
+        return _KERNELS[key][1]
 
 
 def _run_members(member: Any, n_members: int, *args: Any) -> None:

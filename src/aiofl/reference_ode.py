@@ -32,10 +32,12 @@ reference and held measurement noise) are handled by integrating segment by segm
 between their switching times, so the adaptive solver never steps across a jump; within a
 segment they are constants, as in the engine (which switches at step boundaries).
 
-This path is **slow** (a Python right-hand side, typically 10⁴–10⁶ times slower than the
-engine per simulated second) and, with the discontinuous Han TD or the non-Lipschitz
-:math:`|e|^\alpha` terms, an adaptive solver may crawl.  Use it on short horizons, in tests
-and benchmarks only.
+This path is **slow**: a Python right-hand side.  On a smooth loop (linear ESO, linear
+prefilter, linear SEF) RK45 takes long steps and is only some tens of times slower than the
+engine per simulated second; with the discontinuous Han TD (sign) or the non-Lipschitz
+:math:`|e|^\alpha` terms an adaptive solver crawls (about 10⁵ times slower for the paper's
+LESO loop, see ``benchmarks/bench_engine.py``).  Use it on short horizons, in tests and
+benchmarks only.
 """
 
 from __future__ import annotations
