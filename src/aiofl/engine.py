@@ -71,7 +71,11 @@ Q_BETA = L.N_FLOAT  #: observer gains β_i = α_i ω0^i, i = 1..ρ+1
 Q_LINK = Q_BETA + L.RHO_MAX + 1  #: feedback gains k_i (linear SEF / IOFL) or sef.k_i
 Q_SLOPE = Q_LINK + L.RHO_MAX  #: fal inner slopes δ_i^(α_i - 1)
 Q_PF = Q_SLOPE + L.RHO_MAX  #: linear prefilter coefficients ω^ρ, C(ρ,i) ω^(ρ-i)
-N_Q = Q_PF + L.RHO_MAX
+Q_INV_B0 = Q_PF + L.RHO_MAX  #: 1/b0
+Q_INV_C = Q_INV_B0 + 1  #: 1/c of the ITD
+Q_INV_VLIM = Q_INV_B0 + 2  #: 1/δ of the INLSEF
+Q_ITD_GAIN = Q_INV_B0 + 3  #: (1 - a)/c of the ITD
+N_Q = Q_INV_B0 + 4
 # Per-member integers: kinds, ρ, m, offsets of the TD and ESO blocks in z, active length.
 IQ_ESO, IQ_TD, IQ_SEF, IQ_LAW, IQ_RHO, IQ_M, IQ_OTD, IQ_OESO, IQ_NZ, IQ_NTD = range(10)
 N_IQ = 10
@@ -163,6 +167,11 @@ def _tpl_setup(ip, fp, q, iq):  # pragma: no cover - compiled
     for i in range(1, rho):  # state i -> C(rho, i) wr^(rho - i)
         binom = binom * (rho - i + 1) / i
         q[Q_PF + i] = binom * wr ** (rho - i)
+    # divisions by constants become multiplications in the time loop
+    q[Q_INV_B0] = 1.0 / fp[L.F_B0]
+    q[Q_INV_C] = 1.0 / fp[L.F_TD_C]
+    q[Q_INV_VLIM] = 1.0 / fp[L.F_SEF_DOUT]
+    q[Q_ITD_GAIN] = (1.0 - fp[L.F_TD_A]) / fp[L.F_TD_C]
     td = ip[L.I_TD]
     if td == L.TD_EXACT:
         ntd = 0
@@ -248,7 +257,7 @@ def _tpl_deriv(t, z, dz, iq, q, p, p_nom, sc, rr, ri, noise_val, d, xb, sig):  #
         # eq. (21), as aiofl.differentiators.improved_td_rhs
         r2 = z[o_td + 1]
         w = q[L.F_TD_RHO]
-        arg = (q[L.F_TD_B] * z[o_td] - (1.0 - q[L.F_TD_A]) * r) / q[L.F_TD_C]
+        arg = q[L.F_TD_B] * q[Q_INV_C] * z[o_td] - q[Q_ITD_GAIN] * r
         dz[o_td] = r2
         dz[o_td + 1] = -w * w * _TANH(arg) - w * r2
     elif td_kind == L.TD_LINEAR:
@@ -295,13 +304,13 @@ def _tpl_deriv(t, z, dz, iq, q, p, p_nom, sc, rr, ri, noise_val, d, xb, sig):  #
                     gain += kb / (1.0 + np.exp(q[L.F_SEF_MU + i] * ei * ei))
                 acc += gain * _ABSPOW(ae, a, np.log(ae)) * sgn
             dl = q[L.F_SEF_DOUT]
-            v = dl * _TANH(acc / dl)
+            v = dl * _TANH(acc * q[Q_INV_VLIM])
         else:  # linear full-state feedback of the chain (14)
             acc = rff
             for i in range(m):
                 acc += q[Q_LINK + i] * ((rr[ri, i] if exact else z[o_td + i]) - z[o_eso + i])
-            v = acc / b0
-        u = v - z[o_eso + rho] / b0  # eq. (14)
+            v = acc * q[Q_INV_B0]
+        u = v - z[o_eso + rho] * q[Q_INV_B0]  # eq. (14)
     else:  # classical IOFL on the nominal model
         nfx = _PNF(xb, p_nom)
         acc = rff
