@@ -41,6 +41,7 @@ time (no source file) is compiled in every process.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import itertools
 import math
@@ -674,7 +675,13 @@ def _build_kernel(plant: Plant, *, cache: bool | None = None) -> _Kernel:
         _PNF=nf,
         _HAN_TD=_differentiators_module().han_td_rhs,
     )
-    suffix = fingerprint or f"nocache{id(plant):x}"
+    # the plant's identity (stable across edits) + the fingerprint of its code
+    ident = "|".join(
+        [plant.name, str(n)]
+        + [getattr(getattr(plant, k), "__qualname__", "-") for k in ("f", "g", "h", "bd")]
+    )
+    plant_key = hashlib.sha256(ident.encode()).hexdigest()[:8]
+    suffix = f"{plant_key}_{fingerprint}" if fingerprint else f"nocache{id(plant):x}"
     opts = {"fastmath": FASTMATH, "error_model": "numpy"}
     ns["_UNMANAGED"] = _unmanaged_intrinsic()
     ns["_ABSPOW"] = _instantiate(_abspow, ns, suffix, **opts)
@@ -685,6 +692,8 @@ def _build_kernel(plant: Plant, *, cache: bool | None = None) -> _Kernel:
     # one call site in the stage loop: inlined, so the compiler sees the whole step
     ns["_DERIV"] = _instantiate(_tpl_deriv, ns, suffix, inline="always", **opts)
     member = _instantiate(_tpl_member, ns, suffix, nogil=True, cache=use_cache, **opts)
+    if use_cache:
+        _prune_stale_cache(member, plant_key, suffix)
     evaluate = _instantiate(_tpl_eval, ns, suffix, **opts)
     n_cols = N_SIG + n + (L.RHO_MAX + 1) + L.RHO_MAX
     return _Kernel(member=member, evaluate=evaluate, n_cols=n_cols, cached=use_cache)
@@ -722,6 +731,20 @@ def _unmanaged_intrinsic() -> Any:
         return arr(arr), codegen
 
     return unmanaged
+
+
+def _prune_stale_cache(member: Any, plant_key: str, suffix: str) -> None:
+    """Delete this plant's cached kernels from older versions of its code or the engine's
+    (same plant key, other fingerprint), so the cache does not grow with every edit."""
+    cache_dir = getattr(getattr(member, "_cache", None), "_cache_path", None)
+    if not cache_dir or not os.path.isdir(cache_dir):
+        return
+    prefix = f"{__name__.rsplit('.', 1)[-1]}._tpl_member_{plant_key}_"
+    keep = f"{prefix}{suffix.split('_', 1)[1]}"
+    for entry in os.scandir(cache_dir):
+        if entry.name.startswith(prefix) and not entry.name.startswith(keep):
+            with contextlib.suppress(OSError):  # another process may have removed it
+                os.remove(entry.path)
 
 
 def _cache_enabled() -> bool:
