@@ -28,8 +28,10 @@ def _paper_dict(**changes: object) -> dict:
 @pytest.mark.parametrize(
     ("changes", "needles"),
     [
-        ({"controller__eso__omega": 5.0}, ["controller.eso.omega", "unknown key"]),
-        ({"scenario__colour": "red"}, ["scenario.colour", "unknown key"]),
+        ({"controller__eso__omega": 5.0}, ["controller.eso.omega", "unknown key", "omega0"]),
+        ({"scenario__colour": "red"}, ["scenario.colour", "unknown key", "allowed: name,"]),
+        ({"scenario__reference__ampl": 1.0}, ["scenario.reference.ampl", "amplitude"]),
+        ({"controler": {}}, ["controler", "allowed:", "controller"]),
         ({"controller__td__a": 1.5}, ["controller.td.a", "less than 1"]),
         ({"simulation__dt": 0.0}, ["simulation.dt", "greater than 0"]),
         ({"simulation__method": "rk45"}, ["simulation.method", "rk4", "euler"]),

@@ -295,13 +295,29 @@ class RunConfig:
         )
 
 
+def _allowed_keys(loc: tuple[Any, ...]) -> list[str]:
+    """Field names of the table at ``loc[:-1]`` (walking the config models)."""
+    model: Any = ConfigModel
+    for part in loc[:-1]:
+        field = model.model_fields.get(part) if isinstance(part, str) else None
+        if field is None:
+            return []
+        candidates = (field.annotation, *getattr(field.annotation, "__args__", ()))
+        models = [a for a in candidates if isinstance(a, type) and issubclass(a, BaseModel)]
+        if not models:
+            return []
+        model = models[0]
+    return list(model.model_fields)
+
+
 def _format_error(exc: ValidationError, source: str) -> str:
     lines = [f"invalid config {source}:"]
     for err in exc.errors():
-        loc = ".".join(str(p) for p in err["loc"] if not isinstance(p, int) or True)
+        loc = ".".join(str(p) for p in err["loc"])
         msg = err["msg"]
         if err["type"] == "extra_forbidden":
-            msg = "unknown key"
+            allowed = _allowed_keys(err["loc"])
+            msg = "unknown key" + (f"; allowed: {', '.join(allowed)}" if allowed else "")
         lines.append(f"  {loc}: {msg} (got {err.get('input')!r})")
     return "\n".join(lines)
 
