@@ -22,8 +22,9 @@ def atomic_output_dir(out: str | Path) -> Iterator[Path]:
     """Yield a staging directory; on success move its files into ``out``.
 
     Existing files in ``out`` with other names are kept; files of the same name are
-    replaced.  On an exception the staging directory is removed and ``out`` is untouched
-    (not even created).
+    replaced.  On an exception in the body the staging directory is removed and ``out`` is
+    untouched (not even created); the staging directory is also removed when moving the
+    files in fails (e.g. ``out`` is an existing file).
     """
     out = Path(out)
     parent = out.resolve().parent
@@ -31,16 +32,14 @@ def atomic_output_dir(out: str | Path) -> Iterator[Path]:
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.staging-", dir=parent))
     try:
         yield stage
-    except BaseException:
+        out.mkdir(parents=True, exist_ok=True)
+        for item in sorted(stage.iterdir()):
+            target = out / item.name
+            if target.is_dir() and not target.is_symlink():
+                shutil.rmtree(target)
+            os.replace(item, target)
+    finally:
         shutil.rmtree(stage, ignore_errors=True)
-        raise
-    out.mkdir(parents=True, exist_ok=True)
-    for item in sorted(stage.iterdir()):
-        target = out / item.name
-        if target.is_dir() and not target.is_symlink():
-            shutil.rmtree(target)
-        os.replace(item, target)
-    shutil.rmtree(stage, ignore_errors=True)
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
