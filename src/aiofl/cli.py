@@ -299,19 +299,12 @@ def register_feature(name: str, target: str) -> None:
     """Add feature command ``name`` from ``"module:function"`` (one line per feature below).
 
     The module is imported now, so it must keep its heavy imports inside the function.
-    A feature whose module is not installed is skipped (the other commands keep working);
-    any other import error propagates.
+    Every feature module ships with aiofl: an import error is a bug and propagates.
     """
     from importlib import import_module
 
     module, func = target.split(":")
-    try:
-        mod = import_module(module)
-    except ModuleNotFoundError as exc:
-        if exc.name != module:
-            raise
-        return
-    app.command(name)(getattr(mod, func))
+    app.command(name)(getattr(import_module(module), func))
 
 
 # --- feature commands ---
