@@ -441,12 +441,10 @@ def findings(rep: Reproduction) -> list[str]:
     # closed-loop analysis (aiofl.linearize), grouped by verdict
     by_verdict: dict[str, list[str]] = {}
     for preset, v in rep.verdicts.items():
-        if v is None:
-            continue
         mr = _max_real(v)
         tail = f" (max Re λ = {mr:.3g} 1/s)" if mr is not None else ""
         by_verdict.setdefault(str(v.get("verdict", DASH)), []).append(preset + tail)
-    if by_verdict:
+    if by_verdict:  # empty only when there are no cases
         out.append(
             "Closed loop linearised about its operating point (aiofl.linearize): "
             + "; ".join(f"{k}: {', '.join(v)}" for k, v in by_verdict.items())
@@ -502,8 +500,6 @@ def _max_real(v: Mapping[str, Any]) -> float | None:
 def _verdict_table(rep: Reproduction) -> str:
     rows = []
     for preset, v in rep.verdicts.items():
-        if v is None:
-            continue
         mr = _max_real(v)
         sweep = v.get("verdicts_by_amplitude") or {}
         notes = list(v.get("notes") or [])
@@ -511,11 +507,6 @@ def _verdict_table(rep: Reproduction) -> str:
             notes.append("by amplitude ε: " + ", ".join(f"{k}: {w}" for k, w in sweep.items()))
         rows.append(
             [preset, str(v.get("verdict", DASH)), fmt(mr, 4), "; ".join(str(n) for n in notes)]
-        )
-    if not rows:
-        return (
-            '<p class="muted">Closed-loop linearisation (<code>aiofl.linearize</code>) is not '
-            "available in this installation.</p>"
         )
     return _html_table(
         ["Case", "Verdict", "max Re λ [1/s]", "Notes"], rows, cls="settings", context_last=False

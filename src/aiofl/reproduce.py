@@ -379,16 +379,14 @@ def output_ratio(run: CaseRun, window: float = 5.0) -> float | None:
     return float(np.max(np.abs(res["y"][sel]))) / r_peak
 
 
-def closed_loop_verdict(cfg: RunConfig) -> dict[str, Any] | None:
-    """Closed-loop linearisation verdict of a case, or None if the analysis is unavailable.
+def closed_loop_verdict(cfg: RunConfig) -> dict[str, Any]:
+    """Closed-loop linearisation verdict of a case.
 
     Uses :func:`aiofl.linearize.closed_loop_verdict` (``{"verdict": str, "eigenvalues":
     [[re, im], ...]}``).  A failure of the analysis is reported in the verdict, not raised.
     """
-    try:
-        from aiofl.linearize import closed_loop_verdict as verdict
-    except ImportError:
-        return None
+    from aiofl.linearize import closed_loop_verdict as verdict
+
     try:
         return dict(verdict(cfg))
     except Exception as exc:  # the report must not fail because one analysis did
@@ -403,7 +401,7 @@ class Reproduction:
     runs: list[CaseRun]
     records: list[dict[str, Any]]
     trivial: dict[int, float]
-    verdicts: dict[str, dict[str, Any] | None]
+    verdicts: dict[str, dict[str, Any]]
     engine: dict[str, str]
     timings: dict[str, float]
 
