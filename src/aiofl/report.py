@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from aiofl.metrics import opi
 from aiofl.reproduce import (
     PAPER_TABLES,
     SCENARIOS,
@@ -67,10 +68,6 @@ def _roots_text(roots: np.ndarray) -> str:
     return ", ".join(parts)
 
 
-def _computed(rep: Reproduction, run: CaseRun) -> dict[str, Any]:
-    return run.record
-
-
 # ---------------------------------------------------------------------------- tables
 TABLE_HEADER = (
     "Structure",
@@ -88,7 +85,7 @@ def table_rows(rep: Reproduction, scenario: int) -> list[list[str]]:
     """Rows of Table I/II/III (scenario 1/2/3): paper vs computed, plus y ≡ 0 for context."""
     rows = []
     for run in rep.scenario_runs(scenario):
-        rec = _computed(rep, run)
+        rec = run.record
         paper = (
             PAPER_TABLES[scenario].get(run.case.structure, {})
             if run.case.source == "printed"
@@ -120,7 +117,7 @@ def table_rows(rep: Reproduction, scenario: int) -> list[list[str]]:
             DASH,
             "0",
             "0",
-            fmt(w.w_itae * triv / w.n_itae),
+            fmt(opi(triv, 0.0, 0.0, w)),
         ]
     )
     # the least ISU any controller needs to keep y = r (helper C, aiofl.tuning_flat)
@@ -136,7 +133,7 @@ def table_rows(rep: Reproduction, scenario: int) -> list[list[str]]:
             DASH,
             fmt(ex["isu"]),
             fmt(ex["iau"]),
-            fmt(w.w_isu * ex["isu"] / w.n_isu + w.w_iau * ex["iau"] / w.n_iau),
+            fmt(opi(0.0, ex["isu"], ex["iau"], w)),
         ]
     )
     return rows
@@ -148,7 +145,7 @@ def scenario_notes(rep: Reproduction, scenario: int) -> list[str]:
     triv = rep.trivial[scenario]
     paper = PAPER_TABLES[scenario]
     for run in rep.scenario_runs(scenario):
-        rec = _computed(rep, run)
+        rec = run.record
         name = f"{run.case.label} [{run.case.preset}]"
         p = paper.get(run.case.structure) if run.case.source == "printed" else None
         if rec["diverged"]:
@@ -177,14 +174,24 @@ def scenario_notes(rep: Reproduction, scenario: int) -> list[str]:
         f"the paper's own ITAE values relative to it: {rel}."
     )
     notes.append(msg)
-    # how the re-tuned rows were tuned (budget, seed, objective), from their [tune] tables
+    # how the re-tuned rows were tuned (budget, seed, objective), from their [tune] tables;
+    # rows tuned with the same recipe share one note
     from aiofl.tuning import describe_tuning
 
+    recipes: dict[str, list[str]] = {}
     for run in rep.scenario_runs(scenario):
         how = describe_tuning(run.case.config) if run.case.source == "retuned" else None
         if how:
-            notes.append(f"{run.case.label} [{run.case.preset}] was re-tuned with {how}.")
+            recipes.setdefault(how, []).append(f"{run.case.label} [{run.case.preset}]")
+    for how, rows in recipes.items():
+        verb = "was" if len(rows) == 1 else "were"
+        notes.append(f"{_join(rows)} {verb} re-tuned with {how}.")
     return notes
+
+
+def _join(items: Sequence[str]) -> str:
+    """``a``, ``a and b``, ``a, b and c``."""
+    return items[0] if len(items) == 1 else ", ".join(items[:-1]) + " and " + items[-1]
 
 
 def _horizon(rep: Reproduction, scenario: int) -> str:
@@ -405,9 +412,7 @@ def findings(rep: Reproduction) -> list[str]:
                 f"{_pct(inl['isu'], lo['isu'])} in ISU"
             )
         comp = {
-            r.case.structure: _computed(rep, r)
-            for r in rep.scenario_runs(s)
-            if r.case.source == "printed"
+            r.case.structure: r.record for r in rep.scenario_runs(s) if r.case.source == "printed"
         }
         if {"LESO", "INLESO"} <= set(comp):
             lo, inl = comp["LESO"], comp["INLESO"]
@@ -424,7 +429,7 @@ def findings(rep: Reproduction) -> list[str]:
     for r in rep.runs:
         if r.case.source == "printed":
             continue
-        rec = _computed(rep, r)
+        rec = r.record
         triv = rep.trivial[r.case.scenario]
         if rec["diverged"]:
             out.append(f"{r.case.preset}: diverges at t = {rec['diverged_at']:.2f} s.")
