@@ -80,6 +80,12 @@ TABLE_HEADER = (
     "OPI computed",
 )
 
+CONTEXT_ROWS = (
+    "y ≡ 0 (no control, for context)",
+    "y ≡ r exactly (least ISU: model inversion from x*(0), for context)",
+)
+"""Labels of the rows that end every table (references, not results)."""
+
 
 def table_rows(rep: Reproduction, scenario: int) -> list[list[str]]:
     """Rows of Table I/II/III (scenario 1/2/3): paper vs computed, plus y ≡ 0 for context."""
@@ -110,7 +116,7 @@ def table_rows(rep: Reproduction, scenario: int) -> list[list[str]]:
     w = rep.scenario_runs(scenario)[0].case.config.weights
     rows.append(
         [
-            "y ≡ 0 (no control, for context)",
+            CONTEXT_ROWS[0],
             DASH,
             DASH,
             fmt(triv),
@@ -126,7 +132,7 @@ def table_rows(rep: Reproduction, scenario: int) -> list[list[str]]:
     ex = exact_tracking_cost(rep.scenario_runs(scenario)[0].case.config)
     rows.append(
         [
-            "y ≡ r exactly (least ISU: model inversion from x*(0), for context)",
+            CONTEXT_ROWS[1],
             DASH,
             DASH,
             "0",
@@ -479,13 +485,14 @@ def _e(s: object) -> str:
 
 
 def _html_table(
-    header: Sequence[str], rows: Sequence[Sequence[str]], *, cls: str = "", context_last: bool
+    header: Sequence[str], rows: Sequence[Sequence[str]], *, cls: str = "", context_rows: int = 0
 ) -> str:
+    """An HTML table; the last ``context_rows`` rows are styled as context (not results)."""
     parts = [f'<table class="{cls}"><thead><tr>']
     parts += [f"<th>{_e(h)}</th>" for h in header]
     parts.append("</tr></thead><tbody>")
     for i, row in enumerate(rows):
-        ctx = ' class="context"' if context_last and i == len(rows) - 1 else ""
+        ctx = ' class="context"' if i >= len(rows) - context_rows else ""
         parts.append(f"<tr{ctx}>")
         for cell in row:
             c = ' class="div"' if cell.startswith("diverged") else ""
@@ -513,9 +520,7 @@ def _verdict_table(rep: Reproduction) -> str:
         rows.append(
             [preset, str(v.get("verdict", DASH)), fmt(mr, 4), "; ".join(str(n) for n in notes)]
         )
-    return _html_table(
-        ["Case", "Verdict", "max Re λ [1/s]", "Notes"], rows, cls="settings", context_last=False
-    )
+    return _html_table(["Case", "Verdict", "max Re λ [1/s]", "Notes"], rows, cls="settings")
 
 
 def html_report(rep: Reproduction, figures: Mapping[str, bytes]) -> str:
@@ -545,7 +550,7 @@ def html_report(rep: Reproduction, figures: Mapping[str, bytes]) -> str:
     ]
     for s, info in SCENARIOS.items():
         body.append(f"<h2>Table {info.table}: scenario {s}, {_e(info.title)}</h2>")
-        body.append(_html_table(TABLE_HEADER, table_rows(rep, s), context_last=True))
+        body.append(_html_table(TABLE_HEADER, table_rows(rep, s), context_rows=len(CONTEXT_ROWS)))
         body.append(
             '<ul class="notes">'
             + "".join(f"<li>{_e(n)}</li>" for n in scenario_notes(rep, s))
@@ -565,17 +570,12 @@ def html_report(rep: Reproduction, figures: Mapping[str, bytes]) -> str:
             ["Setting", "The paper", "Choice made"],
             [list(t) for t in open_settings(rep)],
             cls="settings",
-            context_last=False,
         )
     )
     body.append("<h2>Engine settings</h2>")
     timing = ", ".join(f"{k} {v:.2f} s" for k, v in rep.timings.items())
     eng = [*rep.engine.items(), ("wall time", timing)]
-    body.append(
-        _html_table(
-            ["Setting", "Value"], [list(r) for r in eng], cls="settings", context_last=False
-        )
-    )
+    body.append(_html_table(["Setting", "Value"], [list(r) for r in eng], cls="settings"))
     return (
         '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
         "<title>AIOFL reproduction report</title>"
