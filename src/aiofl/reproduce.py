@@ -40,7 +40,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl.config import RunConfig, list_presets, load_config
+from aiofl.differentiators import itd_steady_state
 from aiofl.engine import SimulationResult, simulate_batch
+from aiofl.metrics import itae
 from aiofl.observers import eso_gains
 from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 
@@ -341,7 +343,7 @@ def trivial_itae(cfg: RunConfig, dt: float = 1e-4) -> float:
     """
     t_f = cfg.scenario.t_final
     t = np.linspace(0.0, t_f, round(t_f / dt) + 1)
-    return float(np.trapezoid(t * np.abs(cfg.scenario.reference.evaluate(t)), t))
+    return itae(t, np.zeros_like(t), cfg.scenario.reference.evaluate(t))
 
 
 def observer_roots(cfg: RunConfig) -> NDArray[np.complex128]:
@@ -361,7 +363,7 @@ def itd_gain(cfg: RunConfig) -> float | None:
     c = cfg.controller
     if c.td != "improved":
         return None
-    return (1.0 - c.value("td.a")) / c.value("td.b")
+    return itd_steady_state(1.0, c.value("td.a"), c.value("td.b"))
 
 
 def output_ratio(run: CaseRun, window: float = 5.0) -> float | None:
