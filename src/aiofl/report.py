@@ -370,21 +370,15 @@ def findings(rep: Reproduction) -> list[str]:
 
     # observer error polynomial (only where the ESO is in the loop: the AIOFL law)
     in_loop = [r for r in rep.runs if r.case.config.controller.law == "aiofl"]
-    seen_sets: dict[tuple[float, ...], list[str]] = {}
+    groups: dict[tuple[Any, ...], tuple[np.ndarray, bool, list[str]]] = {}
     for r in in_loop:
         roots = observer_roots(r.case.config)
-        key = (r.case.config.controller.eso, *np.round(np.sort_complex(roots), 9).view(float))
-        seen_sets.setdefault(key, []).append(r.case.preset)
-    done: set[tuple[float, ...]] = set()
-    for r in in_loop:
-        roots = observer_roots(r.case.config)
-        key = (r.case.config.controller.eso, *np.round(np.sort_complex(roots), 9).view(float))
-        if key in done:
-            continue
-        done.add(key)
-        names = ", ".join(seen_sets[key])
+        eso = r.case.config.controller.eso
+        key = (eso, *np.round(np.sort_complex(roots), 9).view(float))
+        groups.setdefault(key, (roots, eso == "linear", []))[2].append(r.case.preset)
+    for roots, linear, presets in groups.values():
+        names = ", ".join(presets)
         n_rhp = int(np.sum(roots.real > 0))
-        linear = r.case.config.controller.eso == "linear"
         what = (
             "linear-ESO error polynomial s⁵ + β1 s⁴ + … + β5 (eq. 9)"
             if linear
