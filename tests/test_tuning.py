@@ -508,3 +508,25 @@ def test_retuned_presets_state_their_recipe_and_load() -> None:
             b = prep.settings.parameters[pname]
             assert b.lo <= cfg.controller.value(pname) <= b.hi
     assert describe_tuning(load_config("paper-s1-leso")) is None
+
+
+def test_prepare_finds_a_relative_plant_file_from_another_folder(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A config naming ``plant = "pend.toml"`` next to it tunes from any working folder:
+    the tuning spec (re-parsed by the workers) carries the file's absolute path."""
+    from test_plant_files import PLANT, RUN
+
+    (tmp_path / "cfg").mkdir()
+    (tmp_path / "cfg" / "pend.toml").write_text(PLANT)
+    tune_table = (
+        "\n[tune]\npopulation = 4\ngenerations = 1\nt_final = 1.0\n"
+        '[tune.parameters]\n"eso.omega0" = { lo = 10.0, hi = 100.0 }\n'
+    )
+    cfg_path = tmp_path / "cfg" / "run.toml"
+    cfg_path.write_text(RUN.format(plant="pend.toml") + tune_table)
+    monkeypatch.chdir(tmp_path)
+    prep = prepare(cfg_path)
+    plant_path = Path(prep.spec.config["plant"])
+    assert plant_path.is_absolute() and plant_path == (tmp_path / "cfg" / "pend.toml").resolve()
+    assert parse_config(dict(prep.spec.config)).plant.n_states == 2

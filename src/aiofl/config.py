@@ -364,6 +364,10 @@ def parse_config(
     except ValidationError as exc:
         raise ConfigError(_format_error(exc, source)) from None
     plant = resolve_plant(model.plant, base_dir)
+    plant_file = Path(model.plant)
+    if base_dir is not None and plant_file.suffix == ".toml" and not plant_file.is_absolute():
+        # keep raw self-contained: re-parsing it elsewhere (tuning, Dask) finds the same file
+        data = {**data, "plant": str((Path(base_dir) / plant_file).resolve())}
     try:
         plant.param_vector(model.scenario.plant_overrides, model.scenario.plant_scale)
         controller = model.controller.build(plant.relative_degree or 1)
