@@ -37,7 +37,7 @@ import io
 import json
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -45,6 +45,7 @@ import numpy as np
 import typer
 from numpy.typing import NDArray
 
+from aiofl import layout as L
 from aiofl.tuning_flat import (
     ExactTracking,
     exact_tracking,
@@ -132,7 +133,6 @@ class TuneResult:
     evaluator: str = "local"
     live_evaluations: int = 0
     live_seconds: float = 0.0
-    extra: dict[str, Any] = field(default_factory=dict)
 
     @property
     def n_evaluations(self) -> int:
@@ -241,7 +241,7 @@ def prepare(
     ``settings`` defaults to the config's ``[tune]`` table; ``overrides`` (e.g.
     ``seed=3``) replace settings fields.  Raises :class:`aiofl.config.ConfigError`.
     """
-    from aiofl.config import ConfigError, load_config
+    from aiofl.config import load_config
     from aiofl.tuning_eval import EvalSpec
 
     source = ""
@@ -257,8 +257,6 @@ def prepare(
     _check_parameters(cfg, st)
     space = SearchSpace(st.parameters)
     raw = {k: v for k, v in cfg.raw.items() if k != "tune"}
-    if not raw.get("plant", "slfjm"):
-        raise ConfigError("config.plant is empty")
     spec = EvalSpec(
         config=raw,
         names=space.names,
@@ -512,8 +510,6 @@ def tune(
     values = space.decode(s_all)
     ib = int(np.argmin(obj_all))
     best_values = {n: float(values[ib, j]) for j, n in enumerate(space.names)}
-    from aiofl import layout as L
-
     best_metrics = (
         None
         if div_all[ib]
@@ -670,7 +666,7 @@ def full_horizon_record(result: TuneResult) -> dict[str, Any]:
         "diverged": sim.diverged,
         "diverged_at": sim.diverged_at,
     }
-    rec.update(sim.metrics or dict.fromkeys(("itae", "iae", "ise", "isu", "iau")))
+    rec.update(sim.metrics or dict.fromkeys(L.METRIC_NAMES))
     rec["opi"] = sim.opi(cfg.weights)
     return rec
 

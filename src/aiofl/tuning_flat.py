@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from aiofl import metrics
 from aiofl.plant import Plant
 from aiofl.scenario import Reference, Scenario
 
@@ -77,12 +78,12 @@ class ExactTracking:
     @property
     def isu(self) -> float:
         r""":math:`\int u^{*2}dt` over ``t`` (trapezoidal rule)."""
-        return float(np.trapezoid(self.u**2, self.t))
+        return metrics.isu(self.t, self.u)
 
     @property
     def iau(self) -> float:
         r""":math:`\int |u^*|dt` over ``t`` (trapezoidal rule)."""
-        return float(np.trapezoid(np.abs(self.u), self.t))
+        return metrics.iau(self.t, self.u)
 
 
 def reference_derivatives(reference: Reference, t: ArrayLike, order: int) -> NDArray[np.float64]:

@@ -142,20 +142,18 @@ class TuneSettings(_Model):
         )
 
 
-def parse_tune_settings(
-    data: Mapping[str, Any] | TuneSettings | None, source: str = "[tune]"
-) -> TuneSettings:
+def parse_tune_settings(data: Mapping[str, Any] | TuneSettings | None) -> TuneSettings:
     """Validate a ``[tune]`` table; raises :class:`aiofl.config.ConfigError` naming the field."""
     from aiofl.config import ConfigError
 
     if isinstance(data, TuneSettings):
         return data
     if data is None:
-        raise ConfigError(f"{source}: the config has no [tune] table (needed by `aiofl tune`)")
+        raise ConfigError("[tune]: the config has no [tune] table (needed by `aiofl tune`)")
     try:
         return TuneSettings.model_validate(dict(data))
     except ValidationError as exc:
-        lines = [f"invalid {source}:"]
+        lines = ["invalid [tune]:"]
         for err in exc.errors():
             loc = ".".join(str(p) for p in err["loc"])
             msg = err["msg"]
