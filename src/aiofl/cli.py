@@ -10,6 +10,10 @@ Commands
     One run: ``DIR/metrics.json``, ``DIR/trajectory.csv``, ``DIR/figure.png``.
 ``aiofl reproduce --out DIR``
     The paper's Tables I–III and Figures 3–5, and a self-contained HTML report.
+``aiofl tune CONFIG --out DIR``
+    GA tuning from the config's ``[tune]`` table (:mod:`aiofl.tuning`).
+``aiofl analyze PLANT|CONFIG [--closed-loop]``
+    Symbolic plant analysis or closed-loop linearisation (:mod:`aiofl.symbolic_cli`).
 
 Bad input (a malformed or invalid config, an unknown preset, a missing file) prints one
 clear message to stderr and exits with status 2; nothing is written to ``DIR``.  Heavy
