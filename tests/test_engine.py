@@ -180,8 +180,8 @@ def test_compiled_rhs_of_the_iofl_law_equals_the_oracle(slfjm):
 
 
 def test_engine_fal_is_continuous_at_delta(slfjm):
-    """The engine's own fal (precomputed δ^(α-1)) is continuous at |e1| = δ1: u on both
-    sides of the kink differs by O(ε)."""
+    """The engine's fal (aiofl.feedback.fal_scaled with the precomputed δ^(α-1)) is
+    continuous at |e1| = δ1: u on both sides of the kink differs by O(ε)."""
     rc = load_config("paper-s1-leso")
     delta1 = rc.controller.value("sef.delta1")
     us = []
@@ -196,27 +196,22 @@ def test_engine_fal_is_continuous_at_delta(slfjm):
         assert us[-1] == pytest.approx(side * delta1 ** rc.controller.value("sef.alpha1"))
 
 
-def test_fast_tanh_and_power_agree_with_libm():
-    """The engine's cheaper tanh and |x|^a agree with numpy to 2 ulp / 1e-14."""
-    rng = np.random.default_rng(0)
-    xs = np.concatenate(
-        [
-            rng.uniform(-1, 1, 3000),
-            rng.uniform(-30, 30, 3000),
-            10.0 ** rng.uniform(-300, 0, 1000),
-            [0.0, -0.0, 0.625, -0.625, 20.0, 1e308],
-        ]
-    )
-    got = np.array([engine._tanh(float(x)) for x in xs])
-    want = np.tanh(xs)
-    ulp = np.spacing(np.maximum(np.abs(want), np.finfo(float).tiny))
-    assert np.max(np.abs(got - want) / ulp) <= 2.0
-    assert math.isnan(engine._tanh(math.nan))
-    assert engine._tanh(-math.inf) == -1.0
-    for a in (0.0, 0.188, 0.69, 1.0, 1.8):
-        for x in (0.0, 1e-12, 0.3, 7.0, 1e5):
-            lx = math.log(x) if x > 0 else -math.inf
-            assert engine._abspow(x, a, lx) == pytest.approx(x**a, rel=1e-14, abs=0.0)
+def test_kernel_fingerprint_covers_the_component_modules(slfjm, monkeypatch):
+    """The kernel runs the component functions, so editing a component module must change
+    the on-disk cache fingerprint (a stale kernel would otherwise be loaded)."""
+    from aiofl import differentiators, fastmath, feedback, law, observers
+
+    before = engine._kernel_fingerprint(slfjm)
+    real = engine._source_digest
+    for mod in (fastmath, feedback, observers, differentiators, law):
+        monkeypatch.setattr(
+            engine,
+            "_source_digest",
+            lambda path, f=mod.__file__: "edited" if path == f else real(path),
+        )
+        assert engine._kernel_fingerprint(slfjm) != before, mod.__name__
+    monkeypatch.setattr(engine, "_source_digest", real)
+    assert engine._kernel_fingerprint(slfjm) == before
 
 
 # ------------------------------------------------------------------ convergence order

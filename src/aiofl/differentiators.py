@@ -26,18 +26,22 @@ estimates, :math:`e_i = r_i - \hat\xi_i`.
 
 from __future__ import annotations
 
-from math import comb
-
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from aiofl.fastmath import JIT_OPTIONS, binomial_power, fast_tanh
+
 __all__ = [
     "han_td_rhs",
+    "improved_td_constants",
     "improved_td_rhs",
+    "improved_td_rhs_scaled",
     "itd_steady_state",
+    "linear_prefilter_coefficient",
     "linear_prefilter_coefficients",
     "linear_prefilter_rhs",
+    "linear_prefilter_update",
 ]
 
 
@@ -52,12 +56,41 @@ def han_td_rhs(r1: float, r2: float, r: float, big_r: float) -> tuple[float, flo
     return r2, -big_r * sgn
 
 
-@njit(cache=True)
+@njit(**JIT_OPTIONS)
+def improved_td_rhs_scaled(
+    r1: float, r2: float, r: float, b_over_c: float, gain: float, rho: float
+) -> tuple[float, float]:
+    r"""Improved tracking differentiator (ITD), eq. (21), with the constants divided out:
+
+    .. math:: \dot r_1 = r_2,\qquad
+              \dot r_2 = -\varrho^2\tanh\big(\tfrac{b}{c}\,r_1 - \tfrac{1-a}{c}\,r\big)
+              - \varrho r_2
+
+    ``b_over_c`` = :math:`b/c` and ``gain`` = :math:`(1-a)/c` (:func:`improved_td_constants`;
+    the engine computes them once per member).  Returns :math:`(\dot r_1, \dot r_2)`.
+    """
+    return r2, -rho * rho * fast_tanh(b_over_c * r1 - gain * r) - rho * r2
+
+
+@njit(**JIT_OPTIONS)
+def improved_td_constants(a: float, b: float, c: float) -> tuple[float, float]:
+    r"""The ITD's constants :math:`(b/c,\ (1-a)/c)` for :func:`improved_td_rhs_scaled`."""
+    return b / c, (1.0 - a) / c
+
+
+@njit(**JIT_OPTIONS)
 def improved_td_rhs(
     r1: float, r2: float, r: float, a: float, b: float, c: float, rho: float
 ) -> tuple[float, float]:
-    r"""Improved tracking differentiator (ITD), eq. (21). Returns :math:`(\dot r_1, \dot r_2)`."""
-    return r2, -rho * rho * np.tanh((b * r1 - (1.0 - a) * r) / c) - rho * r2
+    r"""Improved tracking differentiator (ITD), eq. (21). Returns :math:`(\dot r_1, \dot r_2)`.
+
+    .. math:: \dot r_2 = -\varrho^2 \tanh\!\Big(\frac{b r_1 - (1-a) r}{c}\Big)
+              - \varrho r_2
+
+    Computed as :func:`improved_td_rhs_scaled` with :math:`b/c` and :math:`(1-a)/c`.
+    """
+    b_over_c, gain = improved_td_constants(a, b, c)
+    return improved_td_rhs_scaled(r1, r2, r, b_over_c, gain, rho)
 
 
 def itd_steady_state(r: float, a: float, b: float) -> float:
@@ -65,28 +98,58 @@ def itd_steady_state(r: float, a: float, b: float) -> float:
     return (1.0 - a) * r / b
 
 
+@njit(**JIT_OPTIONS)
+def linear_prefilter_coefficient(rho: int, i: int, omega: float) -> float:
+    r"""Coefficient :math:`c_i = \binom{\rho}{i-1}\omega^{\rho-i+1}` (i = 1..ρ) of
+    :math:`(s+\omega)^\rho` (:func:`aiofl.fastmath.binomial_power`)."""
+    return binomial_power(rho, i - 1, omega)
+
+
 def linear_prefilter_coefficients(rho: int, omega: float) -> NDArray[np.float64]:
     r"""Coefficients :math:`c_i = \binom{\rho}{i-1}\omega^{\rho-i+1}`, i = 1..ρ, of
     :math:`(s+\omega)^\rho = s^\rho + c_\rho s^{\rho-1} + \dots + c_1`."""
-    return np.array([comb(rho, i - 1) * omega ** (rho - i + 1) for i in range(1, rho + 1)])
+    return np.array([linear_prefilter_coefficient(rho, i, float(omega)) for i in range(1, rho + 1)])
 
 
-@njit(cache=True)
+@njit(inline="always", **JIT_OPTIONS)  # inlined where called: no array arguments
+def linear_prefilter_update(
+    state: NDArray[np.float64],
+    d_state: NDArray[np.float64],
+    o: int,
+    rho: int,
+    r: float,
+    coeffs: NDArray[np.float64],
+    oc: int,
+) -> float:
+    r"""Linear prefilter :math:`\omega^\rho/(s+\omega)^\rho` in controllable form:
+
+    .. math:: \dot r_i = r_{i+1}\ (i<\rho),\qquad
+              \dot r_\rho = c_1 (r - r_1) - \sum_{i=2}^{\rho} c_i r_i
+
+    with :math:`c_i` from :func:`linear_prefilter_coefficients` at ``coeffs[oc + i - 1]``,
+    :math:`r_i` at ``state[o + i - 1]`` and :math:`\dot r_i` written to
+    ``d_state[o + i - 1]`` (offsets, so the engine passes its state vector without slicing
+    it).  Returns :math:`r_1^{(\rho)} = \dot r_\rho`.
+    """
+    acc = coeffs[oc] * (r - state[o])
+    for i in range(1, rho):
+        d_state[o + i - 1] = state[o + i]
+        acc -= coeffs[oc + i] * state[o + i]
+    d_state[o + rho - 1] = acc
+    return acc
+
+
+@njit(**JIT_OPTIONS)
 def linear_prefilter_rhs(
     state: NDArray[np.float64], d_state: NDArray[np.float64], rho: int, r: float, omega: float
 ) -> float:
     r"""Linear prefilter :math:`\omega^\rho/(s+\omega)^\rho` in controllable form.
 
     Writes :math:`\dot r_1..\dot r_\rho` into ``d_state`` and returns
-    :math:`r_1^{(\rho)} = \dot r_\rho`.
+    :math:`r_1^{(\rho)} = \dot r_\rho` (:func:`linear_prefilter_update` with the
+    coefficients of :func:`linear_prefilter_coefficient`).
     """
-    for i in range(rho - 1):
-        d_state[i] = state[i + 1]
-    # c_i = C(rho, i-1) * omega^(rho-i+1), built incrementally to stay in nopython mode.
-    acc = omega**rho * (r - state[0])
-    binom = 1.0
-    for i in range(1, rho):  # state index i -> coefficient C(rho, i) * omega^(rho-i)
-        binom = binom * (rho - i + 1) / i
-        acc -= binom * omega ** (rho - i) * state[i]
-    d_state[rho - 1] = acc
-    return acc
+    coeffs = np.empty(rho)
+    for i in range(rho):
+        coeffs[i] = linear_prefilter_coefficient(rho, i + 1, omega)
+    return linear_prefilter_update(state, d_state, 0, rho, r, coeffs, 0)

@@ -25,16 +25,53 @@ many estimated states are fed back; the paper uses m = 2 (text after eq. 22).
 
 from __future__ import annotations
 
-from math import comb
-
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-__all__ = ["fal", "improved_sef", "linear_sef_gains", "nonlinear_sef"]
+from aiofl.fastmath import JIT_OPTIONS, abspow, binomial_power, fast_tanh, sign
+
+__all__ = [
+    "fal",
+    "fal_inner_slope",
+    "fal_scaled",
+    "improved_sef",
+    "inlsef_limit",
+    "inlsef_term",
+    "linear_sef",
+    "linear_sef_gain",
+    "linear_sef_gains",
+    "nonlinear_sef",
+]
 
 
-@njit(cache=True)
+@njit(**JIT_OPTIONS)
+def fal_scaled(e: float, alpha: float, delta: float, inner_slope: float) -> float:
+    r"""Han's fal, eq. (17), given its inner slope :math:`\delta^{\alpha-1}`.
+
+    .. math::
+        \mathrm{fal}(e,\alpha,\delta) = \begin{cases} e\,\delta^{\alpha-1} & |e|\le\delta\\
+        |e|^\alpha \operatorname{sign}(e) & |e|>\delta \end{cases}
+
+    ``inner_slope`` must be :math:`\delta^{\alpha-1}` (:func:`fal_inner_slope`); the engine
+    computes it once per member.  :func:`fal` is this function with the slope computed from α and δ.
+    """
+    ae = abs(e)
+    if ae <= delta:
+        return e * inner_slope
+    if alpha == 1.0:
+        return e
+    return abspow(ae, alpha, np.log(ae)) * sign(e)
+
+
+@njit(**JIT_OPTIONS)
+def fal_inner_slope(alpha: float, delta: float) -> float:
+    r"""The slope :math:`\delta^{\alpha-1} = 1/\delta^{1-\alpha}` of fal's linear inner
+    branch (eq. 17, continuous form), for :func:`fal_scaled`."""
+    return delta ** (alpha - 1.0)
+
+
+@njit(**JIT_OPTIONS)
 def fal(e: float, alpha: float, delta: float) -> float:
     r"""Han's fal function, eq. (17), in its continuous form.
 
@@ -45,14 +82,12 @@ def fal(e: float, alpha: float, delta: float) -> float:
     The paper prints :math:`e/\delta^{\alpha-1}` on the inner branch, which is
     discontinuous at :math:`|e| = \delta` (erratum); both branches equal
     :math:`\delta^\alpha\operatorname{sign}(e)` there with the form used here.
+    Computed as :func:`fal_scaled` with the slope :math:`\delta^{\alpha-1}`.
     """
-    ae = abs(e)
-    if ae <= delta:
-        return e / delta ** (1.0 - alpha)
-    return ae**alpha * (1.0 if e > 0.0 else -1.0)
+    return fal_scaled(e, alpha, delta, fal_inner_slope(alpha, delta))
 
 
-@njit(cache=True)
+@njit(**JIT_OPTIONS)
 def nonlinear_sef(
     e: NDArray[np.float64],
     m: int,
@@ -67,7 +102,31 @@ def nonlinear_sef(
     return v
 
 
-@njit(cache=True)
+@njit(**JIT_OPTIONS)
+def inlsef_term(e: float, k1: float, k2: float, mu: float, alpha: float) -> float:
+    r"""One error's term of the INLSEF, eq. (20):
+
+    .. math:: v_i = \Big(k_{i1} + \frac{k_{i2}}{1+\exp(\mu_i e_i^2)}\Big)
+              |e_i|^{\alpha_i}\operatorname{sign}(e_i)
+
+    (the exponential is skipped when :math:`k_{i2} = 0`).
+    """
+    gain = k1
+    if k2 != 0.0:
+        gain += k2 / (1.0 + np.exp(mu * e * e))
+    ae = abs(e)
+    return gain * abspow(ae, alpha, np.log(ae)) * sign(e)
+
+
+@njit(**JIT_OPTIONS)
+def inlsef_limit(s: float, v_limit: float) -> float:
+    r"""The INLSEF's smooth limit, eq. (20): :math:`v = \delta\tanh(s/\delta)` of the sum
+    :math:`s = v_1 + \dots + v_m` of :func:`inlsef_term`, with :math:`\delta` =
+    ``v_limit``."""
+    return v_limit * fast_tanh(s / v_limit)
+
+
+@njit(**JIT_OPTIONS)
 def improved_sef(
     e: NDArray[np.float64],
     m: int,
@@ -77,17 +136,33 @@ def improved_sef(
     alpha: NDArray[np.float64],
     delta: float,
 ) -> float:
-    r"""INLSEF, eq. (20): :math:`v = \delta\tanh((v_1+\dots+v_m)/\delta)`."""
+    r"""INLSEF, eq. (20): :math:`v = \delta\tanh((v_1+\dots+v_m)/\delta)` with the terms
+    :math:`v_i` of :func:`inlsef_term`."""
     s = 0.0
     for i in range(m):
-        ei = e[i]
-        ae = abs(ei)
-        sgn = 1.0 if ei > 0.0 else (-1.0 if ei < 0.0 else 0.0)
-        s += (k1[i] + k2[i] / (1.0 + np.exp(mu[i] * ei * ei))) * ae ** alpha[i] * sgn
-    return delta * np.tanh(s / delta)
+        s += inlsef_term(e[i], k1[i], k2[i], mu[i], alpha[i])
+    return inlsef_limit(s, delta)
+
+
+@njit(**JIT_OPTIONS)
+def linear_sef(weighted_errors: float, r_rho: float, b0: float) -> float:
+    r"""Linear full-state feedback for the chain (14),
+    :math:`v = \big(\sum_{i=1}^m k_i e_i + r^{(\rho)}\big)/b_0`, given the weighted sum
+    :math:`\sum k_i e_i` (gains from :func:`linear_sef_gains`) and the feed-forward
+    :math:`r^{(\rho)}`."""
+    return (weighted_errors + r_rho) / b0
+
+
+@njit(**JIT_OPTIONS)
+def linear_sef_gain(rho: int, i: int, omega_c: float) -> float:
+    r"""Gain :math:`k_i = \binom{\rho}{i-1}\omega_c^{\rho-i+1}` (i = 1..ρ) of the linear SEF:
+    the coefficient of :math:`s^{i-1}` in :math:`(s+\omega_c)^\rho`
+    (:func:`aiofl.fastmath.binomial_power`)."""
+    return binomial_power(rho, i - 1, omega_c)
 
 
 def linear_sef_gains(rho: int, omega_c: float) -> NDArray[np.float64]:
     r"""Gains :math:`k_i = \binom{\rho}{i-1}\omega_c^{\rho-i+1}`, i = 1..ρ, so that
-    :math:`s^\rho + k_\rho s^{\rho-1} + \dots + k_1 = (s+\omega_c)^\rho`."""
-    return np.array([comb(rho, i - 1) * omega_c ** (rho - i + 1) for i in range(1, rho + 1)])
+    :math:`s^\rho + k_\rho s^{\rho-1} + \dots + k_1 = (s+\omega_c)^\rho`
+    (:func:`linear_sef_gain` for each i)."""
+    return np.array([linear_sef_gain(rho, i, float(omega_c)) for i in range(1, rho + 1)])

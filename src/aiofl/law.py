@@ -22,10 +22,12 @@ from __future__ import annotations
 
 from numba import njit
 
+from aiofl.fastmath import JIT_OPTIONS
+
 __all__ = ["aiofl_law", "iofl_law", "saturate"]
 
 
-@njit(cache=True)
+@njit(**JIT_OPTIONS)
 def saturate(u: float, u_max: float) -> float:
     """Clip ``u`` to ``[-u_max, u_max]`` (``u_max = inf`` disables it)."""
     if u > u_max:
@@ -35,13 +37,13 @@ def saturate(u: float, u_max: float) -> float:
     return u
 
 
-@njit(cache=True)
+@njit(**JIT_OPTIONS)
 def aiofl_law(v: float, xi_hat_ext: float, b0: float) -> float:
     r"""Active linearizing law, eq. (14): :math:`u = v - \hat\xi_{\rho+1}/b_0`."""
     return v - xi_hat_ext / b0
 
 
-@njit(cache=True)
+@njit(**JIT_OPTIONS)
 def iofl_law(v: float, alpha: float, beta: float) -> float:
     r"""Classical IOFL law (Section III): :math:`u = (-\alpha(x) + v)/\beta(x)`."""
     return (-alpha + v) / beta

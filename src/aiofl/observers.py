@@ -29,19 +29,29 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
+from aiofl.fastmath import JIT_OPTIONS, abspow, sign
+
 __all__ = [
     "binomial_alphas",
     "eso_error_matrix",
+    "eso_gain",
     "eso_gains",
     "eso_rhs",
+    "eso_update",
     "inleso_injection",
 ]
+
+
+@njit(**JIT_OPTIONS)
+def eso_gain(alpha_i: float, omega0: float, i: int) -> float:
+    r"""Observer gain :math:`\beta_i = \alpha_i\,\omega_0^i` (text after eq. 16)."""
+    return alpha_i * omega0**i
 
 
 def eso_gains(omega0: float, alphas: ArrayLike) -> NDArray[np.float64]:
     r"""Observer gains :math:`\beta_i = \alpha_i\,\omega_0^i`, i = 1..ρ+1 (text after eq. 16)."""
     a = np.asarray(alphas, dtype=np.float64)
-    return a * float(omega0) ** np.arange(1, a.size + 1)
+    return np.array([eso_gain(float(a[i]), float(omega0), i + 1) for i in range(a.size)])
 
 
 def binomial_alphas(rho: int) -> NDArray[np.float64]:
@@ -69,18 +79,55 @@ def eso_error_matrix(betas: ArrayLike) -> NDArray[np.float64]:
     return a
 
 
-@njit(cache=True)
+@njit(**JIT_OPTIONS)
 def inleso_injection(e: float, k_alpha: float, k_beta: float, a: float, b: float) -> float:
     r"""Nonlinear error injection of the INLESO, eq. (19).
 
     .. math:: g(e) = k_\alpha |e|^\alpha \operatorname{sign}(e) + k_\beta |e|^\beta e
+
+    Both powers share one :math:`\log|e|`; the second term is skipped when
+    :math:`k_\beta = 0`.
     """
     ae = abs(e)
-    s = 1.0 if e > 0.0 else (-1.0 if e < 0.0 else 0.0)
-    return k_alpha * ae**a * s + k_beta * ae**b * e
+    la = np.log(ae)
+    g = k_alpha * abspow(ae, a, la) * sign(e)
+    if k_beta != 0.0:
+        g += k_beta * abspow(ae, b, la) * e
+    return g
 
 
-@njit(cache=True)
+@njit(inline="always", **JIT_OPTIONS)  # inlined where called: no array arguments
+def eso_update(
+    xi_hat: NDArray[np.float64],
+    d_xi_hat: NDArray[np.float64],
+    o: int,
+    rho: int,
+    betas: NDArray[np.float64],
+    ob: int,
+    b0: float,
+    u: float,
+    phi: float,
+) -> None:
+    r"""The ESO of eqs. (5)/(16)/(19) given the injected error :math:`\phi` =
+    :math:`\phi(y - \hat\xi_1)`:
+
+    .. math::
+        \dot{\hat\xi}_i = \hat\xi_{i+1} + \beta_i\phi\ (i<\rho),\quad
+        \dot{\hat\xi}_\rho = \hat\xi_{\rho+1} + \beta_\rho\phi + b_0 u,\quad
+        \dot{\hat\xi}_{\rho+1} = \beta_{\rho+1}\phi .
+
+    :math:`\hat\xi_i` is ``xi_hat[o + i - 1]``, its derivative goes to
+    ``d_xi_hat[o + i - 1]`` and :math:`\beta_i` is ``betas[ob + i - 1]`` (offsets, so the
+    engine passes its state vector without slicing it).  :math:`\phi = e` for the LESO,
+    :func:`inleso_injection` for the INLESO.
+    """
+    for i in range(rho):
+        d_xi_hat[o + i] = xi_hat[o + i + 1] + betas[ob + i] * phi
+    d_xi_hat[o + rho - 1] += b0 * u
+    d_xi_hat[o + rho] = betas[ob + rho] * phi
+
+
+@njit(**JIT_OPTIONS)
 def eso_rhs(
     xi_hat: NDArray[np.float64],
     d_xi_hat: NDArray[np.float64],
@@ -98,12 +145,10 @@ def eso_rhs(
     r"""Right-hand side of the ESO of order ρ+1, eqs. (5), (16) and (19).
 
     Writes :math:`\dot{\hat\xi}` into ``d_xi_hat[:rho+1]``.  ``improved`` selects the
-    INLESO injection :math:`g(e)` of eq. (19) instead of the linear :math:`e`.
+    INLESO injection :math:`g(e)` of eq. (19) instead of the linear :math:`e`
+    (:func:`inleso_injection`, then :func:`eso_update`).
     """
     e = y - xi_hat[0]
     if improved:
         e = inleso_injection(e, k_alpha, k_beta, a, b)
-    for i in range(rho):
-        d_xi_hat[i] = xi_hat[i + 1] + betas[i] * e
-    d_xi_hat[rho - 1] += b0 * u
-    d_xi_hat[rho] = betas[rho] * e
+    eso_update(xi_hat, d_xi_hat, 0, rho, betas, 0, b0, u, e)
