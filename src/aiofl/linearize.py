@@ -38,7 +38,6 @@ Defaults and non-smooth elements (how each is handled)
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -47,7 +46,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl.controller import Controller
-from aiofl.observers import eso_error_matrix, eso_gains
+from aiofl.differentiators import han_td_rhs, improved_td_rhs, linear_prefilter_rhs
+from aiofl.feedback import fal, inlsef_limit, inlsef_term, linear_sef_gains
+from aiofl.observers import eso_error_matrix, eso_gains, inleso_injection
 from aiofl.plant import Plant
 from aiofl.scenario import Reference, Scenario
 
@@ -67,30 +68,6 @@ DEFAULT_AMPLITUDE = 1e-3
 
 SWEEP_AMPLITUDES = (1e-4, 1e-3, 1e-2, 1e-1)
 """Amplitudes for ``verdicts_by_amplitude`` when the verdict may depend on ε."""
-
-
-# ---------------------------------------------------------------- scalar functions
-def _sign(e: float) -> float:
-    return 1.0 if e > 0.0 else (-1.0 if e < 0.0 else 0.0)
-
-
-def _fal(e: float, alpha: float, delta: float) -> float:
-    """fal, eq. (17), continuous form (same as :func:`aiofl.feedback.fal`)."""
-    ae = abs(e)
-    if ae <= delta:
-        return e / delta ** (1.0 - alpha)
-    return ae**alpha * _sign(e)
-
-
-def _inj(e: float, ka: float, kb: float, a: float, b: float) -> float:
-    """INLESO injection g(e), eq. (19)."""
-    ae = abs(e)
-    return ka * ae**a * _sign(e) + kb * ae**b * e
-
-
-def _isef_term(e: float, k1: float, k2: float, mu: float, alpha: float) -> float:
-    """One INLSEF term of eq. (20) before the tanh."""
-    return (k1 + k2 / (1.0 + math.exp(mu * e * e))) * abs(e) ** alpha * _sign(e)
 
 
 def reference_operating_value(ref: Reference) -> float:
@@ -160,7 +137,7 @@ class ClosedLoop:
         self.betas = eso_gains(c.value("eso.omega0"), alphas)
         wc = c.value("sef.omega_c")
         if c.sef == "linear" or c.law == "iofl":
-            self.lin_k = np.array([math.comb(c.rho, i) * wc ** (c.rho - i) for i in range(c.rho)])
+            self.lin_k = linear_sef_gains(c.rho, wc)
         else:
             self.lin_k = np.array([c.value(f"sef.k{i}") for i in range(1, c.rho + 1)])
         n = plant.n_states
@@ -185,7 +162,7 @@ class ClosedLoop:
             ka, kb, ga, gb = (
                 c.value(k) for k in ("eso.k_alpha", "eso.k_beta", "eso.g_alpha", "eso.g_beta")
             )
-            self.k_inj = _inj(eps, ka, kb, ga, gb) / eps
+            self.k_inj = inleso_injection(eps, ka, kb, ga, gb) / eps
             self.nonsmooth.append(
                 f"INLESO g(e) (19): secant gain {self.k_inj:.6g} at ε = {eps:g} "
                 f"(exponent {ga:g}{' < 1: infinite slope at 0' if ga < 1 else ''})"
@@ -194,7 +171,7 @@ class ClosedLoop:
             self.k_sef = np.array(
                 [
                     c.value(f"sef.k{i}")
-                    * _fal(eps, c.value(f"sef.alpha{i}"), c.value(f"sef.delta{i}"))
+                    * fal(eps, c.value(f"sef.alpha{i}"), c.value(f"sef.delta{i}"))
                     / eps
                     for i in range(1, self.m + 1)
                 ]
@@ -207,7 +184,7 @@ class ClosedLoop:
         elif c.law == "aiofl" and c.sef == "improved":
             self.k_sef = np.array(
                 [
-                    _isef_term(
+                    inlsef_term(
                         eps,
                         c.value(f"sef.k{i}"),
                         c.value(f"sef.kb{i}"),
@@ -243,11 +220,11 @@ class ClosedLoop:
         if c.sef == "nonlinear":
             return sum(
                 c.value(f"sef.k{i + 1}")
-                * _fal(e[i], c.value(f"sef.alpha{i + 1}"), c.value(f"sef.delta{i + 1}"))
+                * fal(e[i], c.value(f"sef.alpha{i + 1}"), c.value(f"sef.delta{i + 1}"))
                 for i in range(m)
             )
         s = sum(
-            _isef_term(
+            inlsef_term(
                 e[i],
                 c.value(f"sef.k{i + 1}"),
                 c.value(f"sef.kb{i + 1}"),
@@ -257,7 +234,7 @@ class ClosedLoop:
             for i in range(m)
         )
         dl = c.value("sef.v_limit")
-        return dl * math.tanh(s / dl)
+        return inlsef_limit(s, dl)
 
     def _injection(self, e: float) -> float:
         c = self.controller
@@ -265,7 +242,7 @@ class ClosedLoop:
             return e
         if self.mode == "linearise":
             return self.k_inj * e
-        return _inj(
+        return inleso_injection(
             e,
             c.value("eso.k_alpha"),
             c.value("eso.k_beta"),
@@ -315,27 +292,17 @@ class ClosedLoop:
             rff = rdv[rho]
         elif c.td == "han":
             if self.n_td:
-                big_r = c.value("td.R")
-                s = td[0] - r + td[1] * abs(td[1]) / (2.0 * big_r)
-                dz[self.o_td] = td[1]
-                dz[self.o_td + 1] = -big_r * _sign(s)
+                dz[self.o_td], dz[self.o_td + 1] = han_td_rhs(td[0], td[1], r, c.value("td.R"))
                 prof[:2] = td[:2]
             else:
                 prof[0] = r
         elif c.td == "improved":
             a, b, cc, rr = (c.value(k) for k in ("td.a", "td.b", "td.c", "td.rho"))
-            dz[self.o_td] = td[1]
-            dz[self.o_td + 1] = -rr * rr * math.tanh((b * td[0] - (1.0 - a) * r) / cc) - rr * td[1]
+            dz[self.o_td], dz[self.o_td + 1] = improved_td_rhs(td[0], td[1], r, a, b, cc, rr)
             prof[:2] = td[:2]
         else:
-            w = c.value("td.omega")
-            for i in range(rho - 1):
-                dz[self.o_td + i] = td[i + 1]
-            acc = w**rho * (r - td[0])
-            for i in range(1, rho):
-                acc -= math.comb(rho, i) * w ** (rho - i) * td[i]
-            dz[self.o_td + rho - 1] = acc
-            rff = acc
+            d_td = dz[self.o_td : self.o_td + rho]  # a view: the prefilter writes into dz
+            rff = linear_prefilter_rhs(td[:rho], d_td, rho, r, c.value("td.omega"))
             prof[:] = td[:rho]
         p_true = self.p_true
         y = float(np.asarray(self.plant.h(x, p_true), dtype=np.float64).reshape(()))
