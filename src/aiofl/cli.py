@@ -44,12 +44,14 @@ app = typer.Typer(
 EXIT_BAD_INPUT = 2
 
 
-def _input_errors() -> tuple[type[BaseException], ...]:
+def _input_errors(run: bool) -> tuple[type[BaseException], ...]:
     import tomllib
 
     from aiofl.config import ConfigError
     from aiofl.plant import PlantError
 
+    if run:
+        return (ConfigError, OSError)
     return (ConfigError, PlantError, ValueError, OSError, tomllib.TOMLDecodeError)
 
 
@@ -62,11 +64,17 @@ def _check_out(out: Path) -> None:
 
 
 @contextmanager
-def bad_input_exits() -> Iterator[None]:
-    """Turn bad-input exceptions into one message on stderr and exit status 2."""
+def bad_input_exits(*, run: bool = False) -> Iterator[None]:
+    """Turn bad-input exceptions into one message on stderr and exit status 2.
+
+    Wrap the validation of a command's input with it.  Around the work itself use
+    ``run=True``: then only a :class:`~aiofl.config.ConfigError` (e.g. a checkpoint from
+    another run) or an ``OSError`` (an unwritable ``--out``) is bad input; any other
+    exception is a bug and propagates with its traceback.
+    """
     try:
         yield
-    except _input_errors() as exc:
+    except _input_errors(run) as exc:
         msg = str(exc).strip() or type(exc).__name__
         typer.echo(f"aiofl: error: {msg}", err=True)
         raise typer.Exit(EXIT_BAD_INPUT) from None
@@ -196,26 +204,26 @@ def simulate_command(
             if method not in ("rk4", "euler"):
                 raise ConfigError(f"--method = {method!r}; allowed: rk4, euler")
             cfg = replace(cfg, method=method)
-        with atomic_output_dir(out) as stage:
-            with console.status(f"simulating {cfg.name} (first run compiles the kernel)"):
-                result = cfg.simulate(store=True)
-            record = simulation_record(cfg, result, config)
-            atomic_write_text(stage / "metrics.json", json.dumps(record, indent=2) + "\n")
-            atomic_write_text(
-                stage / "trajectory.csv", _csv_text(result, _trajectory_columns(result, cfg))
-            )
-            from aiofl.figures import figure_png, result_figure, scenario_events
+    with bad_input_exits(run=True), atomic_output_dir(out) as stage:
+        with console.status(f"simulating {cfg.name} (first run compiles the kernel)"):
+            result = cfg.simulate(store=True)
+        record = simulation_record(cfg, result, config)
+        atomic_write_text(stage / "metrics.json", json.dumps(record, indent=2) + "\n")
+        atomic_write_text(
+            stage / "trajectory.csv", _csv_text(result, _trajectory_columns(result, cfg))
+        )
+        from aiofl.figures import figure_png, result_figure, scenario_events
 
-            title = f"{cfg.name}: output vs reference and control signal"
-            fig = result_figure(
-                result,
-                title,
-                cfg.scenario.t_final,
-                cfg.controller.structure,
-                cfg.scenario.reference.evaluate,
-                scenario_events(cfg.scenario),
-            )
-            atomic_write_bytes(stage / "figure.png", figure_png(fig))
+        title = f"{cfg.name}: output vs reference and control signal"
+        fig = result_figure(
+            result,
+            title,
+            cfg.scenario.t_final,
+            cfg.controller.structure,
+            cfg.scenario.reference.evaluate,
+            scenario_events(cfg.scenario),
+        )
+        atomic_write_bytes(stage / "figure.png", figure_png(fig))
     _print_records([record], title=f"aiofl simulate {config}")
     typer.echo(f"wrote {out}/metrics.json, trajectory.csv, figure.png")
 
@@ -274,7 +282,7 @@ def reproduce_command(
     )
     with bad_input_exits():
         _check_out(out)
-    with bad_input_exits(), progress:
+    with bad_input_exits(run=True), progress:
         task = progress.add_task("starting", total=None)
         last: list[str] = []
 

@@ -754,6 +754,7 @@ def tune_command(
         prepare(config, None, seed=seed, generations=generations, population=population)
         if resume and not (out / CHECKPOINT).is_file():
             typer.echo(f"aiofl: no checkpoint in {out}; starting from scratch", err=True)
+    with bad_input_exits(run=True):
         try:
             result = tune(
                 config,
