@@ -177,3 +177,18 @@ def test_an_extra_preset_becomes_an_extra_row_everywhere(monkeypatch) -> None:
     assert "| INLESO (retuned) | retuned-s1-inleso |" in md
     assert any("retuned-s1-inleso" in f for f in findings(rep))
     assert len(scenario_figure(rep, 1).axes) == 2 * len(rep.scenario_runs(1)) == 2 * 3
+
+
+def test_report_groups_numerically_split_repeated_roots() -> None:
+    import numpy as np
+
+    from aiofl.observers import binomial_alphas, eso_gains
+    from aiofl.report import _roots_text
+
+    # a 5-fold observer pole at -44.7 comes back from np.roots split by ~1e-3 relative
+    split = np.roots(np.r_[1.0, eso_gains(44.7, binomial_alphas(4))]).astype(complex)
+    assert np.ptp(split.real) > 0  # really split, so the grouping is what is tested
+    assert _roots_text(split) == "-44.7 (×5)"
+    # distinct roots stay distinct, conjugate pairs print once with ±
+    assert _roots_text(np.array([-1 + 2j, -1 - 2j, -1 + 2j, -1 - 2j, -3])) == "-1 ± 2j (×2), -3"
+    assert _roots_text(np.array([0.5 + 3j, 0.5 - 3j, -2.0])) == "0.5 ± 3j, -2"

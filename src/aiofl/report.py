@@ -60,11 +60,35 @@ def _root(z: complex) -> str:
     return f"{z.real:.4g} {'+' if z.imag >= 0 else '−'} {abs(z.imag):.4g}j"
 
 
+def _cluster_roots(roots: np.ndarray, rtol: float = 1e-2) -> list[tuple[complex, int]]:
+    """Group numerically split repeated roots: (mean, multiplicity), largest real part first.
+
+    A root of multiplicity k computed by ``np.roots`` is split by about ε^(1/k) relative
+    (e.g. -44.72 ± 0.049j for a 5-fold root at -44.7); roots within ``rtol`` of a group's
+    first member, relative to its magnitude, are one group.
+    """
+    groups: list[list[complex]] = []
+    for z in sorted(roots, key=lambda z: (-z.real, -z.imag)):
+        for g in groups:
+            if abs(z - g[0]) <= rtol * max(abs(g[0]), 1e-300):
+                g.append(z)
+                break
+        else:
+            groups.append([z])
+    return [(complex(np.mean(g)), len(g)) for g in groups]
+
+
 def _roots_text(roots: np.ndarray) -> str:
-    shown = [z for z in roots if z.imag >= -1e-12 or abs(z.imag) < 1e-9]  # one per pair
     parts = []
-    for z in sorted(shown, key=lambda z: -z.real):
-        parts.append(_root(z) if abs(z.imag) < 1e-9 else _root(z).replace(" + ", " ± "))
+    for z, k in _cluster_roots(roots):
+        if z.imag < -1e-9 * max(1.0, abs(z.real)):
+            continue  # the conjugate of a pair already shown
+        text = (
+            _root(z)
+            if abs(z.imag) < 1e-9 * max(1.0, abs(z.real))
+            else _root(z).replace(" + ", " ± ")
+        )
+        parts.append(text + (f" (×{k})" if k > 1 else ""))
     return ", ".join(parts)
 
 
