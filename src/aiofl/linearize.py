@@ -607,8 +607,14 @@ def _depends_on_amplitude(controller: Controller) -> bool:
     return False
 
 
-def closed_loop_verdict(run_config: Any, amplitude: float = DEFAULT_AMPLITUDE) -> dict[str, Any]:
+def closed_loop_verdict(
+    run_config: Any, amplitude: float = DEFAULT_AMPLITUDE, linearization: Any = None
+) -> dict[str, Any]:
     """Stability verdict of a run config's linearised closed loop.
+
+    ``run_config`` is a :class:`~aiofl.config.RunConfig` or a config path / preset name;
+    ``linearization`` reuses a :func:`linearize_closed_loop` result at ``amplitude``
+    (the default operating point) instead of computing it again.
 
     Returns
     -------
@@ -618,13 +624,13 @@ def closed_loop_verdict(run_config: Any, amplitude: float = DEFAULT_AMPLITUDE) -
         "notes"}`` and, when the secant gains depend on ε, ``"verdicts_by_amplitude"``
         (ε -> verdict over :data:`SWEEP_AMPLITUDES`).
     """
-    lin = linearize_closed_loop(run_config, amplitude=amplitude)
-    out = lin.to_dict()
     cfg = run_config
     if isinstance(cfg, str) or hasattr(cfg, "__fspath__"):
         from aiofl.config import load_config
 
         cfg = load_config(cfg)
+    lin = linearization or linearize_closed_loop(cfg, amplitude=amplitude)
+    out = lin.to_dict()
     if _depends_on_amplitude(cfg.controller):
         sweep = {}
         for eps in SWEEP_AMPLITUDES:

@@ -106,7 +106,11 @@ def analyze_command(
             cfg = load_config(target)
             lin = linearize_closed_loop(cfg, amplitude=amplitude, r_op=r_op)
             # the default operating point also gets the verdict per error amplitude
-            info = closed_loop_verdict(cfg, amplitude=amplitude) if r_op is None else lin.to_dict()
+            info = (
+                closed_loop_verdict(cfg, amplitude=amplitude, linearization=lin)
+                if r_op is None
+                else lin.to_dict()
+            )
             if as_json:
                 typer.echo(json.dumps(info, indent=2))
             else:
