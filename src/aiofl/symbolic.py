@@ -464,14 +464,7 @@ class SymbolicPlant:
     @classmethod
     def from_toml(cls, path: str | Path) -> SymbolicPlant:
         """Read a plant from a TOML file (format of :meth:`from_dict`)."""
-        p = Path(path)
-        if not p.is_file():
-            raise SymbolicPlantError(f"plant file {str(p)!r} does not exist")
-        try:
-            data = tomllib.loads(p.read_text(encoding="utf-8"))
-        except tomllib.TOMLDecodeError as exc:
-            raise SymbolicPlantError(f"malformed TOML in {p}: {exc}") from None
-        return cls.from_dict(data, str(p))
+        return cls.from_dict(_read_toml(path), str(path))
 
     # ----------------------------------------------------------------- helpers
     @property
@@ -1040,6 +1033,17 @@ def format_analysis_latex(a: Analysis) -> str:
 
 
 # ---------------------------------------------------------------------- loading
+def _read_toml(path: str | Path) -> dict[str, Any]:
+    """The TOML table of a plant file; a missing or malformed file is a SymbolicPlantError."""
+    p = Path(path)
+    if not p.is_file():
+        raise SymbolicPlantError(f"plant file {str(p)!r} does not exist")
+    try:
+        return tomllib.loads(p.read_text(encoding="utf-8"))
+    except tomllib.TOMLDecodeError as exc:
+        raise SymbolicPlantError(f"malformed TOML in {p}: {exc}") from None
+
+
 def load_symbolic_plant(target: str | Path) -> SymbolicPlant:
     """A symbolic plant by built-in name (``"slfjm"``, ...) or from a TOML file.
 
@@ -1052,12 +1056,7 @@ def load_symbolic_plant(target: str | Path) -> SymbolicPlant:
         return symbolic_model(text)
     path = Path(text)
     if path.suffix == ".toml" or path.exists():
-        if not path.is_file():
-            raise SymbolicPlantError(f"plant file {text!r} does not exist")
-        try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
-        except tomllib.TOMLDecodeError as exc:
-            raise SymbolicPlantError(f"malformed TOML in {path}: {exc}") from None
+        data = _read_toml(path)
         if "f" not in data and isinstance(data.get("plant"), str):
             return load_symbolic_plant(data["plant"])
         return SymbolicPlant.from_dict(data, str(path))
