@@ -3,7 +3,7 @@
 Run ``python benchmarks/bench_engine.py`` (or ``make bench``).  Prints one table per part:
 
 (a) the same closed loop through scipy's ``solve_ivp`` (RK45, the plain-Python right-hand
-    side of :mod:`aiofl.reference_ode`) and through the engine (RK4, dt = 1e-4): seconds
+    side of :mod:`aiofl.engine.reference`) and through the engine (RK4, dt = 1e-4): seconds
     of wall time per simulated second, and the ratio.  scipy runs a short horizon only
     (``--scipy-horizon``, default 0.5 s); the per-simulated-second figure extrapolates it.
 (b) one 20-s simulation at dt = 1e-4 after warm-up, for the paper presets (best of
@@ -62,9 +62,9 @@ def smooth_ladrc() -> object:
 
 def part_a(horizon: float, repeat: int) -> None:
     from aiofl.config import load_config
-    from aiofl.engine import simulate
-    from aiofl.plants import get_plant
-    from aiofl.reference_ode import reference_simulate
+    from aiofl.engine.reference import reference_simulate
+    from aiofl.engine.simulation import simulate
+    from aiofl.plants.builtin import get_plant
     from aiofl.scenario import Scenario
 
     plant = get_plant("slfjm")
@@ -131,7 +131,7 @@ def part_c(repeat: int, size: int) -> None:
 
     from aiofl.config import load_config
     from aiofl.controller import controller_batch
-    from aiofl.engine import simulate_batch
+    from aiofl.engine.simulation import simulate_batch
 
     rows = []
     max_threads = numba.config.NUMBA_NUM_THREADS
@@ -172,7 +172,7 @@ _COLD = textwrap.dedent(
     import time
     t0 = time.perf_counter()
     from aiofl.config import load_config
-    from aiofl import engine
+    from aiofl.engine import simulation as engine
     rc = load_config("paper-s1-leso")
     t1 = time.perf_counter()
     import dataclasses

@@ -26,7 +26,7 @@ from pathlib import Path
 
 def _aiofl() -> list[str]:
     exe = Path(sys.executable).with_name("aiofl")
-    return [str(exe)] if exe.exists() else [sys.executable, "-m", "aiofl.cli"]
+    return [str(exe)] if exe.exists() else [sys.executable, "-m", "aiofl"]
 
 
 def run_once(env_changes: dict[str, str]) -> tuple[float, int, str]:

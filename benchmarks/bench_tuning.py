@@ -33,8 +33,8 @@ from typing import Any
 import numpy as np
 
 from aiofl.config import load_config, parse_config
-from aiofl.tuning import prepare, tune
-from aiofl.tuning_eval import DaskEvaluator, evaluate_chunk
+from aiofl.tuning.evaluate import DaskEvaluator, evaluate_chunk
+from aiofl.tuning.search import prepare, tune
 
 TUNE = {
     "LESO": {

@@ -23,7 +23,7 @@ def reproduced(tmp_path_factory: pytest.TempPathFactory) -> ReproduceRun:
     """Run ``aiofl reproduce --out DIR`` once (in-process, through the typer app)."""
     from typer.testing import CliRunner
 
-    from aiofl.cli import app
+    from aiofl.cli.app import app
 
     out = tmp_path_factory.mktemp("reproduce") / "results"
     res = CliRunner().invoke(app, ["reproduce", "--out", str(out)])

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from aiofl.cli import app
+from aiofl.cli.app import app
 from aiofl.config import list_presets, load_config, parse_config, preset_text
 
 runner = CliRunner()
@@ -27,7 +27,7 @@ def _leftovers(parent: Path, name: str) -> list[Path]:
 # --------------------------------------------------------------------------- basics
 def test_importing_the_cli_does_not_import_heavy_modules() -> None:
     code = (
-        "import sys, aiofl.cli; "
+        "import sys, aiofl.cli.app; "
         "print([m for m in ('numba', 'matplotlib', 'scipy', 'pymoo', 'dask', 'sympy') "
         "if m in sys.modules])"
     )
@@ -124,7 +124,7 @@ def test_out_that_is_a_file_exits_2(tmp_path: Path, command: list[str]) -> None:
 def test_bad_input_in_a_fresh_process_has_no_traceback(tmp_path: Path) -> None:
     cfg = tmp_path / "bad.toml"
     cfg.write_text("[controller.eso]\nomega0 = -1\n")
-    cmd = [sys.executable, "-c", "from aiofl.cli import main; main()", "simulate", str(cfg)]
+    cmd = [sys.executable, "-c", "from aiofl.cli.app import main; main()", "simulate", str(cfg)]
     out = subprocess.run(
         [*cmd, "--out", str(tmp_path / "o")],
         capture_output=True,

@@ -15,26 +15,26 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from aiofl.controller import Controller
-from aiofl.differentiators import (
+from aiofl.components.differentiators import (
     han_td_rhs,
     improved_td_rhs,
     itd_steady_state,
     linear_prefilter_coefficients,
     linear_prefilter_rhs,
 )
-from aiofl.engine import simulate
-from aiofl.fastmath import abspow, fast_tanh
-from aiofl.feedback import fal, improved_sef, linear_sef_gains, nonlinear_sef
-from aiofl.law import aiofl_law, iofl_law, saturate
-from aiofl.observers import (
+from aiofl.components.fastmath import abspow, fast_tanh
+from aiofl.components.feedback import fal, improved_sef, linear_sef_gains, nonlinear_sef
+from aiofl.components.law import aiofl_law, iofl_law, saturate
+from aiofl.components.observers import (
     binomial_alphas,
     eso_error_matrix,
     eso_gains,
     eso_rhs,
     inleso_injection,
 )
-from aiofl.plants import get_plant
+from aiofl.controller import Controller
+from aiofl.engine.simulation import simulate
+from aiofl.plants.builtin import get_plant
 from aiofl.scenario import Reference, Scenario
 
 rhos = st.integers(min_value=1, max_value=8)
@@ -355,7 +355,7 @@ def test_itd_settles_at_one_minus_a_r_over_b(a, b):
 
 # ------------------------------------------------------------------ shared fast math
 def test_fast_tanh_and_power_agree_with_libm():
-    """The cheaper tanh and |x|^a of the components and the engine (aiofl.fastmath) agree
+    """The cheaper tanh and |x|^a of the components and the engine (aiofl.components.fastmath) agree
     with numpy to 2 ulp / 1e-14."""
     rng = np.random.default_rng(0)
     xs = np.concatenate(

@@ -14,13 +14,13 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from aiofl import engine
 from aiofl.config import load_config
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine import closed_loop_rhs, simulate, simulate_batch
-from aiofl.plant import Plant, PlantError
-from aiofl.plants import get_plant
-from aiofl.reference_ode import closed_loop, reference_simulate, setup_loop
+from aiofl.engine import simulation as engine
+from aiofl.engine.reference import closed_loop, reference_simulate, setup_loop
+from aiofl.engine.simulation import closed_loop_rhs, simulate, simulate_batch
+from aiofl.plants.base import Plant, PlantError
+from aiofl.plants.builtin import get_plant
 from aiofl.scenario import Reference, Scenario, noise_sequence
 
 BETA_SLFJM = 1.61 * 0.00767 * 70.0 / (0.0059 * 0.0021 * 2.6)  # Ks Km Kg / (Jl Jh Rm)
@@ -108,7 +108,7 @@ _KINDS = [
 @given(kinds=st.sampled_from(_KINDS), seed=st.integers(0, 2**32 - 1))
 def test_compiled_rhs_equals_the_oracle_rhs(kinds, seed):
     """Every component combination: the engine's dz equals the plain-Python F(t, z) of
-    aiofl.reference_ode at a random state, to rounding."""
+    aiofl.engine.reference at a random state, to rounding."""
     eso, td, sef = kinds
     rng = np.random.default_rng(seed)
     m = int(rng.integers(1, 3)) if td in ("han", "improved") else int(rng.integers(1, 5))
@@ -180,7 +180,7 @@ def test_compiled_rhs_of_the_iofl_law_equals_the_oracle(slfjm):
 
 
 def test_engine_fal_is_continuous_at_delta(slfjm):
-    """The engine's fal (aiofl.feedback.fal_scaled with the precomputed δ^(α-1)) is
+    """The engine's fal (aiofl.components.feedback.fal_scaled with the precomputed δ^(α-1)) is
     continuous at |e1| = δ1: u on both sides of the kink differs by O(ε)."""
     rc = load_config("paper-s1-leso")
     delta1 = rc.controller.value("sef.delta1")
@@ -199,7 +199,7 @@ def test_engine_fal_is_continuous_at_delta(slfjm):
 def test_kernel_fingerprint_covers_the_component_modules(slfjm, monkeypatch):
     """The kernel runs the component functions, so editing a component module must change
     the on-disk cache fingerprint (a stale kernel would otherwise be loaded)."""
-    from aiofl import differentiators, fastmath, feedback, law, observers
+    from aiofl.components import differentiators, fastmath, feedback, law, observers
 
     before = engine._kernel_fingerprint(slfjm)
     real = engine._source_digest

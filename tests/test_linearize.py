@@ -9,18 +9,18 @@ import math
 import numpy as np
 import pytest
 
-from aiofl.config import load_config
-from aiofl.controller import Controller
-from aiofl.linearize import (
+from aiofl.analysis.linearize import (
     ClosedLoop,
     closed_loop_verdict,
     eso_statespace,
     linear_eso_statespace,
     linearize_closed_loop,
 )
-from aiofl.plants import get_plant
+from aiofl.config import load_config
+from aiofl.controller import Controller
+from aiofl.plants.builtin import get_plant
+from aiofl.plants.symbolic import SymbolicPlant
 from aiofl.scenario import Reference, Scenario
-from aiofl.symbolic import SymbolicPlant
 
 GAIN = 2.5
 
@@ -111,7 +111,7 @@ def test_iofl_poles_are_controller_observer_and_zero_dynamics_poles() -> None:
     expected = np.polymul(np.polymul(np.poly([-wc, -wc]), zd), np.poly([-w0] * 3))
     assert rel_poly_close(np.poly(lin.a), expected, rtol=1e-6)
     # the same zero-dynamics eigenvalues as the symbolic analysis
-    from aiofl.plant_library import symbolic_model
+    from aiofl.plants.library import symbolic_model
 
     zd_sym = symbolic_model("flexjoint_hub").analyze().zero_dynamics
     assert zd_sym is not None
@@ -179,7 +179,7 @@ def test_linear_eso_statespace() -> None:
 def test_cli_closed_loop() -> None:
     from typer.testing import CliRunner
 
-    from aiofl.cli import app
+    from aiofl.cli.app import app
 
     runner = CliRunner()
     res = runner.invoke(app, ["analyze", "paper-s3-leso", "--closed-loop", "--json"])
@@ -234,7 +234,7 @@ def test_python_closed_loop_matches_the_engine(preset: str, td: str | None) -> N
     """ClosedLoop(mode="exact") integrates to the engine's state (same equations)."""
     from dataclasses import replace
 
-    from aiofl.engine import simulate
+    from aiofl.engine.simulation import simulate
 
     cfg = load_config(preset)
     ctrl = cfg.controller
@@ -260,7 +260,7 @@ def test_python_closed_loop_matches_the_engine(preset: str, td: str | None) -> N
 def test_verdicts_agree_with_nonlinear_simulation() -> None:
     """From a small perturbation of the operating point (r ≡ 0): the loop linearised as
     stable (paper-s3-leso) returns, the one linearised as unstable (paper-s1-leso) departs."""
-    from aiofl.engine import simulate
+    from aiofl.engine.simulation import simulate
 
     for preset, x1, stable in (("paper-s3-leso", 1e-3, True), ("paper-s1-leso", 1e-6, False)):
         cfg = load_config(preset)

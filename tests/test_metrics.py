@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from aiofl import metrics as M
+from aiofl.components import metrics as M
+from aiofl.components.metrics import OPIWeights, opi
 from aiofl.controller import Controller
-from aiofl.engine import simulate, simulate_batch
-from aiofl.metrics import OPIWeights, opi
-from aiofl.plants import get_plant
+from aiofl.engine.simulation import simulate, simulate_batch
+from aiofl.plants.builtin import get_plant
 from aiofl.scenario import Reference, Scenario
 
 BETA_SLFJM = 1.61 * 0.00767 * 70.0 / (0.0059 * 0.0021 * 2.6)

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from aiofl.config import load_config
-from aiofl.plant_library import EXTRA_PLANTS, SPECS
-from aiofl.plants import available_plants, get_plant
+from aiofl.plants.builtin import available_plants, get_plant
+from aiofl.plants.library import EXTRA_PLANTS, SPECS
 
 PRESETS = {
     "tank": "tank-ladrc",
@@ -73,7 +73,7 @@ def test_aiofl_tracks_each_extra_plant_knowing_only_rho_and_b0(name: str) -> Non
     assert res.metrics["itae"] < 0.05 * trivial
     assert np.max(np.abs(y - r)[t > 10.0]) < 0.05 * ref.amplitude
     # the closed loop linearised at the operating point agrees: stable
-    from aiofl.linearize import closed_loop_verdict
+    from aiofl.analysis.linearize import closed_loop_verdict
 
     assert closed_loop_verdict(cfg)["verdict"] == "stable"
 
@@ -86,7 +86,7 @@ def test_internal_dynamics_stay_bounded_under_iofl_and_aiofl() -> None:
     from dataclasses import replace
 
     from aiofl.controller import Controller
-    from aiofl.engine import simulate
+    from aiofl.engine.simulation import simulate
 
     cfg = load_config("flexjoint-hub-ladrc")
     iofl = Controller.from_structure("IOFL", rho=2, n_feedback=2).with_values(

@@ -13,7 +13,7 @@ import re
 import pytest
 
 from aiofl.config import list_presets, load_config
-from aiofl.reproduce import EXTRA_PRESETS, PAPER_TABLES, discover_cases, trivial_itae
+from aiofl.reporting.reproduce import EXTRA_PRESETS, PAPER_TABLES, discover_cases, trivial_itae
 
 pytestmark = pytest.mark.slow
 
@@ -158,9 +158,9 @@ def test_extra_preset_patterns() -> None:
 
 
 def test_an_extra_preset_becomes_an_extra_row_everywhere(monkeypatch) -> None:
-    import aiofl.reproduce as rp
-    from aiofl.figures import scenario_figure
-    from aiofl.report import findings, tables_markdown
+    import aiofl.reporting.reproduce as rp
+    from aiofl.reporting.figures import scenario_figure
+    from aiofl.reporting.report import findings, tables_markdown
 
     real = rp.load_config
     # pretend a re-tuned preset is shipped: the printed INLESO set under another name
@@ -182,8 +182,8 @@ def test_an_extra_preset_becomes_an_extra_row_everywhere(monkeypatch) -> None:
 def test_report_groups_numerically_split_repeated_roots() -> None:
     import numpy as np
 
-    from aiofl.observers import binomial_alphas, eso_gains
-    from aiofl.report import _roots_text
+    from aiofl.components.observers import binomial_alphas, eso_gains
+    from aiofl.reporting.report import _roots_text
 
     # a 5-fold observer pole at -44.7 comes back from np.roots split by ~1e-3 relative
     split = np.roots(np.r_[1.0, eso_gains(44.7, binomial_alphas(4))]).astype(complex)

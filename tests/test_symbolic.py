@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from aiofl.plant_library import SPECS, symbolic_model
-from aiofl.plants import get_plant
-from aiofl.symbolic import (
+from aiofl.plants.builtin import get_plant
+from aiofl.plants.library import SPECS, symbolic_model
+from aiofl.plants.symbolic import (
     RelativeDegreeError,
     SymbolicPlant,
     SymbolicPlantError,
@@ -171,7 +171,7 @@ def test_flexjoint_hub_is_minimum_phase_with_the_damped_link_as_zero_dynamics() 
 @pytest.mark.parametrize("name", list(SPECS))
 def test_generated_functions_match_the_symbolic_model(name: str) -> None:
     """The ahead-of-time generated plant_library_generated functions (and, for slfjm and
-    pendulum, the hand-written ones in aiofl.plants) equal the symbolic model."""
+    pendulum, the hand-written ones in aiofl.plants.builtin) equal the symbolic model."""
     sym = symbolic_model(name)
     a = sym.analyze()
     plant = get_plant(name)
@@ -218,11 +218,12 @@ def test_generated_module_is_up_to_date() -> None:
     import ast
     from pathlib import Path
 
-    from aiofl import plant_library, plant_library_generated
+    from aiofl.plants import library as plant_library
+    from aiofl.plants import library_generated as plant_library_generated
 
     fresh = ast.dump(ast.parse(plant_library.generated_source()))
     shipped = ast.dump(ast.parse(Path(plant_library_generated.__file__).read_text("utf-8")))
-    assert fresh == shipped, "run `python -m aiofl.plant_library` to regenerate"
+    assert fresh == shipped, "run `python -m aiofl.plants.library` to regenerate"
 
 
 def test_integer_literals_become_floats() -> None:
@@ -242,8 +243,8 @@ def test_importing_aiofl_and_plants_does_not_import_sympy() -> None:
     import sys
 
     code = (
-        "import sys, aiofl, aiofl.plants, aiofl.config\n"
-        "aiofl.plants.get_plant('slfjm'); aiofl.config.load_config('iofl-s1')\n"
+        "import sys, aiofl, aiofl.plants.builtin, aiofl.config\n"
+        "aiofl.plants.builtin.get_plant('slfjm'); aiofl.config.load_config('iofl-s1')\n"
         "print('sympy' in sys.modules)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
@@ -372,7 +373,7 @@ def test_cli_analyze_text_json_latex_and_bad_input(tmp_path: object) -> None:
 
     from typer.testing import CliRunner
 
-    from aiofl.cli import app
+    from aiofl.cli.app import app
 
     runner = CliRunner()
     res = runner.invoke(app, ["analyze", "slfjm"])
@@ -433,7 +434,7 @@ def test_symbolic_toml_plant_compiles_into_the_engine(tmp_path: object) -> None:
     from pathlib import Path
 
     from aiofl.controller import Controller
-    from aiofl.engine import simulate
+    from aiofl.engine.simulation import simulate
     from aiofl.scenario import Reference, Scenario
 
     path = Path(str(tmp_path)) / "pend.toml"

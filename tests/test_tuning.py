@@ -12,11 +12,11 @@ import numpy as np
 import pytest
 
 from aiofl import layout as L
+from aiofl.analysis.exact_tracking import exact_tracking, exact_tracking_cost, exact_tracking_input
 from aiofl.config import ConfigError, load_config, parse_config
-from aiofl.tuning import prepare, tune, write_outputs
-from aiofl.tuning_eval import EvalSpec, LocalEvaluator, PopulationResult, evaluate_chunk
-from aiofl.tuning_flat import exact_tracking, exact_tracking_cost, exact_tracking_input
-from aiofl.tuning_space import (
+from aiofl.tuning.evaluate import EvalSpec, LocalEvaluator, PopulationResult, evaluate_chunk
+from aiofl.tuning.search import prepare, tune, write_outputs
+from aiofl.tuning.space import (
     SearchSpace,
     TuneSettings,
     objective_coefficients,
@@ -251,7 +251,7 @@ def test_saturation_bound_optimum_on_engine() -> None:
 @pytest.mark.slow
 def test_dask_path_equals_local_path() -> None:
     distributed = pytest.importorskip("distributed")
-    from aiofl.tuning_eval import DaskEvaluator
+    from aiofl.tuning.evaluate import DaskEvaluator
 
     cfg = fast_config(population=10, generations=2)
     prep = prepare(cfg)
@@ -324,7 +324,7 @@ def test_parameters_must_act_on_the_structure_and_stay_in_range() -> None:
 def test_cli_bad_config_exits_2_and_writes_nothing(edit: dict[str, Any], tmp_path: Path) -> None:
     from typer.testing import CliRunner
 
-    from aiofl.cli import app
+    from aiofl.cli.app import app
 
     data = {**FAST, "tune": {**FAST["tune"], **edit}}
     path = tmp_path / "bad.toml"
@@ -342,7 +342,7 @@ def test_cli_bad_config_exits_2_and_writes_nothing(edit: dict[str, Any], tmp_pat
 def test_cli_tune_writes_outputs_and_resumes(tmp_path: Path) -> None:
     from typer.testing import CliRunner
 
-    from aiofl.cli import app
+    from aiofl.cli.app import app
 
     path = tmp_path / "fast.toml"
     path.write_text(to_toml(FAST))
@@ -380,7 +380,7 @@ def test_opi_objective_matches_eq22_and_penalty_formula() -> None:
     st = TuneSettings.model_validate(FAST["tune"])
     c = objective_coefficients(st, cfg)
     m = np.array([[12.0, 1.0, 1.0, 3.0, 4.0], [1.0, 1.0, 1.0, 1.0, 1.0]])
-    from aiofl.metrics import opi
+    from aiofl.components.metrics import opi
 
     j = objective_values(m, np.array([False, True]), np.array([np.nan, 0.15]), c, 100.0, 0.6)
     assert j[0] == pytest.approx(opi(12.0, 3.0, 4.0, cfg.weights))
@@ -443,8 +443,8 @@ def test_exact_tracking_cancels_matched_disturbance_and_parameter_change() -> No
 
 
 def test_generic_normal_form_inverse_matches_closed_form() -> None:
-    from aiofl.plant import Plant
-    from aiofl.plants import get_plant
+    from aiofl.plants.base import Plant
+    from aiofl.plants.builtin import get_plant
     from aiofl.scenario import Reference
 
     pend = get_plant("pendulum")
@@ -494,7 +494,7 @@ def test_exact_tracking_cost_of_the_paper_scenarios() -> None:
 
 def test_retuned_presets_state_their_recipe_and_load() -> None:
     from aiofl.config import list_presets
-    from aiofl.tuning import describe_tuning
+    from aiofl.tuning.search import describe_tuning
 
     names = [n for n in list_presets() if n.startswith("retuned-")]
     assert len(names) == 9

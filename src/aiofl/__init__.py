@@ -18,15 +18,15 @@ __version__ = "0.1.0"
 _LAZY = {
     "Controller": "aiofl.controller",
     "controller_batch": "aiofl.controller",
-    "Plant": "aiofl.plant",
-    "PlantError": "aiofl.plant",
+    "Plant": "aiofl.plants",
+    "PlantError": "aiofl.plants",
     "get_plant": "aiofl.plants",
     "register_plant": "aiofl.plants",
     "Reference": "aiofl.scenario",
     "Scenario": "aiofl.scenario",
     "simulate": "aiofl.engine",
     "simulate_batch": "aiofl.engine",
-    "OPIWeights": "aiofl.metrics",
+    "OPIWeights": "aiofl.components.metrics",
     "load_config": "aiofl.config",
     "ConfigError": "aiofl.config",
 }

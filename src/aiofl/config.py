@@ -61,9 +61,9 @@ from typing import Annotated, Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from aiofl import layout as L
+from aiofl.components.metrics import OPIWeights
 from aiofl.controller import STRUCTURES, Controller
-from aiofl.metrics import OPIWeights
-from aiofl.plant import Plant, PlantError
+from aiofl.plants.base import Plant, PlantError
 from aiofl.scenario import Reference, Scenario
 
 __all__ = [
@@ -190,7 +190,7 @@ class ControllerModel(_Model):
         for key, val in eso.items():
             values[f"eso.{key}"] = val
         if alphas == "binomial":
-            from aiofl.observers import binomial_alphas
+            from aiofl.components.observers import binomial_alphas
 
             alphas = list(binomial_alphas(rho))
         if len(alphas) != rho + 1:
@@ -253,7 +253,7 @@ class ConfigModel(_Model):
     @field_validator("plant")
     @classmethod
     def _plant_name(cls, v: str) -> str:
-        from aiofl.plants import available_plants
+        from aiofl.plants.builtin import available_plants
 
         if v not in available_plants() and not v.endswith(".toml"):
             raise ValueError(
@@ -280,8 +280,8 @@ class RunConfig:
     raw: dict[str, Any]
 
     def simulate(self, *, store: bool = True) -> Any:
-        """Run this config once (see :func:`aiofl.engine.simulate`)."""
-        from aiofl.engine import simulate
+        """Run this config once (see :func:`aiofl.engine.simulation.simulate`)."""
+        from aiofl.engine.simulation import simulate
 
         return simulate(
             self.plant,
@@ -330,9 +330,9 @@ def resolve_plant(name_or_file: str, base_dir: str | Path | None = None) -> Plan
 
     A relative file path is taken relative to ``base_dir`` (the config's folder).  A file
     plant is built once per process (per path and modification time), so its kernel
-    compiles once.  See :meth:`aiofl.symbolic.SymbolicPlant.from_dict` for the format.
+    compiles once.  See :meth:`aiofl.plants.symbolic.SymbolicPlant.from_dict` for the format.
     """
-    from aiofl.plants import get_plant
+    from aiofl.plants.builtin import get_plant
 
     if not name_or_file.endswith(".toml"):
         return get_plant(name_or_file)
@@ -343,7 +343,7 @@ def resolve_plant(name_or_file: str, base_dir: str | Path | None = None) -> Plan
         raise ConfigError(f"plant: file {str(path)!r} does not exist")
     key = (str(path.resolve()), path.stat().st_mtime_ns)
     if key not in _FILE_PLANTS:
-        from aiofl.symbolic import SymbolicPlant, SymbolicPlantError
+        from aiofl.plants.symbolic import SymbolicPlant, SymbolicPlantError
 
         try:
             _FILE_PLANTS[key] = SymbolicPlant.from_toml(path).to_plant()

@@ -17,7 +17,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
-from aiofl.observers import binomial_alphas
+from aiofl.components.observers import binomial_alphas
 
 __all__ = ["STRUCTURES", "Controller", "ControllerBatch", "controller_batch"]
 

@@ -39,11 +39,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from aiofl.components.differentiators import itd_steady_state
+from aiofl.components.metrics import itae
+from aiofl.components.observers import eso_gains
 from aiofl.config import RunConfig, list_presets, load_config
-from aiofl.differentiators import itd_steady_state
-from aiofl.engine import SimulationResult, simulate_batch
-from aiofl.metrics import itae
-from aiofl.observers import eso_gains
+from aiofl.engine.simulation import SimulationResult, simulate_batch
 from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 
 __all__ = [
@@ -384,10 +384,10 @@ def output_ratio(run: CaseRun, window: float = 5.0) -> float | None:
 def closed_loop_verdict(cfg: RunConfig) -> dict[str, Any]:
     """Closed-loop linearisation verdict of a case.
 
-    Uses :func:`aiofl.linearize.closed_loop_verdict` (``{"verdict": str, "eigenvalues":
+    Uses :func:`aiofl.analysis.linearize.closed_loop_verdict` (``{"verdict": str, "eigenvalues":
     [[re, im], ...]}``).  A failure of the analysis is reported in the verdict, not raised.
     """
-    from aiofl.linearize import closed_loop_verdict as verdict
+    from aiofl.analysis.linearize import closed_loop_verdict as verdict
 
     try:
         return dict(verdict(cfg))
@@ -493,8 +493,8 @@ def reproduce(
     -------
     Reproduction
     """
-    from aiofl.figures import figure_png, scenario_figure
-    from aiofl.report import html_report, tables_markdown
+    from aiofl.reporting.figures import figure_png, scenario_figure
+    from aiofl.reporting.report import html_report, tables_markdown
 
     stage = on_stage or (lambda _msg: None)
     rep = compute(available=available, on_stage=stage)

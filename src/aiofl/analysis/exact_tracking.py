@@ -40,8 +40,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from aiofl import metrics
-from aiofl.plant import Plant
+from aiofl.components import metrics
+from aiofl.plants.base import Plant
 from aiofl.scenario import Reference, Scenario
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -118,7 +118,7 @@ def slfjm_inverse(
     derivs
         Shape (5, T): :math:`y, \\dot y, \\ddot y, y^{(3)}, y^{(4)}`.
     p
-        Parameter vector in :data:`aiofl.plants.SLFJM_PARAMS` order.
+        Parameter vector in :data:`aiofl.plants.builtin.SLFJM_PARAMS` order.
     d
         Load torque :math:`\\tau_d` [N·m] at each time point (scalar or (T,)).
 

@@ -11,9 +11,9 @@ Commands
 ``aiofl reproduce --out DIR``
     The paper's Tables I–III and Figures 3–5, and a self-contained HTML report.
 ``aiofl tune CONFIG --out DIR``
-    GA tuning from the config's ``[tune]`` table (:mod:`aiofl.tuning`).
+    GA tuning from the config's ``[tune]`` table (:mod:`aiofl.tuning.search`).
 ``aiofl analyze PLANT|CONFIG [--closed-loop]``
-    Symbolic plant analysis or closed-loop linearisation (:mod:`aiofl.symbolic_cli`).
+    Symbolic plant analysis or closed-loop linearisation (:mod:`aiofl.cli.analyze`).
 
 Bad input (a malformed or invalid config, an unknown preset, a missing file) prints one
 clear message to stderr and exits with status 2; nothing is written to ``DIR``.  Heavy
@@ -48,7 +48,7 @@ def _input_errors(run: bool) -> tuple[type[BaseException], ...]:
     import tomllib
 
     from aiofl.config import ConfigError
-    from aiofl.plant import PlantError
+    from aiofl.plants.base import PlantError
 
     if run:
         return (ConfigError, OSError)
@@ -154,7 +154,7 @@ def simulation_record(cfg: Any, result: Any, source_name: str) -> dict[str, Any]
     ``source`` is ``"config"``.
     """
     from aiofl.config import list_presets
-    from aiofl.reproduce import computed_record, scenario_number
+    from aiofl.reporting.reproduce import computed_record, scenario_number
 
     number = scenario_number(source_name) if source_name in list_presets() else None
     rec = computed_record(
@@ -212,7 +212,7 @@ def simulate_command(
         atomic_write_text(
             stage / "trajectory.csv", _csv_text(result, _trajectory_columns(result, cfg))
         )
-        from aiofl.figures import figure_png, result_figure, scenario_events
+        from aiofl.reporting.figures import figure_png, result_figure, scenario_events
 
         title = f"{cfg.name}: output vs reference and control signal"
         fig = result_figure(
@@ -231,7 +231,7 @@ def simulate_command(
 # -------------------------------------------------------------------------- reproduce
 def _short(x: float | None) -> str:
     """4 significant digits, compact exponent (1.205e5), dash for None."""
-    from aiofl.report import fmt
+    from aiofl.reporting.report import fmt
 
     return fmt(x, 4).replace("e+0", "e").replace("e-0", "e-").replace("e+", "e")
 
@@ -270,7 +270,7 @@ def reproduce_command(
 
     from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
 
-    from aiofl.reproduce import reproduce
+    from aiofl.reporting.reproduce import reproduce
 
     t0 = time.perf_counter()
     progress = Progress(
@@ -320,5 +320,5 @@ def register_feature(name: str, target: str) -> None:
 
 
 # --- feature commands ---
-register_feature("tune", "aiofl.tuning:tune_command")
-register_feature("analyze", "aiofl.symbolic_cli:analyze_command")
+register_feature("tune", "aiofl.tuning.search:tune_command")
+register_feature("analyze", "aiofl.cli.analyze:analyze_command")

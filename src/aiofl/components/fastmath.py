@@ -1,9 +1,9 @@
 r"""Scalar building blocks shared by the controller components and the compiled engine.
 
 The paper's formulas are implemented once, as small compiled scalar functions in
-:mod:`aiofl.feedback`, :mod:`aiofl.observers`, :mod:`aiofl.differentiators` and
-:mod:`aiofl.law`; the engine's time loop calls exactly those functions.  This module holds
-what they share:
+:mod:`aiofl.components.feedback`, :mod:`aiofl.components.observers`,
+:mod:`aiofl.components.differentiators` and :mod:`aiofl.components.law`; the engine's time loop
+calls exactly those functions.  This module holds what they share:
 
 * :data:`FASTMATH` and :data:`JIT_OPTIONS`, the numba options every one of them (and the
   engine's time loop) is compiled with: LLVM fast-math without ``nnan``/``ninf`` (NaN and

@@ -2,7 +2,7 @@
 
 The unit of work is :func:`evaluate_chunk`: given an :class:`EvalSpec` (small, picklable:
 the config as a plain dict, the tuned parameter names, horizon and integrator) and a
-(B, d) array of parameter values, it runs **one** :func:`aiofl.engine.simulate_batch`
+(B, d) array of parameter values, it runs **one** :func:`aiofl.engine.simulation.simulate_batch`
 call and returns the metrics of the B members.  The spec carries the plant by *name*:
 a worker rebuilds the plant, controller and scenario from the dict on first use and
 keeps them (so the plant's kernel is compiled once per worker process), never receiving
@@ -104,7 +104,7 @@ def _build(spec: EvalSpec) -> Any:
 def evaluate_chunk(spec: EvalSpec, values: NDArray[np.float64]) -> PopulationResult:
     """Simulate the members with parameter ``values`` (B, d) in one batched engine call."""
     from aiofl.controller import controller_batch
-    from aiofl.engine import simulate_batch
+    from aiofl.engine.simulation import simulate_batch
 
     values = np.asarray(values, dtype=np.float64)
     if values.shape[0] == 0:

@@ -19,7 +19,7 @@ written in sympy (in Python, or as strings in a TOML file, see
   (eq. 3), the zero dynamics :math:`\dot\eta = f_0(\eta, 0)` and a numerical check of
   their stability at an equilibrium (linearised eigenvalues; minimum phase or not).
 
-A :class:`SymbolicPlant` compiles to the same fast :class:`aiofl.plant.Plant` the engine
+A :class:`SymbolicPlant` compiles to the same fast :class:`aiofl.plants.base.Plant` the engine
 runs (:meth:`SymbolicPlant.to_plant`): sympy generates plain Python source for
 ``f, g, h, bd`` and ``normal_form(x, p) -> (ξ_1..ξ_ρ, α, β)`` returning tuples of floats,
 which numba compiles into the closed-loop kernel like any hand-written plant.
@@ -503,7 +503,7 @@ class SymbolicPlant:
         """Python source of ``f, g, h, bd, normal_form`` (``def <prefix><name>(x, p)``).
 
         Each returns a tuple of floats (``h`` one float); integer constants are written as
-        floats so numba sees homogeneous tuples (:meth:`aiofl.plant.Plant.check`).
+        floats so numba sees homogeneous tuples (:meth:`aiofl.plants.base.Plant.check`).
         ``normal_form`` returns :math:`(\\xi_1..\\xi_\\rho, \\alpha, \\beta)` with common
         subexpressions shared.
         """
@@ -529,17 +529,17 @@ class SymbolicPlant:
             ns: dict[str, Any] = {"math": math}
             srcs = self.function_sources()
             for src in srcs.values():  # source generated from parsed sympy expressions only
-                exec(compile(src, f"<aiofl.symbolic {self.name}>", "exec"), ns)
+                exec(compile(src, f"<aiofl.plants.symbolic {self.name}>", "exec"), ns)
             self._cache["functions"] = {k: ns[k] for k in srcs}
         return dict(self._cache["functions"])
 
     def to_plant(self, name: str | None = None) -> Any:
-        """Compile to an engine :class:`aiofl.plant.Plant` (with ``normal_form`` for IOFL).
+        """Compile to an engine :class:`aiofl.plants.base.Plant` (with ``normal_form`` for IOFL).
 
         The generated functions are plain Python over ``math``, so the engine's numba kernel
         compiles them exactly as it compiles hand-written plants.
         """
-        from aiofl.plant import Plant
+        from aiofl.plants.base import Plant
 
         fns = self.compile_functions()
         return Plant(
@@ -1049,7 +1049,7 @@ def load_symbolic_plant(target: str | Path) -> SymbolicPlant:
 
     A run config (a TOML with ``plant = "<name>"``) resolves to its plant.
     """
-    from aiofl.plant_library import symbolic_model, symbolic_plant_names
+    from aiofl.plants.library import symbolic_model, symbolic_plant_names
 
     text = str(target)
     if text in symbolic_plant_names():
@@ -1060,12 +1060,13 @@ def load_symbolic_plant(target: str | Path) -> SymbolicPlant:
         if "f" not in data and isinstance(data.get("plant"), str):
             return load_symbolic_plant(data["plant"])
         return SymbolicPlant.from_dict(data, str(path))
-    from aiofl.plants import available_plants
+    from aiofl.plants.builtin import available_plants
 
     if text in available_plants():
         raise SymbolicPlantError(
             f"plant {text!r} is registered from Python functions and has no symbolic model; "
-            "write it as a symbolic-plant TOML file (see aiofl.symbolic.SymbolicPlant.from_dict)"
+            "write it as a symbolic-plant TOML file "
+            "(see aiofl.plants.symbolic.SymbolicPlant.from_dict)"
         )
     raise SymbolicPlantError(
         f"unknown plant {text!r}: not a built-in symbolic plant "

@@ -6,7 +6,7 @@
   stability verdict (Section III).  ``--latex`` prints LaTeX, ``--json`` JSON.
 * ``aiofl analyze CONFIG.toml|PRESET --closed-loop``: eigenvalues of the closed loop
   linearised at its operating point, slowest / fastest modes and a verdict
-  (:mod:`aiofl.linearize`); ``--json`` prints ``{"verdict": ..., "eigenvalues": [[re, im],
+  (:mod:`aiofl.analysis.linearize`); ``--json`` prints ``{"verdict": ..., "eigenvalues": [[re, im],
   ...], ...}``.
 
 sympy, numpy and the engine are imported inside the command, so registering it keeps
@@ -23,7 +23,7 @@ __all__ = ["analysis_to_dict", "analyze_command"]
 
 
 def analysis_to_dict(a: Any) -> dict[str, Any]:
-    """JSON-ready form of an :class:`aiofl.symbolic.Analysis`."""
+    """JSON-ready form of an :class:`aiofl.plants.symbolic.Analysis`."""
     import sympy as sp
 
     zd = a.zero_dynamics
@@ -87,7 +87,7 @@ def analyze_command(
 
     from rich.console import Console
 
-    from aiofl.cli import bad_input_exits
+    from aiofl.cli.app import bad_input_exits
 
     console = Console(highlight=False, markup=False, soft_wrap=True)
     with bad_input_exits():
@@ -96,12 +96,12 @@ def analyze_command(
         if closed_loop:
             if latex:
                 raise ValueError("--latex applies to the plant analysis, not to --closed-loop")
-            from aiofl.config import load_config
-            from aiofl.linearize import (
+            from aiofl.analysis.linearize import (
                 closed_loop_verdict,
                 format_linearization_text,
                 linearize_closed_loop,
             )
+            from aiofl.config import load_config
 
             cfg = load_config(target)
             lin = linearize_closed_loop(cfg, amplitude=amplitude, r_op=r_op)
@@ -118,7 +118,7 @@ def analyze_command(
             return
         if r_op is not None:
             raise ValueError("--r-op applies only with --closed-loop")
-        from aiofl.symbolic import (
+        from aiofl.plants.symbolic import (
             format_analysis_latex,
             format_analysis_text,
             load_symbolic_plant,

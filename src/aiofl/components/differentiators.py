@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from aiofl.fastmath import JIT_OPTIONS, binomial_power, fast_tanh
+from aiofl.components.fastmath import JIT_OPTIONS, binomial_power, fast_tanh
 
 __all__ = [
     "han_td_rhs",
@@ -101,7 +101,7 @@ def itd_steady_state(r: float, a: float, b: float) -> float:
 @njit(**JIT_OPTIONS)
 def linear_prefilter_coefficient(rho: int, i: int, omega: float) -> float:
     r"""Coefficient :math:`c_i = \binom{\rho}{i-1}\omega^{\rho-i+1}` (i = 1..ρ) of
-    :math:`(s+\omega)^\rho` (:func:`aiofl.fastmath.binomial_power`)."""
+    :math:`(s+\omega)^\rho` (:func:`aiofl.components.fastmath.binomial_power`)."""
     return binomial_power(rho, i - 1, omega)
 
 

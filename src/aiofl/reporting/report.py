@@ -1,8 +1,8 @@
 """Tables (Markdown) and the self-contained HTML report of ``aiofl reproduce``.
 
 Every number and every finding on these pages is generated from the computed
-:class:`aiofl.reproduce.Reproduction` (and the paper's values in
-:data:`aiofl.reproduce.PAPER_TABLES`); nothing here states a result that was not computed
+:class:`aiofl.reporting.reproduce.Reproduction` (and the paper's values in
+:data:`aiofl.reporting.reproduce.PAPER_TABLES`); nothing here states a result that was not computed
 in the same run.  Extra cases (re-tuned presets, the IOFL baseline) appear as extra rows.
 """
 
@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from aiofl.metrics import opi
-from aiofl.reproduce import (
+from aiofl.components.metrics import opi
+from aiofl.reporting.reproduce import (
     PAPER_TABLES,
     SCENARIOS,
     CaseRun,
@@ -150,8 +150,8 @@ def table_rows(rep: Reproduction, scenario: int) -> list[list[str]]:
             fmt(opi(triv, 0.0, 0.0, w)),
         ]
     )
-    # the least ISU any controller needs to keep y = r (helper C, aiofl.tuning_flat)
-    from aiofl.tuning_flat import exact_tracking_cost
+    # the least ISU any controller needs to keep y = r (helper C, aiofl.analysis.exact_tracking)
+    from aiofl.analysis.exact_tracking import exact_tracking_cost
 
     ex = exact_tracking_cost(rep.scenario_runs(scenario)[0].case.config)
     rows.append(
@@ -206,7 +206,7 @@ def scenario_notes(rep: Reproduction, scenario: int) -> list[str]:
     notes.append(msg)
     # how the re-tuned rows were tuned (budget, seed, objective), from their [tune] tables;
     # rows tuned with the same recipe share one note
-    from aiofl.tuning import describe_tuning
+    from aiofl.tuning.search import describe_tuning
 
     recipes: dict[str, list[str]] = {}
     for run in rep.scenario_runs(scenario):
@@ -467,7 +467,7 @@ def findings(rep: Reproduction) -> list[str]:
                 + "."
             )
 
-    # closed-loop analysis (aiofl.linearize), grouped by verdict
+    # closed-loop analysis (aiofl.analysis.linearize), grouped by verdict
     by_verdict: dict[str, list[str]] = {}
     for preset, v in rep.verdicts.items():
         mr = _max_real(v)
@@ -475,7 +475,7 @@ def findings(rep: Reproduction) -> list[str]:
         by_verdict.setdefault(str(v.get("verdict", DASH)), []).append(preset + tail)
     if by_verdict:  # empty only when there are no cases
         out.append(
-            "Closed loop linearised about its operating point (aiofl.linearize): "
+            "Closed loop linearised about its operating point (aiofl.analysis.linearize): "
             + "; ".join(f"{k}: {', '.join(v)}" for k, v in by_verdict.items())
             + "."
         )

@@ -2,8 +2,8 @@ r"""Tuning controllers with a genetic algorithm (pymoo) on the paper's OPI, loca
 
 The paper tuned each controller with a GA on its objective performance index (22) over
 :math:`t_f = 6` s.  :func:`tune` does the same for any config: the ``[tune]`` table
-(:mod:`aiofl.tuning_space`) names the parameters, their bounds and the objective; each
-generation is evaluated by **one** batched engine call (:mod:`aiofl.tuning_eval`), or in
+(:mod:`aiofl.tuning.space`) names the parameters, their bounds and the objective; each
+generation is evaluated by **one** batched engine call (:mod:`aiofl.tuning.evaluate`), or in
 chunks on a dask.distributed cluster, with identical numbers either way.
 
 Determinism and resuming
@@ -46,13 +46,13 @@ import typer
 from numpy.typing import NDArray
 
 from aiofl import layout as L
-from aiofl.tuning_flat import (
+from aiofl.analysis.exact_tracking import (
     ExactTracking,
     exact_tracking,
     exact_tracking_cost,
     exact_tracking_input,
 )
-from aiofl.tuning_space import (
+from aiofl.tuning.space import (
     SearchSpace,
     TuneSettings,
     config_with_values,
@@ -65,7 +65,7 @@ from aiofl.tuning_space import (
 
 if TYPE_CHECKING:  # pragma: no cover
     from aiofl.config import RunConfig
-    from aiofl.tuning_eval import EvalSpec, PopulationResult
+    from aiofl.tuning.evaluate import EvalSpec, PopulationResult
 
 __all__ = [
     "ExactTracking",
@@ -242,7 +242,7 @@ def prepare(
     ``seed=3``) replace settings fields.  Raises :class:`aiofl.config.ConfigError`.
     """
     from aiofl.config import load_config
-    from aiofl.tuning_eval import EvalSpec
+    from aiofl.tuning.evaluate import EvalSpec
 
     source = ""
     if isinstance(run_config, (str, Path)):
@@ -379,7 +379,7 @@ def _generation_row(
 
 
 def _make_evaluator(scheduler: Any, n_workers: int | None, chunks: int | None) -> Any:
-    from aiofl.tuning_eval import DaskEvaluator, LocalEvaluator
+    from aiofl.tuning.evaluate import DaskEvaluator, LocalEvaluator
 
     if scheduler is None and not n_workers:
         return LocalEvaluator()
@@ -423,7 +423,7 @@ def tune(
         Start a local Dask cluster with this many worker processes instead.
     evaluator
         A ready evaluator (``callable(spec, values) -> PopulationResult``), e.g. a
-        :class:`~aiofl.tuning_eval.DaskEvaluator`; overrides ``scheduler``/``n_workers``.
+        :class:`~aiofl.tuning.evaluate.DaskEvaluator`; overrides ``scheduler``/``n_workers``.
     **overrides
         Settings fields to replace (``seed``, ``generations``, ``population`` ...).
 
@@ -744,7 +744,7 @@ def tune_command(
     convergence.png and summary.json; OUT/checkpoint.npz is updated after every
     generation so `--resume` continues a killed run with the same final result.
     """
-    from aiofl.cli import bad_input_exits
+    from aiofl.cli.app import bad_input_exits
 
     with bad_input_exits():
         if scheduler is not None and dask_workers is not None:

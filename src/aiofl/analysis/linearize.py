@@ -1,10 +1,10 @@
 r"""Linearisation of the whole closed loop (plant + TD + ESO + SEF + law) and its stability.
 
-The closed loop of :mod:`aiofl.engine` is an ODE :math:`\dot z = F(z; r, \tau_d, n)`.  This
-module writes the same equations in Python (:class:`ClosedLoop`, checked against the
-engine in the tests), finds the operating point :math:`z^*` with the reference held at a
-constant :math:`r^*` and the disturbance at its final value, and linearises by central
-finite differences,
+The closed loop of :mod:`aiofl.engine.simulation` is an ODE
+:math:`\dot z = F(z; r, \tau_d, n)`.  This module writes the same equations in Python
+(:class:`ClosedLoop`, checked against the engine in the tests), finds the operating point
+:math:`z^*` with the reference held at a constant :math:`r^*` and the disturbance at its final
+value, and linearises by central finite differences,
 
 .. math:: A = \frac{\partial F}{\partial z}(z^*),\qquad
           \dot{\delta z} = A\,\delta z + B\,(\delta r, \delta\tau_d, \delta n),\quad
@@ -45,11 +45,11 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from aiofl.components.differentiators import han_td_rhs, improved_td_rhs, linear_prefilter_rhs
+from aiofl.components.feedback import fal, inlsef_limit, inlsef_term, linear_sef_gains
+from aiofl.components.observers import eso_error_matrix, eso_gains, inleso_injection
 from aiofl.controller import Controller
-from aiofl.differentiators import han_td_rhs, improved_td_rhs, linear_prefilter_rhs
-from aiofl.feedback import fal, inlsef_limit, inlsef_term, linear_sef_gains
-from aiofl.observers import eso_error_matrix, eso_gains, inleso_injection
-from aiofl.plant import Plant
+from aiofl.plants.base import Plant
 from aiofl.scenario import Reference, Scenario
 
 __all__ = [
@@ -83,7 +83,7 @@ def reference_operating_value(ref: Reference) -> float:
 class ClosedLoop:
     r"""Python right-hand side :math:`F(z; r, \tau_d, n)` of one closed loop.
 
-    The same equations as the engine's kernel (:mod:`aiofl.engine`): TD (18)/(21)/linear,
+    The same equations as the engine's kernel (:mod:`aiofl.engine.simulation`): TD (18)/(21)/linear,
     ESO (5)/(16)/(19), SEF (17)/(20)/linear, law (14) or classical IOFL.
 
     Parameters

@@ -23,8 +23,8 @@ from numpy.typing import NDArray
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from aiofl.engine import SimulationResult
-    from aiofl.reproduce import Reproduction
+    from aiofl.engine.simulation import SimulationResult
+    from aiofl.reporting.reproduce import Reproduction
     from aiofl.scenario import Scenario
 
 __all__ = [
@@ -186,11 +186,11 @@ def scenario_figure(rep: Reproduction, scenario: int) -> Figure:
     Parameters
     ----------
     rep
-        The reproduction (see :func:`aiofl.reproduce.compute`).
+        The reproduction (see :func:`aiofl.reporting.reproduce.compute`).
     scenario
         1, 2 or 3.
     """
-    from aiofl.reproduce import SCENARIOS
+    from aiofl.reporting.reproduce import SCENARIOS
 
     info = SCENARIOS[scenario]
     runs = rep.scenario_runs(scenario)

@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from aiofl.fastmath import JIT_OPTIONS, abspow, binomial_power, fast_tanh, sign
+from aiofl.components.fastmath import JIT_OPTIONS, abspow, binomial_power, fast_tanh, sign
 
 __all__ = [
     "fal",
@@ -157,7 +157,7 @@ def linear_sef(weighted_errors: float, r_rho: float, b0: float) -> float:
 def linear_sef_gain(rho: int, i: int, omega_c: float) -> float:
     r"""Gain :math:`k_i = \binom{\rho}{i-1}\omega_c^{\rho-i+1}` (i = 1..ρ) of the linear SEF:
     the coefficient of :math:`s^{i-1}` in :math:`(s+\omega_c)^\rho`
-    (:func:`aiofl.fastmath.binomial_power`)."""
+    (:func:`aiofl.components.fastmath.binomial_power`)."""
     return binomial_power(rho, i - 1, omega_c)
 
 

@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from aiofl.fastmath import JIT_OPTIONS, abspow, sign
+from aiofl.components.fastmath import JIT_OPTIONS, abspow, sign
 
 __all__ = [
     "binomial_alphas",

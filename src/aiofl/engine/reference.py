@@ -1,10 +1,10 @@
 r"""A slow, independent reference path for the closed loop: scipy ``solve_ivp`` on plain Python.
 
-This module is an *oracle* for the compiled engine (:mod:`aiofl.engine`).  It writes the
+This module is an *oracle* for the compiled engine (:mod:`aiofl.engine.simulation`).  It writes the
 same closed loop straight from the paper's equations, in plain Python and numpy, and
 integrates it with an adaptive scipy solver (``RK45`` by default).  It shares no code with
-the engine's compiled kernel: the plant is evaluated through :meth:`aiofl.plant.Plant.rhs`
-and :meth:`aiofl.plant.Plant.output` (the user's Python functions), and every controller
+the engine's compiled kernel: the plant is evaluated through :meth:`aiofl.plants.base.Plant.rhs`
+and :meth:`aiofl.plants.base.Plant.output` (the user's Python functions), and every controller
 component is written out again below.  Only the data containers (:class:`Controller`,
 :class:`Scenario`) and the noise generator :func:`aiofl.scenario.noise_sequence` (which
 *defines* the noise) are shared.
@@ -51,7 +51,7 @@ from numpy.typing import NDArray
 from scipy.integrate import solve_ivp
 
 from aiofl.controller import Controller
-from aiofl.plant import Plant
+from aiofl.plants.base import Plant
 from aiofl.scenario import Scenario, noise_sequence
 
 __all__ = ["LoopSetup", "ReferenceResult", "closed_loop", "reference_simulate", "setup_loop"]

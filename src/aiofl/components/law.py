@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from numba import njit
 
-from aiofl.fastmath import JIT_OPTIONS
+from aiofl.components.fastmath import JIT_OPTIONS
 
 __all__ = ["aiofl_law", "iofl_law", "saturate"]
 

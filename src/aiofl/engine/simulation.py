@@ -24,20 +24,21 @@ change and a step reference) are held over each step at their value at its start
 integrator never straddles a jump inside a step: a switch on the time grid is exact, one
 between grid points acts from the next step (see :data:`SWITCH_RTOL`).
 
-The controller's formulas are not written here: the right-hand side calls the public
-scalar component functions of :mod:`aiofl.differentiators` (TDs, prefilter),
-:mod:`aiofl.feedback` (fal, NLSEF, INLSEF, linear SEF), :mod:`aiofl.observers` (INLESO
-injection, ESO) and :mod:`aiofl.law` (AIOFL and IOFL laws, saturation), bound into the
-kernel as compiled functions; per-member constants (observer gains, fal slopes, prefilter
-coefficients, ITD constants) come from the same modules' scalar functions.
+The controller's formulas are not written here: the right-hand side calls the public scalar
+component functions of :mod:`aiofl.components.differentiators` (TDs, prefilter),
+:mod:`aiofl.components.feedback` (fal, NLSEF, INLSEF, linear SEF),
+:mod:`aiofl.components.observers` (INLESO injection, ESO) and :mod:`aiofl.components.law` (AIOFL
+and IOFL laws, saturation), bound into the kernel as compiled functions; per-member constants
+(observer gains, fal slopes, prefilter coefficients, ITD constants) come from the same modules'
+scalar functions.
 
 Speed notes.  The time loop touches only thread-local memory reached through *unmanaged*
 array views (no reference counting, see :func:`_unmanaged_intrinsic`), evaluates r(t) once
-per distinct stage time, and passes scalars (or a whole array and an offset) to the
-component functions, never slices.  The components skip the power function for exponents
-0 and 1 and use cheaper forms of tanh and :math:`|e|^a` that agree with libm to a few ulp
-(:mod:`aiofl.fastmath`).  LLVM fast-math flags are on except ``nnan``/``ninf`` (divergence
-detection relies on IEEE NaN/inf).
+per distinct stage time, and passes scalars (or a whole array and an offset) to the component
+functions, never slices.  The components skip the power function for exponents 0 and 1 and use
+cheaper forms of tanh and :math:`|e|^a` that agree with libm to a few ulp
+(:mod:`aiofl.components.fastmath`).  LLVM fast-math flags are on except ``nnan``/``ninf``
+(divergence detection relies on IEEE NaN/inf).
 
 Compilation.  The kernel is built from the template functions below with the plant's
 compiled f, g, h, b_d bound as globals.  When every plant function comes from a source
@@ -66,9 +67,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
+from aiofl.components.metrics import OPIWeights, opi
 from aiofl.controller import Controller, ControllerBatch, controller_batch
-from aiofl.metrics import OPIWeights, opi
-from aiofl.plant import Plant
+from aiofl.plants.base import Plant
 from aiofl.scenario import Scenario, noise_sequence
 
 __all__ = ["BatchResult", "SimulationResult", "closed_loop_rhs", "simulate", "simulate_batch"]
@@ -559,17 +560,17 @@ def _kernel_fingerprint(plant: Plant) -> str | None:
 def _component_modules() -> tuple[Any, ...]:
     """The modules whose compiled functions the kernel calls (their sources are part of the
     kernel's cache fingerprint)."""
-    from aiofl import differentiators, fastmath, feedback, law, observers
+    from aiofl.components import differentiators, fastmath, feedback, law, observers
 
     return fastmath, feedback, observers, differentiators, law
 
 
 def _component_functions() -> dict[str, Any]:
     """The controller's component functions, by the global name the templates use."""
-    from aiofl import differentiators as td
-    from aiofl import feedback as fb
-    from aiofl import law
-    from aiofl import observers as ob
+    from aiofl.components import differentiators as td
+    from aiofl.components import feedback as fb
+    from aiofl.components import law
+    from aiofl.components import observers as ob
 
     return {
         "_HAN_TD": td.han_td_rhs,
@@ -633,7 +634,7 @@ def _build_kernel(plant: Plant, *, cache: bool | None = None) -> _Kernel:
     )
     plant_key = hashlib.sha256(ident.encode()).hexdigest()[:8]
     suffix = f"{plant_key}_{fingerprint}" if fingerprint else f"nocache{id(plant):x}"
-    from aiofl.fastmath import FASTMATH
+    from aiofl.components.fastmath import FASTMATH
 
     # the time loop is compiled with the components' fast-math flags and error model
     opts = {"fastmath": FASTMATH, "error_model": "numpy"}
@@ -1006,7 +1007,7 @@ def closed_loop_rhs(
 ) -> dict[str, Any]:
     """One evaluation of the engine's compiled right-hand side :math:`F(t, z)`.
 
-    For cross-checks against an independent implementation (:mod:`aiofl.reference_ode`):
+    For cross-checks against an independent implementation (:mod:`aiofl.engine.reference`):
     the same compiled code the time loop runs, at a chosen state.
 
     Parameters

@@ -1,0 +1,1 @@
+"""Reproduction of the paper: cases, tables, figures and the HTML report."""
