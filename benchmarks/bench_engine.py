@@ -64,7 +64,7 @@ def part_a(horizon: float, repeat: int) -> None:
     from aiofl.config import load_config
     from aiofl.engine.reference import reference_simulate
     from aiofl.engine.simulation import simulate
-    from aiofl.plants.builtin import get_plant
+    from aiofl.plants import get_plant
     from aiofl.scenario import Scenario
 
     plant = get_plant("slfjm")
@@ -172,13 +172,13 @@ _COLD = textwrap.dedent(
     import time
     t0 = time.perf_counter()
     from aiofl.config import load_config
-    from aiofl.engine import simulation as engine
+    from aiofl.engine import build, simulation
     rc = load_config("paper-s1-leso")
     t1 = time.perf_counter()
     import dataclasses
-    engine.simulate(rc.plant, rc.controller, dataclasses.replace(rc.scenario, t_final=0.01))
+    simulation.simulate(rc.plant, rc.controller, dataclasses.replace(rc.scenario, t_final=0.01))
     t2 = time.perf_counter()
-    print(f"{t1 - t0:.3f} {t2 - t1:.3f} {int(engine.kernel_for(rc.plant).cached)}")
+    print(f"{t1 - t0:.3f} {t2 - t1:.3f} {int(build.kernel_for(rc.plant).cached)}")
     """
 )
 

@@ -34,7 +34,7 @@ from aiofl.components.observers import (
 )
 from aiofl.controller import Controller
 from aiofl.engine.simulation import simulate
-from aiofl.plants.builtin import get_plant
+from aiofl.plants import get_plant
 from aiofl.scenario import Reference, Scenario
 
 rhos = st.integers(min_value=1, max_value=8)

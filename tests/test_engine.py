@@ -16,11 +16,11 @@ from hypothesis import strategies as st
 
 from aiofl.config import load_config
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine import simulation as engine
+from aiofl.engine import build as engine
 from aiofl.engine.reference import closed_loop, reference_simulate, setup_loop
 from aiofl.engine.simulation import closed_loop_rhs, simulate, simulate_batch
+from aiofl.plants import get_plant
 from aiofl.plants.base import Plant, PlantError
-from aiofl.plants.builtin import get_plant
 from aiofl.scenario import Reference, Scenario, noise_sequence
 
 BETA_SLFJM = 1.61 * 0.00767 * 70.0 / (0.0059 * 0.0021 * 2.6)  # Ks Km Kg / (Jl Jh Rm)

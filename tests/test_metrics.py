@@ -12,7 +12,7 @@ from aiofl.components import metrics as M
 from aiofl.components.metrics import OPIWeights, opi
 from aiofl.controller import Controller
 from aiofl.engine.simulation import simulate, simulate_batch
-from aiofl.plants.builtin import get_plant
+from aiofl.plants import get_plant
 from aiofl.scenario import Reference, Scenario
 
 BETA_SLFJM = 1.61 * 0.00767 * 70.0 / (0.0059 * 0.0021 * 2.6)

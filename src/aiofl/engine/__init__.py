@@ -1,6 +1,9 @@
 """The compiled batched engine: one numba kernel per plant runs a batch of closed loops.
 
-:func:`simulate` runs one member, :func:`simulate_batch` a batch in one compiled call;
+:func:`simulate` runs one member, :func:`simulate_batch` a batch in one compiled call
+(:mod:`aiofl.engine.simulation`).  :mod:`aiofl.engine.kernel` holds the kernel templates
+(the closed-loop right-hand side and the time loop), :mod:`aiofl.engine.build` compiles
+them for a plant, caches the result on disk and runs the members on threads.
 :mod:`aiofl.engine.reference` is the slow, deliberately independent scipy path the tests
 check the kernel against.
 """

@@ -1,0 +1,297 @@
+"""A plant's compiled kernel: building it from the templates, caching it, running its members.
+
+:func:`kernel_for` compiles the templates of :mod:`aiofl.engine.kernel` for one plant: their
+code is copied into a namespace (a copy of that module's globals) that binds the plant's
+compiled f, g, h, b_d and normal form, its sizes and the controller's component functions,
+and numba compiles the copy.  When every plant function comes from a source file (built-in
+plants, user plants defined in a module or script), the compiled kernel is cached on disk by
+numba under a name that carries a fingerprint of those files and of the sources of the kernel
+templates, of this module and of the component modules, so later processes load it instead
+of compiling (about 6 s).  Set ``AIOFL_NO_CACHE=1`` to disable the cache.  A plant whose
+functions are generated at run time (no source file) is compiled in every process.
+
+:func:`run_members` runs a batch on ``numba.get_num_threads()`` threads: the compiled member
+function releases the GIL and each thread claims the next unclaimed member, so a member that
+diverges early frees its core at once.  Members are independent, so a member's numbers do
+not depend on the batch it is in, the thread count or the scheduling (bitwise).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import itertools
+import os
+import sys
+import threading
+import types
+from dataclasses import dataclass
+from typing import Any
+
+from aiofl import layout as L
+from aiofl.engine import kernel
+from aiofl.plants.base import Plant
+
+__all__ = ["Kernel", "kernel_for", "run_members"]
+
+
+@dataclass(frozen=True)
+class Kernel:
+    """The compiled functions of one plant."""
+
+    member: Any  # integrates one member of a batch (releases the GIL)
+    evaluate: Any  # one F(t, z) evaluation (compiled lazily by closed_loop_rhs)
+    n_cols: int
+    cached: bool
+
+
+_KERNELS: dict[int, tuple[Plant, Kernel]] = {}
+_KERNELS_LOCK = threading.Lock()
+
+
+def _source_digest(path: str) -> str:
+    with open(path, "rb") as fh:
+        return hashlib.sha256(fh.read()).hexdigest()
+
+
+def _function_fingerprint(fn: Any) -> str | None:
+    """What identifies a plant function's code for the on-disk kernel cache, or None if it
+    cannot be identified (no source file, or a closure over non-scalar values)."""
+    fn = getattr(fn, "py_func", fn)
+    code = getattr(fn, "__code__", None)
+    if code is None:
+        return None
+    path = code.co_filename
+    if not os.path.isfile(path):
+        return None
+    extra: list[Any] = []
+    for cell in fn.__closure__ or ():
+        val = cell.cell_contents
+        if not isinstance(val, (int, float, str, bool, tuple)):
+            return None
+        extra.append(repr(val))
+    if fn.__defaults__:
+        extra.append(repr(fn.__defaults__))
+    return "|".join([path, fn.__qualname__, _source_digest(path), *extra])
+
+
+def _kernel_fingerprint(plant: Plant) -> str | None:
+    """A digest of everything the compiled kernel of ``plant`` depends on, or None if a
+    plant function cannot be fingerprinted (the kernel is then compiled every process)."""
+    parts = [sys.version, __import__("numba").__version__, str(plant.n_states)]
+    # the layout, the templates, how they are compiled (this module) and what they call
+    for mod in (L, kernel, sys.modules[__name__], *_component_modules()):
+        parts.append(_source_digest(mod.__file__))
+    for fname in ("f", "g", "h", "bd", "normal_form"):
+        fn = getattr(plant, fname)
+        if fn is None:
+            parts.append(f"{fname}=None")
+            continue
+        fp = _function_fingerprint(fn)
+        if fp is None:
+            return None
+        parts.append(f"{fname}={fp}")
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:20]
+
+
+def _component_modules() -> tuple[Any, ...]:
+    """The modules whose compiled functions the kernel calls (their sources are part of the
+    kernel's cache fingerprint)."""
+    from aiofl.components import differentiators, fastmath, feedback, law, observers
+
+    return fastmath, feedback, observers, differentiators, law
+
+
+def _component_functions() -> dict[str, Any]:
+    """The controller's component functions, by the global name the templates use."""
+    from aiofl.components import differentiators as td
+    from aiofl.components import feedback as fb
+    from aiofl.components import law
+    from aiofl.components import observers as ob
+
+    return {
+        "_HAN_TD": td.han_td_rhs,
+        "_ITD": td.improved_td_rhs_scaled,
+        "_ITD_CONSTANTS": td.improved_td_constants,
+        "_PREFILTER": td.linear_prefilter_update,
+        "_PREFILTER_COEF": td.linear_prefilter_coefficient,
+        "_FAL": fb.fal_scaled,
+        "_FAL_SLOPE": fb.fal_inner_slope,
+        "_INLSEF_TERM": fb.inlsef_term,
+        "_INLSEF_LIMIT": fb.inlsef_limit,
+        "_LINEAR_SEF": fb.linear_sef,
+        "_LINEAR_SEF_GAIN": fb.linear_sef_gain,
+        "_ESO_GAIN": ob.eso_gain,
+        "_ESO_UPDATE": ob.eso_update,
+        "_INLESO": ob.inleso_injection,
+        "_AIOFL_LAW": law.aiofl_law,
+        "_IOFL_LAW": law.iofl_law,
+        "_SATURATE": law.saturate,
+    }
+
+
+def _instantiate(tpl: Any, ns: dict[str, Any], suffix: str, **jit_options: Any) -> Any:
+    """Compile template ``tpl`` with the globals ``ns`` (which bind one plant's functions).
+
+    The qualified name carries the plant fingerprint so that numba's on-disk cache keeps
+    one entry per plant (its index is keyed by file and qualified name).
+    """
+    from numba import njit
+
+    fn = types.FunctionType(tpl.__code__, ns, tpl.__name__, tpl.__defaults__, None)
+    fn.__qualname__ = f"{tpl.__name__}_{suffix}"
+    fn.__doc__ = tpl.__doc__
+    return njit(**jit_options)(fn)
+
+
+def _build_kernel(plant: Plant, *, cache: bool | None = None) -> Kernel:
+    """Compile the closed-loop functions for one plant (see the module notes).
+
+    The templates read their globals from ``ns``: a copy of :mod:`aiofl.engine.kernel`'s
+    globals (layout constants, ``L``, ``np``) with the placeholders bound for this plant.
+    """
+
+    f, g, h, bd, nf = plant.compiled
+    fingerprint = _kernel_fingerprint(plant)
+    use_cache = _cache_enabled() if cache is None else cache
+    use_cache = use_cache and fingerprint is not None
+    n = plant.n_states
+    ns = dict(vars(kernel))
+    ns.update(
+        _N=n,
+        _N_P=len(plant.params),
+        _NZ=n + L.N_METRIC + 2 * L.RHO_MAX + 1,
+        _PF=f,
+        _PG=g,
+        _PH=h,
+        _PBD=bd,
+        _PNF=nf,
+        **_component_functions(),
+    )
+    # the plant's identity (stable across edits) + the fingerprint of its code
+    ident = "|".join(
+        [plant.name, str(n)]
+        + [getattr(getattr(plant, k), "__qualname__", "-") for k in ("f", "g", "h", "bd")]
+    )
+    plant_key = hashlib.sha256(ident.encode()).hexdigest()[:8]
+    suffix = f"{plant_key}_{fingerprint}" if fingerprint else f"nocache{id(plant):x}"
+    from aiofl.components.fastmath import FASTMATH
+
+    # the time loop is compiled with the components' fast-math flags and error model
+    opts = {"fastmath": FASTMATH, "error_model": "numpy"}
+    ns["_UNMANAGED"] = _unmanaged_intrinsic()
+    ns["_KEEP_ALIVE"] = _instantiate(kernel._tpl_keep_alive, ns, suffix)
+    ns["_SETUP"] = _instantiate(kernel._tpl_setup, ns, suffix, **opts)
+    ns["_REFERENCE"] = _instantiate(kernel._tpl_reference, ns, suffix, **opts)
+    # one call site in the stage loop: inlined, so the compiler sees the whole step
+    ns["_DERIV"] = _instantiate(kernel._tpl_deriv, ns, suffix, inline="always", **opts)
+    member = _instantiate(kernel._tpl_member, ns, suffix, nogil=True, cache=use_cache, **opts)
+    if use_cache:
+        _prune_stale_cache(member, plant_key, suffix)
+    evaluate = _instantiate(kernel._tpl_eval, ns, suffix, **opts)
+    n_cols = kernel.N_SIG + n + (L.RHO_MAX + 1) + L.RHO_MAX
+    return Kernel(member=member, evaluate=evaluate, n_cols=n_cols, cached=use_cache)
+
+
+def _unmanaged_intrinsic() -> Any:
+    """A numba intrinsic returning a view of an array without a memory-info pointer.
+
+    numba reference-counts arrays with atomic increments whenever an array is passed to a
+    compiled function or bound to a new name; in a loop that calls the plant's f, g and h
+    four times per step this dominated the run time, and on a *shared* input array the
+    atomics made parallel members contend for one cache line.  A view whose meminfo is
+    NULL is never counted (numba's incref/decref return at once on NULL and LLVM removes
+    them).  The caller must keep the owning array alive while the view is used (the
+    kernel passes the owners to ``_KEEP_ALIVE`` after its loop).
+    """
+    from numba.core import cgutils
+    from numba.core import types as nbtypes
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def unmanaged(typingctx: Any, arr: Any) -> Any:
+        if not isinstance(arr, nbtypes.Array):
+            return None
+
+        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+            src = context.make_array(sig.args[0])(context, builder, value=args[0])
+            dst = context.make_array(sig.return_type)(context, builder)
+            for name in ("nitems", "itemsize", "data", "shape", "strides"):
+                setattr(dst, name, getattr(src, name))
+            dst.meminfo = cgutils.get_null_value(dst.meminfo.type)
+            dst.parent = cgutils.get_null_value(dst.parent.type)
+            return dst._getvalue()
+
+        return arr(arr), codegen
+
+    return unmanaged
+
+
+def _prune_stale_cache(member: Any, plant_key: str, suffix: str) -> None:
+    """Delete this plant's cached kernels from older versions of its code or the engine's
+    (same plant key, other fingerprint), so the cache does not grow with every edit."""
+    cache_dir = getattr(getattr(member, "_cache", None), "_cache_path", None)
+    if not cache_dir or not os.path.isdir(cache_dir):
+        return
+    # numba names a cache entry "<source file stem>.<qualified name>"
+    stem = os.path.splitext(os.path.basename(kernel.__file__))[0]
+    prefix = f"{stem}.{kernel._tpl_member.__name__}_{plant_key}_"
+    keep = f"{prefix}{suffix.split('_', 1)[1]}"
+    for entry in os.scandir(cache_dir):
+        if entry.name.startswith(prefix) and not entry.name.startswith(keep):
+            with contextlib.suppress(OSError):  # another process may have removed it
+                os.remove(entry.path)
+
+
+def _cache_enabled() -> bool:
+    """On-disk kernel cache, on unless ``AIOFL_NO_CACHE=1`` (or numba's caching is off)."""
+    return os.environ.get("AIOFL_NO_CACHE", "") not in ("1", "true", "yes")
+
+
+def kernel_for(plant: Plant) -> Kernel:
+    """The compiled kernel of ``plant`` (built on first use, then reused in this process;
+    across processes numba's on-disk cache skips the compilation of built-in and
+    file-defined plants)."""
+    key = id(plant)
+    with _KERNELS_LOCK:  # two threads asking for a new plant's kernel build it once
+        if key not in _KERNELS or _KERNELS[key][0] is not plant:
+            _KERNELS[key] = (plant, _build_kernel(plant))
+        return _KERNELS[key][1]
+
+
+def run_members(member: Any, n_members: int, *args: Any) -> None:
+    """Run ``member(i, *args)`` for every member, on ``numba.get_num_threads()`` threads.
+
+    The compiled member function releases the GIL, so Python threads run members truly in
+    parallel; each thread takes the next unclaimed member (dynamic scheduling, so members
+    that diverge early do not leave a core idle).  Members are independent: the numbers do
+    not depend on the thread count or on which thread ran which member.
+    """
+    import numba
+
+    n_threads = max(1, min(numba.get_num_threads(), n_members))
+    if n_threads == 1:
+        for i in range(n_members):
+            member(i, *args)
+        return
+    claim = itertools.count()  # next() on a count is atomic under the GIL
+    errors: list[BaseException] = []
+
+    def work() -> None:
+        try:
+            while not errors:
+                i = next(claim)
+                if i >= n_members:
+                    return
+                member(i, *args)
+        except BaseException as exc:  # pragma: no cover - re-raised below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=work, daemon=True) for _ in range(n_threads - 1)]
+    for th in threads:
+        th.start()
+    work()
+    for th in threads:
+        th.join()
+    if errors:
+        raise errors[0]
