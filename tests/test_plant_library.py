@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from aiofl.config import load_config
-from aiofl.plants.builtin import available_plants, get_plant
 from aiofl.plants.library import EXTRA_PLANTS, SPECS
+from aiofl.plants.registry import available_plants, get_plant
 
 PRESETS = {
     "tank": "tank-ladrc",

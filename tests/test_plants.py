@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from aiofl.plants.base import Plant, PlantError
-from aiofl.plants.builtin import available_plants, get_plant
+from aiofl.plants.registry import available_plants, get_plant
 
 # Section V, as printed
 KS, JH, M_LINK, G, H, KM, KG, JL, RM = 1.61, 0.0021, 0.403, -9.81, 0.06, 0.00767, 70.0, 0.0059, 2.6

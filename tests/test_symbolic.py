@@ -10,18 +10,13 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from aiofl.plants.builtin import get_plant
+from aiofl.analysis.plant_structure import format_analysis_latex, format_analysis_text
+from aiofl.plants.expressions import SymbolicPlantError, parse_expression
 from aiofl.plants.library import SPECS, symbolic_model
-from aiofl.plants.symbolic import (
-    RelativeDegreeError,
-    SymbolicPlant,
-    SymbolicPlantError,
-    format_analysis_latex,
-    format_analysis_text,
-    lie_derivative,
-    load_symbolic_plant,
-    parse_expression,
-)
+from aiofl.plants.normal_form import RelativeDegreeError, lie_derivative
+from aiofl.plants.plant_file import load_symbolic_plant
+from aiofl.plants.registry import get_plant
+from aiofl.plants.symbolic import SymbolicPlant
 
 # ------------------------------------------------------------------ textbook cases
 
@@ -243,8 +238,8 @@ def test_importing_aiofl_and_plants_does_not_import_sympy() -> None:
     import sys
 
     code = (
-        "import sys, aiofl, aiofl.plants.builtin, aiofl.config\n"
-        "aiofl.plants.builtin.get_plant('slfjm'); aiofl.config.load_config('iofl-s1')\n"
+        "import sys, aiofl, aiofl.plants.registry, aiofl.config\n"
+        "aiofl.plants.registry.get_plant('slfjm'); aiofl.config.load_config('iofl-s1')\n"
         "print('sympy' in sys.modules)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -253,7 +253,7 @@ class ConfigModel(_Model):
     @field_validator("plant")
     @classmethod
     def _plant_name(cls, v: str) -> str:
-        from aiofl.plants.builtin import available_plants
+        from aiofl.plants.registry import available_plants
 
         if v not in available_plants() and not v.endswith(".toml"):
             raise ValueError(
@@ -332,7 +332,7 @@ def resolve_plant(name_or_file: str, base_dir: str | Path | None = None) -> Plan
     plant is built once per process (per path and modification time), so its kernel
     compiles once.  See :meth:`aiofl.plants.symbolic.SymbolicPlant.from_dict` for the format.
     """
-    from aiofl.plants.builtin import get_plant
+    from aiofl.plants.registry import get_plant
 
     if not name_or_file.endswith(".toml"):
         return get_plant(name_or_file)
@@ -343,7 +343,8 @@ def resolve_plant(name_or_file: str, base_dir: str | Path | None = None) -> Plan
         raise ConfigError(f"plant: file {str(path)!r} does not exist")
     key = (str(path.resolve()), path.stat().st_mtime_ns)
     if key not in _FILE_PLANTS:
-        from aiofl.plants.symbolic import SymbolicPlant, SymbolicPlantError
+        from aiofl.plants.expressions import SymbolicPlantError
+        from aiofl.plants.symbolic import SymbolicPlant
 
         try:
             _FILE_PLANTS[key] = SymbolicPlant.from_toml(path).to_plant()

@@ -15,46 +15,11 @@ sympy, numpy and the engine are imported inside the command, so registering it k
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated
 
 import typer
 
-__all__ = ["analysis_to_dict", "analyze_command"]
-
-
-def analysis_to_dict(a: Any) -> dict[str, Any]:
-    """JSON-ready form of an :class:`aiofl.plants.symbolic.Analysis`."""
-    import sympy as sp
-
-    zd = a.zero_dynamics
-    lie = {}
-    for k in range(a.rho + 1):
-        lie[f"L_f^{k} h"] = sp.sstr(a.lf_h[k])
-        if k < a.rho:
-            lie[f"L_g L_f^{k} h"] = sp.sstr(a.lg_lf_h[k])
-    return {
-        "plant": a.plant.name,
-        "n": a.plant.n,
-        "rho": a.rho,
-        "lie_derivatives": lie,
-        "alpha": sp.sstr(a.alpha),
-        "beta": sp.sstr(a.beta),
-        "beta_constant": a.beta_constant,
-        "beta_nominal": a.beta_nominal,
-        "region": a.region,
-        "xi": [sp.sstr(e) for e in a.xi],
-        "zero_dynamics": None
-        if zd is None
-        else {
-            "eta": [sp.sstr(e) for e in zd.eta],
-            "f0": None if zd.f0 is None else [sp.sstr(e) for e in zd.f0],
-            "eta_dot": [sp.sstr(e) for e in zd.eta_dot],
-            "equilibrium": list(zd.equilibrium),
-            "eigenvalues": [[float(z.real), float(z.imag)] for z in zd.eigenvalues],
-            "verdict": zd.verdict,
-        },
-        "zero_dynamics_note": a.zero_dynamics_note,
-    }
+__all__ = ["analyze_command"]
 
 
 def analyze_command(
@@ -87,7 +52,7 @@ def analyze_command(
 
     from rich.console import Console
 
-    from aiofl.cli.app import bad_input_exits
+    from aiofl.cli.errors import bad_input_exits
 
     console = Console(highlight=False, markup=False, soft_wrap=True)
     with bad_input_exits():
@@ -118,11 +83,12 @@ def analyze_command(
             return
         if r_op is not None:
             raise ValueError("--r-op applies only with --closed-loop")
-        from aiofl.plants.symbolic import (
+        from aiofl.analysis.plant_structure import (
+            analysis_to_dict,
             format_analysis_latex,
             format_analysis_text,
-            load_symbolic_plant,
         )
+        from aiofl.plants.plant_file import load_symbolic_plant
 
         analysis = load_symbolic_plant(target).analyze()
         if as_json:

@@ -17,7 +17,7 @@ work.  The engine compiles these with numba into its closed-loop kernel, so user
 as fast as the built-in ones.  :meth:`Plant.check` calls each function once in Python and
 reports a function of the wrong shape by name before anything is compiled.
 
-An optional ``normal_form(x, p) -> (ξ_1, ..., ξ_ρ, α, β)`` (see :mod:`aiofl.plants.symbolic`)
+An optional ``normal_form(x, p) -> (ξ_1, ..., ξ_ρ, α, β)`` (see :mod:`aiofl.plants.normal_form`)
 enables the classical IOFL baseline law.
 """
 

@@ -1,25 +1,24 @@
-r"""Built-in plants, addressed by name in configs (``plant = "slfjm"``).
+r"""The hand-written built-in plants, addressed by name in configs (``plant = "slfjm"``).
 
 * ``slfjm``: the single-link flexible-joint manipulator of eq. (15), ρ = 4.
 * ``pendulum``: a damped pendulum driven by a torque, ρ = 2.
 
-:func:`get_plant` returns a plant by name; :func:`register_plant` adds one (other modules,
-e.g. :mod:`aiofl.plants.symbolic`, register more).
+Their ``normal_form`` (ξ, α, β of eq. 3) is generated from their symbolic models in
+:mod:`aiofl.plants.library`.  :mod:`aiofl.plants.registry` registers them by name, with the
+plants of the library.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from math import sin
 
 import numpy as np
 from numpy.typing import NDArray
 
-from aiofl.plants.base import Plant, PlantError
-from aiofl.plants.library import FACTORIES as _LIBRARY  # more plants (tank, dcmotor_arm, ...)
+from aiofl.plants.base import Plant
 from aiofl.plants.library_generated import pendulum_normal_form, slfjm_normal_form
 
-__all__ = ["available_plants", "get_plant", "pendulum", "register_plant", "slfjm"]
+__all__ = ["pendulum", "slfjm"]
 
 Vec = NDArray[np.float64]
 
@@ -128,29 +127,3 @@ def pendulum() -> Plant:
         state_names=("theta", "theta_dot"),
         description="damped pendulum driven by a torque",
     )
-
-
-# ------------------------------------------------------------------------ registry
-_REGISTRY: dict[str, Callable[[], Plant]] = {"slfjm": slfjm, "pendulum": pendulum}
-_REGISTRY.update(_LIBRARY)
-_CACHE: dict[str, Plant] = {}
-
-
-def register_plant(name: str, factory: Callable[[], Plant]) -> None:
-    """Make ``factory()`` available as ``plant = "<name>"`` in configs."""
-    _REGISTRY[name] = factory
-    _CACHE.pop(name, None)
-
-
-def available_plants() -> tuple[str, ...]:
-    """Names of the registered plants."""
-    return tuple(sorted(_REGISTRY))
-
-
-def get_plant(name: str) -> Plant:
-    """The registered plant ``name`` (one shared instance, so its kernel compiles once)."""
-    if name not in _REGISTRY:
-        raise PlantError(f"unknown plant {name!r}; available: {', '.join(available_plants())}")
-    if name not in _CACHE:
-        _CACHE[name] = _REGISTRY[name]()
-    return _CACHE[name]

@@ -1,0 +1,47 @@
+"""Plant files: a symbolic plant by name, from a plant TOML file, or from a run config.
+
+``aiofl analyze PLANT`` accepts a shipped plant's name (its symbolic model in
+:mod:`aiofl.plants.library`), a symbolic-plant TOML file (the format of
+:meth:`aiofl.plants.symbolic.SymbolicPlant.from_dict`) or a run config whose ``plant`` is
+one of those; :func:`load_symbolic_plant` resolves each to a
+:class:`~aiofl.plants.symbolic.SymbolicPlant` for the Section-III analysis.  A plant
+registered from Python functions (:mod:`aiofl.plants.registry`) has no symbolic model and
+is reported as such.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from aiofl.plants.expressions import SymbolicPlantError
+from aiofl.plants.library import symbolic_model, symbolic_plant_names
+from aiofl.plants.registry import available_plants
+from aiofl.plants.symbolic import SymbolicPlant, read_plant_toml
+
+__all__ = ["load_symbolic_plant"]
+
+
+def load_symbolic_plant(target: str | Path) -> SymbolicPlant:
+    """A symbolic plant by built-in name (``"slfjm"``, ...) or from a TOML file.
+
+    A run config (a TOML with ``plant = "<name>"``) resolves to its plant.
+    """
+    text = str(target)
+    if text in symbolic_plant_names():
+        return symbolic_model(text)
+    path = Path(text)
+    if path.suffix == ".toml" or path.exists():
+        data = read_plant_toml(path)
+        if "f" not in data and isinstance(data.get("plant"), str):
+            return load_symbolic_plant(data["plant"])
+        return SymbolicPlant.from_dict(data, str(path))
+    if text in available_plants():
+        raise SymbolicPlantError(
+            f"plant {text!r} is registered from Python functions and has no symbolic model; "
+            "write it as a symbolic-plant TOML file "
+            "(see aiofl.plants.symbolic.SymbolicPlant.from_dict)"
+        )
+    raise SymbolicPlantError(
+        f"unknown plant {text!r}: not a built-in symbolic plant "
+        f"({', '.join(symbolic_plant_names())}) nor a TOML file"
+    )
