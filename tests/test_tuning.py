@@ -15,7 +15,8 @@ from aiofl import layout as L
 from aiofl.analysis.exact_tracking import exact_tracking, exact_tracking_cost, exact_tracking_input
 from aiofl.config import ConfigError, load_config, parse_config
 from aiofl.tuning.evaluate import EvalSpec, LocalEvaluator, PopulationResult, evaluate_chunk
-from aiofl.tuning.search import prepare, tune, write_outputs
+from aiofl.tuning.results import write_outputs
+from aiofl.tuning.search import prepare, tune
 from aiofl.tuning.space import (
     SearchSpace,
     TuneSettings,
@@ -443,8 +444,8 @@ def test_exact_tracking_cancels_matched_disturbance_and_parameter_change() -> No
 
 
 def test_generic_normal_form_inverse_matches_closed_form() -> None:
+    from aiofl.plants import get_plant
     from aiofl.plants.base import Plant
-    from aiofl.plants.builtin import get_plant
     from aiofl.scenario import Reference
 
     pend = get_plant("pendulum")

@@ -11,24 +11,25 @@ Commands
 ``aiofl reproduce --out DIR``
     The paper's Tables I–III and Figures 3–5, and a self-contained HTML report.
 ``aiofl tune CONFIG --out DIR``
-    GA tuning from the config's ``[tune]`` table (:mod:`aiofl.tuning.search`).
+    GA tuning from the config's ``[tune]`` table (:mod:`aiofl.cli.tune`).
 ``aiofl analyze PLANT|CONFIG [--closed-loop]``
     Symbolic plant analysis or closed-loop linearisation (:mod:`aiofl.cli.analyze`).
 
 Bad input (a malformed or invalid config, an unknown preset, a missing file) prints one
-clear message to stderr and exits with status 2; nothing is written to ``DIR``.  Heavy
-modules (numba, matplotlib) are imported inside the commands so ``aiofl --help`` is fast.
+clear message to stderr and exits with status 2 (:mod:`aiofl.cli.errors`); nothing is
+written to ``DIR``.  Heavy modules (numba, matplotlib) are imported inside the commands so
+``aiofl --help`` is fast.
 """
 
 from __future__ import annotations
 
 import sys
-from collections.abc import Iterator
-from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+
+from aiofl.cli.errors import _check_out, bad_input_exits
 
 __all__ = ["app", "main"]
 
@@ -40,44 +41,6 @@ app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
 )
-
-EXIT_BAD_INPUT = 2
-
-
-def _input_errors(run: bool) -> tuple[type[BaseException], ...]:
-    import tomllib
-
-    from aiofl.config import ConfigError
-    from aiofl.plants.base import PlantError
-
-    if run:
-        return (ConfigError, OSError)
-    return (ConfigError, PlantError, ValueError, OSError, tomllib.TOMLDecodeError)
-
-
-def _check_out(out: Path) -> None:
-    """Reject an output path that exists and is not a directory (before any work)."""
-    from aiofl.config import ConfigError
-
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"--out {str(out)!r} exists and is not a directory")
-
-
-@contextmanager
-def bad_input_exits(*, run: bool = False) -> Iterator[None]:
-    """Turn bad-input exceptions into one message on stderr and exit status 2.
-
-    Wrap the validation of a command's input with it.  Around the work itself use
-    ``run=True``: then only a :class:`~aiofl.config.ConfigError` (e.g. a checkpoint from
-    another run) or an ``OSError`` (an unwritable ``--out``) is bad input; any other
-    exception is a bug and propagates with its traceback.
-    """
-    try:
-        yield
-    except _input_errors(run) as exc:
-        msg = str(exc).strip() or type(exc).__name__
-        typer.echo(f"aiofl: error: {msg}", err=True)
-        raise typer.Exit(EXIT_BAD_INPUT) from None
 
 
 def _stderr_console() -> Any:
@@ -154,7 +117,7 @@ def simulation_record(cfg: Any, result: Any, source_name: str) -> dict[str, Any]
     ``source`` is ``"config"``.
     """
     from aiofl.config import list_presets
-    from aiofl.reporting.reproduce import computed_record, scenario_number
+    from aiofl.reporting.cases import computed_record, scenario_number
 
     number = scenario_number(source_name) if source_name in list_presets() else None
     rec = computed_record(
@@ -320,5 +283,5 @@ def register_feature(name: str, target: str) -> None:
 
 
 # --- feature commands ---
-register_feature("tune", "aiofl.tuning.search:tune_command")
+register_feature("tune", "aiofl.cli.tune:tune_command")
 register_feature("analyze", "aiofl.cli.analyze:analyze_command")

@@ -4,53 +4,40 @@ The paper tuned each controller with a GA on its objective performance index (22
 :math:`t_f = 6` s.  :func:`tune` does the same for any config: the ``[tune]`` table
 (:mod:`aiofl.tuning.space`) names the parameters, their bounds and the objective; each
 generation is evaluated by **one** batched engine call (:mod:`aiofl.tuning.evaluate`), or in
-chunks on a dask.distributed cluster, with identical numbers either way.
+chunks on a dask.distributed cluster, with identical numbers either way.  :func:`prepare`
+validates a config and its settings before anything is run or written; :func:`tune` returns
+a :class:`TuneResult`.  The checkpoint written after every generation and its replay on
+resume are in :mod:`aiofl.tuning.checkpoint`, the output files in :mod:`aiofl.tuning.results`.
 
-Determinism and resuming
-    The algorithm's random stream is seeded (``seed``); pymoo 0.6.2 keeps it in the
-    algorithm (``np.random.default_rng(seed)``), the initial Latin-hypercube sample is
-    drawn from its own seeded generator, and CMA-ES is seeded with ``seed + 1`` (cma treats
-    0 as "use the clock").  The same seed therefore gives the same run bit for bit.  The
-    checkpoint written after every generation (``DIR/checkpoint.npz``, atomically) holds
-    every evaluated member (unit-cube coordinates and engine metrics).  ``resume`` rebuilds
-    the algorithm from the seed and *replays* the checkpointed generations, checking that
-    each re-asked population equals the stored one bit for bit and feeding back the stored
-    results instead of simulating; then it carries on.  A resumed run therefore ends with
-    exactly the result of an uninterrupted one, for every pymoo algorithm (including
-    CMA-ES, whose generator-based state cannot be pickled), and a finished run can be
-    extended by resuming with more generations.
-
-Outputs (:func:`write_outputs`)
-    ``best.toml`` (the input config with the best parameters, loadable by
-    ``aiofl simulate``; its ``[tune]`` table is kept so re-tuning from it is a warm
-    start), ``history.csv`` (per generation: evaluations, best, mean, median, best so far,
-    diverged count, time), ``evaluations.csv`` (every member), ``convergence.png`` and
-    ``summary.json`` (settings, budget, best values, and the best config's metrics over the
-    tuning horizon and over the config's own horizon).
+Notes
+-----
+The algorithm's random stream is seeded (``seed``); pymoo 0.6.2 keeps it in the algorithm
+(``np.random.default_rng(seed)``), the initial Latin-hypercube sample is drawn from its own
+seeded generator, and CMA-ES is seeded with ``seed + 1`` (cma treats 0 as "use the
+clock").  The same seed therefore gives the same run bit for bit, and a resumed run ends
+with exactly the result of an uninterrupted one.
 """
 
 from __future__ import annotations
 
-import csv
 import hashlib
-import io
 import json
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Annotated, Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import typer
 from numpy.typing import NDArray
 
 from aiofl import layout as L
-from aiofl.analysis.exact_tracking import (
-    ExactTracking,
-    exact_tracking,
-    exact_tracking_cost,
-    exact_tracking_input,
+from aiofl.tuning.checkpoint import (
+    CHECKPOINT,
+    CHECKPOINT_FORMAT,
+    check_replay,
+    load_checkpoint,
+    save_checkpoint,
 )
 from aiofl.tuning.space import (
     SearchSpace,
@@ -68,22 +55,13 @@ if TYPE_CHECKING:  # pragma: no cover
     from aiofl.tuning.evaluate import EvalSpec, PopulationResult
 
 __all__ = [
-    "ExactTracking",
     "TuneResult",
     "TuneSettings",
     "describe_tuning",
-    "exact_tracking",
-    "exact_tracking_cost",
-    "exact_tracking_input",
     "parse_tune_settings",
     "prepare",
     "tune",
-    "tune_command",
-    "write_outputs",
 ]
-
-CHECKPOINT = "checkpoint.npz"
-CHECKPOINT_FORMAT = 1
 
 
 # ------------------------------------------------------------------------ results
@@ -278,53 +256,6 @@ def prepare(
     return _Prepared(cfg, st, space, spec, coeffs, initial, fingerprint, source)
 
 
-# --------------------------------------------------------------------- checkpoint
-def _save_checkpoint(path: Path, fingerprint: str, gens: list[dict[str, Any]]) -> None:
-    from aiofl.outputs import atomic_write_bytes
-
-    arrays: dict[str, Any] = {
-        "meta": np.array(
-            json.dumps(
-                {"format": CHECKPOINT_FORMAT, "fingerprint": fingerprint, "generations": len(gens)}
-            )
-        )
-    }
-    for i, g in enumerate(gens):
-        for key in ("s", "metrics", "diverged", "diverged_at"):
-            arrays[f"g{i}_{key}"] = g[key]
-        arrays[f"g{i}_seconds"] = np.array(g["seconds"])
-    buf = io.BytesIO()
-    np.savez(buf, **arrays)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write_bytes(path, buf.getvalue())
-
-
-def _load_checkpoint(path: Path, fingerprint: str) -> list[dict[str, Any]]:
-    from aiofl.config import ConfigError
-
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            meta = json.loads(str(data["meta"]))
-            if meta.get("format") != CHECKPOINT_FORMAT:
-                raise ConfigError(f"checkpoint {path}: unsupported format {meta.get('format')}")
-            if meta["fingerprint"] != fingerprint:
-                raise ConfigError(
-                    f"checkpoint {path} belongs to a different tuning run (config, [tune] "
-                    "settings other than generations, or seed changed); use another --out "
-                    "or drop --resume to start over"
-                )
-            gens = []
-            for i in range(int(meta["generations"])):
-                g = {k: data[f"g{i}_{k}"] for k in ("s", "metrics", "diverged", "diverged_at")}
-                g["seconds"] = float(data[f"g{i}_seconds"])
-                gens.append(g)
-            return gens
-    except (OSError, ValueError, KeyError) as exc:
-        if isinstance(exc, ConfigError):
-            raise
-        raise ConfigError(f"checkpoint {path} is unreadable: {exc}") from None
-
-
 # -------------------------------------------------------------------------- runner
 def _algorithm(st: TuneSettings, initial: NDArray[np.float64]) -> Any:
     if st.algorithm == "ga":
@@ -414,8 +345,8 @@ def tune(
     checkpoint_dir
         Write ``checkpoint.npz`` there (atomically) after every generation.
     resume
-        Continue from ``checkpoint_dir``'s checkpoint (replayed bit for bit, see the module
-        notes); without one, start from scratch.
+        Continue from ``checkpoint_dir``'s checkpoint (replayed bit for bit, see
+        :mod:`aiofl.tuning.checkpoint`); without one, start from scratch.
     scheduler
         A Dask scheduler address ``tcp://HOST:PORT`` (or a ``distributed.Client``): evaluate
         each generation in chunks on that cluster.
@@ -436,7 +367,7 @@ def tune(
     ckpt = Path(checkpoint_dir) / CHECKPOINT if checkpoint_dir is not None else None
     cached: list[dict[str, Any]] = []
     if resume and ckpt is not None and ckpt.exists():
-        cached = _load_checkpoint(ckpt, prep.fingerprint)
+        cached = load_checkpoint(ckpt, prep.fingerprint)
     own = evaluator is None
     ev = evaluator or _make_evaluator(scheduler, n_workers, st.chunks)
     gens: list[dict[str, Any]] = []
@@ -449,14 +380,7 @@ def tune(
         t0 = time.perf_counter()
         if g < len(cached):
             c = cached[g]
-            if c["s"].shape != s.shape or not np.array_equal(c["s"], s):
-                from aiofl.config import ConfigError
-
-                raise ConfigError(
-                    f"checkpoint replay diverged at generation {g + 1}: the algorithm asked "
-                    "for other members than were stored (different pymoo version?); start over "
-                    "without --resume"
-                )
+            check_replay(c, s, g + 1)
             res_m, res_d, res_t, secs = c["metrics"], c["diverged"], c["diverged_at"], c["seconds"]
             live = False
         else:
@@ -484,7 +408,7 @@ def tune(
             state["live_n"] += obj.size
             state["live_s"] += secs
             if ckpt is not None:
-                _save_checkpoint(ckpt, prep.fingerprint, gens)
+                save_checkpoint(ckpt, prep.fingerprint, gens)
         bar.update(len(gens), state["best"], obj.size, secs, live)
         return obj
 
@@ -582,211 +506,3 @@ class _Progress:
     def __exit__(self, *exc: Any) -> None:
         if self._p is not None:
             self._p.__exit__(*exc)
-
-
-# -------------------------------------------------------------------------- outputs
-def _history_csv(result: TuneResult) -> str:
-    buf = io.StringIO()
-    cols = list(result.history[0]) if result.history else []
-    w = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n")
-    w.writeheader()
-    for row in result.history:
-        w.writerow({k: (repr(v) if isinstance(v, float) else v) for k, v in row.items()})
-    return buf.getvalue()
-
-
-def _evaluations_csv(result: TuneResult) -> str:
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["generation", "member", *result.names, "objective", "diverged"])
-    member = 0
-    last = 0
-    for i in range(result.n_evaluations):
-        g = int(result.generation[i])
-        member = member + 1 if g == last else 0
-        last = g
-        w.writerow(
-            [
-                g,
-                member,
-                *(repr(float(v)) for v in result.values[i]),
-                repr(float(result.objective[i])),
-                int(result.diverged[i]),
-            ]
-        )
-    return buf.getvalue()
-
-
-def convergence_png(result: TuneResult) -> bytes:
-    """The convergence plot: best-so-far, generation best and median vs generation."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    h = result.history
-    gen = [r["generation"] for r in h]
-    fig, ax = plt.subplots(figsize=(7, 4.2), dpi=110)
-    ax.plot(gen, [r["best_so_far"] for r in h], lw=2, label="best so far")
-    ax.plot(gen, [r["best"] for r in h], ".", ms=4, label="generation best")
-    ax.plot(gen, [r["median"] for r in h], lw=1, alpha=0.7, label="generation median (stable)")
-    vals = [v for r in h for v in (r["best"], r["median"]) if np.isfinite(v)]
-    if vals and min(vals) > 0:
-        ax.set_yscale("log")
-    st = result.settings
-    obj = st.objective if isinstance(st.objective, str) else "weighted sum"
-    ax.set_xlabel("generation")
-    ax.set_ylabel(f"objective ({obj}, t_f = {st.t_final:g} s)")
-    ax.set_title(f"{result.source}: {st.budget()}", fontsize=9)
-    ax.grid(True, alpha=0.3)
-    ax2 = ax.twinx()
-    ax2.bar(gen, [r["diverged"] for r in h], alpha=0.15, color="red", label="diverged")
-    ax2.set_ylabel("diverged members")
-    ax.set_zorder(ax2.get_zorder() + 1)  # lines over the bars
-    ax.patch.set_visible(False)
-    from matplotlib.ticker import MaxNLocator
-
-    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-    lines = ax.get_legend_handles_labels()
-    bars = ax2.get_legend_handles_labels()
-    ax.legend(lines[0] + bars[0], lines[1] + bars[1], fontsize=8, loc="upper right")
-    fig.tight_layout()
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    plt.close(fig)
-    return buf.getvalue()
-
-
-def full_horizon_record(result: TuneResult) -> dict[str, Any]:
-    """The best config simulated over its own horizon (e.g. 20 s): itae, isu, iau, opi."""
-    cfg = result.run_config()
-    sim = cfg.simulate(store=False)
-    rec: dict[str, Any] = {
-        "t_final": cfg.scenario.t_final,
-        "diverged": sim.diverged,
-        "diverged_at": sim.diverged_at,
-    }
-    rec.update(sim.metrics or dict.fromkeys(L.METRIC_NAMES))
-    rec["opi"] = sim.opi(cfg.weights)
-    return rec
-
-
-def write_outputs(result: TuneResult, out: str | Path, *, header: str = "") -> dict[str, Any]:
-    """Write best.toml, history.csv, evaluations.csv, convergence.png, summary.json to ``out``.
-
-    Files are staged and moved in together (:func:`aiofl.outputs.atomic_output_dir`); other
-    files in ``out`` (the checkpoint) are kept.  Returns the summary dict.
-    """
-    from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
-
-    summary = {
-        "source": result.source,
-        "budget": result.settings.budget(),
-        "settings": result.settings.model_dump(mode="json"),
-        "best_values": result.best_values,
-        "best_objective": result.best_objective,
-        "tuning_horizon_metrics": result.best_metrics,
-        "full_horizon": full_horizon_record(result),
-        "evaluations": result.n_evaluations,
-        "diverged": int(result.diverged.sum()),
-        "live_evaluations": result.live_evaluations,
-        "live_seconds": result.live_seconds,
-        "evals_per_second": result.evals_per_second,
-        "evaluator": result.evaluator,
-    }
-    text = result.toml(header)
-    with atomic_output_dir(out) as stage:
-        atomic_write_text(stage / "best.toml", text)
-        atomic_write_text(stage / "history.csv", _history_csv(result))
-        atomic_write_text(stage / "evaluations.csv", _evaluations_csv(result))
-        atomic_write_bytes(stage / "convergence.png", convergence_png(result))
-        atomic_write_text(
-            stage / "summary.json", json.dumps(summary, indent=2, default=_json_default) + "\n"
-        )
-    return summary
-
-
-def _json_default(o: Any) -> Any:
-    if isinstance(o, (np.floating, np.integer)):
-        return o.item()
-    if isinstance(o, np.bool_):
-        return bool(o)
-    raise TypeError(type(o).__name__)
-
-
-# ------------------------------------------------------------------------------- CLI
-def tune_command(
-    config: Annotated[str, typer.Argument(help="A TOML config (or preset) with a tune table.")],
-    out: Annotated[Path, typer.Option("--out", "-o", help="Output directory.")],
-    resume: Annotated[
-        bool, typer.Option("--resume", help="Continue from OUT/checkpoint.npz (same result).")
-    ] = False,
-    scheduler: Annotated[
-        str | None,
-        typer.Option("--scheduler", help="Dask scheduler address tcp://HOST:PORT."),
-    ] = None,
-    dask_workers: Annotated[
-        int | None,
-        typer.Option("--dask-workers", help="Start a local Dask cluster with N workers."),
-    ] = None,
-    seed: Annotated[int | None, typer.Option("--seed", help="Override tune.seed.")] = None,
-    generations: Annotated[
-        int | None, typer.Option("--generations", help="Override tune.generations.")
-    ] = None,
-    population: Annotated[
-        int | None, typer.Option("--population", help="Override tune.population.")
-    ] = None,
-    quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
-) -> None:
-    """Tune a controller with a GA (pymoo) on the OPI of eq. (22), per the config's tune table.
-
-    Writes OUT/best.toml (runs with `aiofl simulate`), history.csv, evaluations.csv,
-    convergence.png and summary.json; OUT/checkpoint.npz is updated after every
-    generation so `--resume` continues a killed run with the same final result.
-    """
-    from aiofl.cli.app import bad_input_exits
-
-    with bad_input_exits():
-        if scheduler is not None and dask_workers is not None:
-            raise ValueError("give --scheduler or --dask-workers, not both")
-        if dask_workers is not None and dask_workers < 1:
-            raise ValueError(f"--dask-workers = {dask_workers}; allowed: >= 1")
-        prepare(config, None, seed=seed, generations=generations, population=population)
-        if resume and not (out / CHECKPOINT).is_file():
-            typer.echo(f"aiofl: no checkpoint in {out}; starting from scratch", err=True)
-    with bad_input_exits(run=True):
-        try:
-            result = tune(
-                config,
-                progress=not quiet,
-                checkpoint_dir=out,
-                resume=resume,
-                scheduler=scheduler,
-                n_workers=dask_workers,
-                seed=seed,
-                generations=generations,
-                population=population,
-            )
-        except KeyboardInterrupt:
-            typer.echo(
-                f"aiofl: interrupted; the checkpoint in {out} keeps the finished generations "
-                "(continue with --resume)",
-                err=True,
-            )
-            raise typer.Exit(130) from None
-        summary = write_outputs(result, out)
-    full = summary["full_horizon"]
-    status = (
-        f"diverged at {full['diverged_at']:.3g} s"
-        if full["diverged"]
-        else (
-            f"ITAE {full['itae']:.4g}, ISU {full['isu']:.4g}, IAU {full['iau']:.4g}, "
-            f"OPI {full['opi']:.4g}"
-        )
-    )
-    typer.echo(
-        f"best objective {result.best_objective:.6g} ({result.n_evaluations} evaluations, "
-        f"{int(result.diverged.sum())} diverged, {result.evals_per_second:.1f} eval/s)\n"
-        f"best config over {full['t_final']:g} s: {status}\n"
-        f"wrote {out}/best.toml, history.csv, evaluations.csv, convergence.png, summary.json"
-    )

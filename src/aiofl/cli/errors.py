@@ -1,0 +1,55 @@
+"""Bad input on the command line: one clear message on stderr and exit status 2.
+
+Every ``aiofl`` command wraps the validation of its input in :func:`bad_input_exits` (and
+the work itself in ``bad_input_exits(run=True)``), so a malformed or invalid config, an
+unknown preset or a missing file prints ``aiofl: error: ...`` and exits with
+:data:`EXIT_BAD_INPUT`, without a traceback and before anything is written.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+import typer
+
+__all__ = ["EXIT_BAD_INPUT", "bad_input_exits"]
+
+EXIT_BAD_INPUT = 2
+
+
+def _input_errors(run: bool) -> tuple[type[BaseException], ...]:
+    import tomllib
+
+    from aiofl.config import ConfigError
+    from aiofl.plants.base import PlantError
+
+    if run:
+        return (ConfigError, OSError)
+    return (ConfigError, PlantError, ValueError, OSError, tomllib.TOMLDecodeError)
+
+
+def _check_out(out: Path) -> None:
+    """Reject an output path that exists and is not a directory (before any work)."""
+    from aiofl.config import ConfigError
+
+    if out.exists() and not out.is_dir():
+        raise ConfigError(f"--out {str(out)!r} exists and is not a directory")
+
+
+@contextmanager
+def bad_input_exits(*, run: bool = False) -> Iterator[None]:
+    """Turn bad-input exceptions into one message on stderr and exit status 2.
+
+    Wrap the validation of a command's input with it.  Around the work itself use
+    ``run=True``: then only a :class:`~aiofl.config.ConfigError` (e.g. a checkpoint from
+    another run) or an ``OSError`` (an unwritable ``--out``) is bad input; any other
+    exception is a bug and propagates with its traceback.
+    """
+    try:
+        yield
+    except _input_errors(run) as exc:
+        msg = str(exc).strip() or type(exc).__name__
+        typer.echo(f"aiofl: error: {msg}", err=True)
+        raise typer.Exit(EXIT_BAD_INPUT) from None

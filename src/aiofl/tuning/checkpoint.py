@@ -1,0 +1,112 @@
+"""Checkpointing a tuning run after every generation, and replaying it on resume.
+
+:func:`save_checkpoint` rewrites ``DIR/checkpoint.npz`` (:data:`CHECKPOINT`) atomically after
+every generation of :func:`aiofl.tuning.search.tune`.  It holds every evaluated member
+(unit-cube coordinates, engine metrics, divergence flag and time, the generation's wall
+time) and the run's fingerprint (config, ``[tune]`` settings other than ``generations`` and
+``chunks``, seed, initial population, objective coefficients).  :func:`load_checkpoint`
+reads it back and refuses a checkpoint of another run or of another format.
+
+Notes
+-----
+Resuming rebuilds the algorithm from the seed and *replays* the checkpointed generations:
+:func:`check_replay` checks that each re-asked population equals the stored one bit for
+bit, and the stored results are fed back instead of simulating; then the run carries on.
+A resumed run therefore ends with exactly the result of an uninterrupted one, for every
+pymoo algorithm (including CMA-ES, whose generator-based state cannot be pickled), and a
+finished run can be extended by resuming with more generations.
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "CHECKPOINT",
+    "CHECKPOINT_FORMAT",
+    "check_replay",
+    "load_checkpoint",
+    "save_checkpoint",
+]
+
+CHECKPOINT = "checkpoint.npz"
+CHECKPOINT_FORMAT = 1
+
+
+def save_checkpoint(path: Path, fingerprint: str, gens: list[dict[str, Any]]) -> None:
+    """Write the generations so far to ``path`` (atomically, creating its directory).
+
+    Each generation is a dict with arrays ``s`` (unit-cube members), ``metrics``,
+    ``diverged``, ``diverged_at`` and the float ``seconds``; other keys are not stored.
+    """
+    from aiofl.outputs import atomic_write_bytes
+
+    arrays: dict[str, Any] = {
+        "meta": np.array(
+            json.dumps(
+                {"format": CHECKPOINT_FORMAT, "fingerprint": fingerprint, "generations": len(gens)}
+            )
+        )
+    }
+    for i, g in enumerate(gens):
+        for key in ("s", "metrics", "diverged", "diverged_at"):
+            arrays[f"g{i}_{key}"] = g[key]
+        arrays[f"g{i}_seconds"] = np.array(g["seconds"])
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def load_checkpoint(path: Path, fingerprint: str) -> list[dict[str, Any]]:
+    """Read the generations stored in ``path`` (as :func:`save_checkpoint` wrote them).
+
+    Raises :class:`aiofl.config.ConfigError` if the file is unreadable, of another format,
+    or belongs to another run (its fingerprint differs from ``fingerprint``).
+    """
+    from aiofl.config import ConfigError
+
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            meta = json.loads(str(data["meta"]))
+            if meta.get("format") != CHECKPOINT_FORMAT:
+                raise ConfigError(f"checkpoint {path}: unsupported format {meta.get('format')}")
+            if meta["fingerprint"] != fingerprint:
+                raise ConfigError(
+                    f"checkpoint {path} belongs to a different tuning run (config, [tune] "
+                    "settings other than generations, or seed changed); use another --out "
+                    "or drop --resume to start over"
+                )
+            gens = []
+            for i in range(int(meta["generations"])):
+                g = {k: data[f"g{i}_{k}"] for k in ("s", "metrics", "diverged", "diverged_at")}
+                g["seconds"] = float(data[f"g{i}_seconds"])
+                gens.append(g)
+            return gens
+    except (OSError, ValueError, KeyError) as exc:
+        if isinstance(exc, ConfigError):
+            raise
+        raise ConfigError(f"checkpoint {path} is unreadable: {exc}") from None
+
+
+def check_replay(stored: dict[str, Any], s: NDArray[np.float64], generation: int) -> None:
+    """Refuse to replay a stored generation the algorithm did not ask for again.
+
+    ``stored`` is generation ``generation`` (counted from 1) as loaded by
+    :func:`load_checkpoint`, ``s`` the population the algorithm asks for now (unit cube).
+    Raises :class:`aiofl.config.ConfigError` unless they are equal bit for bit.
+    """
+    if stored["s"].shape != s.shape or not np.array_equal(stored["s"], s):
+        from aiofl.config import ConfigError
+
+        raise ConfigError(
+            f"checkpoint replay diverged at generation {generation}: the algorithm asked "
+            "for other members than were stored (different pymoo version?); start over "
+            "without --resume"
+        )

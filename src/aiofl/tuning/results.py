@@ -1,0 +1,163 @@
+"""Writing a tuning run's outputs: best config, history, evaluations, plot and summary.
+
+:func:`write_outputs` writes, all or nothing (:func:`aiofl.outputs.atomic_output_dir`),
+
+``best.toml``
+    The input config with the best parameters, loadable by ``aiofl simulate``; its
+    ``[tune]`` table is kept so re-tuning from it is a warm start.
+``history.csv``
+    Per generation: evaluations, best, mean, median, best so far, diverged count, time.
+``evaluations.csv``
+    Every evaluated member: generation, member, parameter values, objective, diverged.
+``convergence.png``
+    Best so far, generation best and median vs generation (:func:`convergence_png`).
+``summary.json``
+    Settings, budget, best values, and the best config's metrics over the tuning horizon
+    and over the config's own horizon (:func:`full_horizon_record`).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from aiofl import layout as L
+
+if TYPE_CHECKING:  # pragma: no cover
+    from aiofl.tuning.search import TuneResult
+
+__all__ = ["convergence_png", "full_horizon_record", "write_outputs"]
+
+
+def _history_csv(result: TuneResult) -> str:
+    buf = io.StringIO()
+    cols = list(result.history[0]) if result.history else []
+    w = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n")
+    w.writeheader()
+    for row in result.history:
+        w.writerow({k: (repr(v) if isinstance(v, float) else v) for k, v in row.items()})
+    return buf.getvalue()
+
+
+def _evaluations_csv(result: TuneResult) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(["generation", "member", *result.names, "objective", "diverged"])
+    member = 0
+    last = 0
+    for i in range(result.n_evaluations):
+        g = int(result.generation[i])
+        member = member + 1 if g == last else 0
+        last = g
+        w.writerow(
+            [
+                g,
+                member,
+                *(repr(float(v)) for v in result.values[i]),
+                repr(float(result.objective[i])),
+                int(result.diverged[i]),
+            ]
+        )
+    return buf.getvalue()
+
+
+def convergence_png(result: TuneResult) -> bytes:
+    """The convergence plot: best-so-far, generation best and median vs generation."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    h = result.history
+    gen = [r["generation"] for r in h]
+    fig, ax = plt.subplots(figsize=(7, 4.2), dpi=110)
+    ax.plot(gen, [r["best_so_far"] for r in h], lw=2, label="best so far")
+    ax.plot(gen, [r["best"] for r in h], ".", ms=4, label="generation best")
+    ax.plot(gen, [r["median"] for r in h], lw=1, alpha=0.7, label="generation median (stable)")
+    vals = [v for r in h for v in (r["best"], r["median"]) if np.isfinite(v)]
+    if vals and min(vals) > 0:
+        ax.set_yscale("log")
+    st = result.settings
+    obj = st.objective if isinstance(st.objective, str) else "weighted sum"
+    ax.set_xlabel("generation")
+    ax.set_ylabel(f"objective ({obj}, t_f = {st.t_final:g} s)")
+    ax.set_title(f"{result.source}: {st.budget()}", fontsize=9)
+    ax.grid(True, alpha=0.3)
+    ax2 = ax.twinx()
+    ax2.bar(gen, [r["diverged"] for r in h], alpha=0.15, color="red", label="diverged")
+    ax2.set_ylabel("diverged members")
+    ax.set_zorder(ax2.get_zorder() + 1)  # lines over the bars
+    ax.patch.set_visible(False)
+    from matplotlib.ticker import MaxNLocator
+
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    lines = ax.get_legend_handles_labels()
+    bars = ax2.get_legend_handles_labels()
+    ax.legend(lines[0] + bars[0], lines[1] + bars[1], fontsize=8, loc="upper right")
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    return buf.getvalue()
+
+
+def full_horizon_record(result: TuneResult) -> dict[str, Any]:
+    """The best config simulated over its own horizon (e.g. 20 s): itae, isu, iau, opi."""
+    cfg = result.run_config()
+    sim = cfg.simulate(store=False)
+    rec: dict[str, Any] = {
+        "t_final": cfg.scenario.t_final,
+        "diverged": sim.diverged,
+        "diverged_at": sim.diverged_at,
+    }
+    rec.update(sim.metrics or dict.fromkeys(L.METRIC_NAMES))
+    rec["opi"] = sim.opi(cfg.weights)
+    return rec
+
+
+def write_outputs(result: TuneResult, out: str | Path, *, header: str = "") -> dict[str, Any]:
+    """Write best.toml, history.csv, evaluations.csv, convergence.png, summary.json to ``out``.
+
+    Files are staged and moved in together (:func:`aiofl.outputs.atomic_output_dir`); other
+    files in ``out`` (the checkpoint) are kept.  Returns the summary dict.
+    """
+    from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
+
+    summary = {
+        "source": result.source,
+        "budget": result.settings.budget(),
+        "settings": result.settings.model_dump(mode="json"),
+        "best_values": result.best_values,
+        "best_objective": result.best_objective,
+        "tuning_horizon_metrics": result.best_metrics,
+        "full_horizon": full_horizon_record(result),
+        "evaluations": result.n_evaluations,
+        "diverged": int(result.diverged.sum()),
+        "live_evaluations": result.live_evaluations,
+        "live_seconds": result.live_seconds,
+        "evals_per_second": result.evals_per_second,
+        "evaluator": result.evaluator,
+    }
+    text = result.toml(header)
+    with atomic_output_dir(out) as stage:
+        atomic_write_text(stage / "best.toml", text)
+        atomic_write_text(stage / "history.csv", _history_csv(result))
+        atomic_write_text(stage / "evaluations.csv", _evaluations_csv(result))
+        atomic_write_bytes(stage / "convergence.png", convergence_png(result))
+        atomic_write_text(
+            stage / "summary.json", json.dumps(summary, indent=2, default=_json_default) + "\n"
+        )
+    return summary
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, (np.floating, np.integer)):
+        return o.item()
+    if isinstance(o, np.bool_):
+        return bool(o)
+    raise TypeError(type(o).__name__)
