@@ -9,8 +9,8 @@ import math
 import numpy as np
 import pytest
 
+from aiofl.analysis.closed_loop import ClosedLoop
 from aiofl.analysis.linearize import (
-    ClosedLoop,
     closed_loop_verdict,
     eso_statespace,
     linear_eso_statespace,
@@ -18,7 +18,7 @@ from aiofl.analysis.linearize import (
 )
 from aiofl.config import load_config
 from aiofl.controller import Controller
-from aiofl.plants.builtin import get_plant
+from aiofl.plants.registry import get_plant
 from aiofl.plants.symbolic import SymbolicPlant
 from aiofl.scenario import Reference, Scenario
 

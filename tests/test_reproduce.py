@@ -13,7 +13,8 @@ import re
 import pytest
 
 from aiofl.config import list_presets, load_config
-from aiofl.reporting.reproduce import EXTRA_PRESETS, PAPER_TABLES, discover_cases, trivial_itae
+from aiofl.reporting.cases import EXTRA_PRESETS, discover_cases, trivial_itae
+from aiofl.reporting.paper import PAPER_TABLES
 
 pytestmark = pytest.mark.slow
 
@@ -158,7 +159,7 @@ def test_extra_preset_patterns() -> None:
 
 
 def test_an_extra_preset_becomes_an_extra_row_everywhere(monkeypatch) -> None:
-    import aiofl.reporting.reproduce as rp
+    import aiofl.reporting.cases as rp
     from aiofl.reporting.figures import scenario_figure
     from aiofl.reporting.report import findings, tables_markdown
 

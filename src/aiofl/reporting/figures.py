@@ -20,11 +20,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from aiofl.reporting.paper import SCENARIOS
+
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
     from aiofl.engine.simulation import SimulationResult
-    from aiofl.reporting.reproduce import Reproduction
+    from aiofl.reporting.cases import Reproduction
     from aiofl.scenario import Scenario
 
 __all__ = [
@@ -186,12 +188,10 @@ def scenario_figure(rep: Reproduction, scenario: int) -> Figure:
     Parameters
     ----------
     rep
-        The reproduction (see :func:`aiofl.reporting.reproduce.compute`).
+        The reproduction (see :func:`aiofl.reporting.cases.compute`).
     scenario
         1, 2 or 3.
     """
-    from aiofl.reporting.reproduce import SCENARIOS
-
     info = SCENARIOS[scenario]
     runs = rep.scenario_runs(scenario)
     panels = [

@@ -1,8 +1,8 @@
 """Tables (Markdown) and the self-contained HTML report of ``aiofl reproduce``.
 
 Every number and every finding on these pages is generated from the computed
-:class:`aiofl.reporting.reproduce.Reproduction` (and the paper's values in
-:data:`aiofl.reporting.reproduce.PAPER_TABLES`); nothing here states a result that was not computed
+:class:`aiofl.reporting.cases.Reproduction` (and the paper's values in
+:data:`aiofl.reporting.paper.PAPER_TABLES`); nothing here states a result that was not computed
 in the same run.  Extra cases (re-tuned presets, the IOFL baseline) appear as extra rows.
 """
 
@@ -18,15 +18,14 @@ from typing import Any
 import numpy as np
 
 from aiofl.components.metrics import opi
-from aiofl.reporting.reproduce import (
-    PAPER_TABLES,
-    SCENARIOS,
+from aiofl.reporting.cases import (
     CaseRun,
     Reproduction,
     itd_gain,
     observer_roots,
     output_ratio,
 )
+from aiofl.reporting.paper import PAPER_TABLES, SCENARIOS
 
 __all__ = [
     "findings",

@@ -1,0 +1,421 @@
+r"""The cases of ``aiofl reproduce``: found among the presets, simulated batched, summarised.
+
+The paper (Abdul-Adheem & Ibraheem, arXiv 1805.00222, Section V) reports two AIOFL
+structures on the SLFJM of eq. (15):
+
+* **LESO**: linear ESO (16) + NLSEF with fal (17) + Han's TD (18), law (14);
+* **INLESO**: improved nonlinear ESO (19) + INLSEF (20) + improved TD (21), law (14);
+
+in three scenarios (nominal tracking; a 0.5 N·m step load at 10 s with :math:`J_l\times1.4`;
+output noise of variance 1e-4) and scores them with ITAE and ISU (eq. 22).
+
+:func:`compute` runs the shipped presets ``paper-s{1,2,3}-{leso,inleso}`` (the printed
+parameters) in as few batched engine calls as possible and returns a
+:class:`Reproduction` that the tables, figures and report read; the printed numbers
+themselves are in :mod:`aiofl.reporting.paper`.  Extra presets are picked up automatically
+when they exist, and appear as extra rows and panels everywhere without special cases:
+
+* ``retuned-s{N}-{leso,inleso,ladrc}``: parameters re-tuned by ``aiofl tune``
+  (records with ``"source": "retuned"``);
+* ``iofl-s{N}``: the classical model-based IOFL baseline (``"structure": "IOFL"``,
+  ``"source": "model"``).
+"""
+
+from __future__ import annotations
+
+import math
+import platform
+import re
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from aiofl.analysis.linearize import closed_loop_verdict as _linearized_verdict
+from aiofl.components.differentiators import itd_steady_state
+from aiofl.components.metrics import itae
+from aiofl.components.observers import eso_gains
+from aiofl.config import RunConfig, list_presets, load_config
+from aiofl.engine.simulation import SimulationResult, simulate_batch
+from aiofl.reporting.paper import PAPER_PRESETS, PAPER_TABLES, SCENARIOS
+
+__all__ = [
+    "EXTRA_PRESETS",
+    "PAPER_TABLES",
+    "SCENARIOS",
+    "Case",
+    "CaseRun",
+    "Reproduction",
+    "compute",
+    "computed_record",
+    "discover_cases",
+    "paper_records",
+    "run_cases",
+    "trivial_itae",
+]
+
+EXTRA_PRESETS: tuple[tuple[str, str], ...] = (
+    (r"retuned-s(?P<s>\d+)-(?:leso|inleso|ladrc)", "retuned"),
+    (r"iofl-s(?P<s>\d+)", "model"),
+)
+"""Optional presets (regex on the name, source label) included when they are shipped."""
+
+SOURCE_ORDER = ("paper", "printed", "retuned", "model")
+STRUCTURE_ORDER = ("LESO", "INLESO", "LADRC", "IOFL")
+_SCENARIO_IN_NAME = re.compile(r"(?:^|-)s(\d+)(?:-|$)")
+
+
+# ----------------------------------------------------------------------------- cases
+@dataclass(frozen=True)
+class Case:
+    """One simulated case: a preset, the paper scenario it belongs to, and its labels."""
+
+    preset: str
+    scenario: int
+    structure: str
+    source: str
+    config: RunConfig = field(repr=False, compare=False)
+
+    @property
+    def label(self) -> str:
+        """Row label: ``"LESO"`` for the printed sets, ``"LESO (retuned)"`` otherwise."""
+        return self.structure if self.source == "printed" else f"{self.structure} ({self.source})"
+
+
+def _sort_key(case: Case) -> tuple[int, int, int, str]:
+    src = SOURCE_ORDER.index(case.source) if case.source in SOURCE_ORDER else len(SOURCE_ORDER)
+    st = (
+        STRUCTURE_ORDER.index(case.structure)
+        if case.structure in STRUCTURE_ORDER
+        else len(STRUCTURE_ORDER)
+    )
+    return (case.scenario, src, st, case.preset)
+
+
+def scenario_number(name: str) -> int | None:
+    """The paper scenario encoded in a preset name (``paper-s2-leso`` -> 2), else None."""
+    m = _SCENARIO_IN_NAME.search(name)
+    return int(m.group(1)) if m else None
+
+
+def discover_cases(available: Iterable[str] | None = None) -> list[Case]:
+    """The six paper cases plus every shipped ``retuned-*`` / ``iofl-*`` preset.
+
+    Parameters
+    ----------
+    available
+        Preset names to choose from (default: :func:`aiofl.config.list_presets`).
+
+    Returns
+    -------
+    list of Case
+        Sorted by scenario, then source (printed, retuned, model), then structure.
+    """
+    names = set(list_presets() if available is None else available)
+    cases = []
+    for preset, s, structure in PAPER_PRESETS:
+        cases.append(Case(preset, s, structure, "printed", load_config(preset)))
+    for name in sorted(names):
+        for pattern, source in EXTRA_PRESETS:
+            m = re.fullmatch(pattern, name)
+            if m and int(m.group("s")) in SCENARIOS:
+                cfg = load_config(name)
+                structure = "IOFL" if source == "model" else cfg.controller.structure
+                cases.append(Case(name, int(m.group("s")), structure, source, cfg))
+    return sorted(cases, key=_sort_key)
+
+
+# ------------------------------------------------------------------------------ runs
+@dataclass(frozen=True)
+class CaseRun:
+    """A case and what the engine computed for it."""
+
+    case: Case
+    result: SimulationResult = field(repr=False)
+    opi: float | None
+
+    @property
+    def diverged(self) -> bool:
+        """Whether the run diverged."""
+        return self.result.diverged
+
+    @property
+    def record(self) -> dict[str, Any]:
+        """This run's metrics.json record (see :func:`computed_record`)."""
+        return computed_record(
+            self.result,
+            scenario=self.case.scenario,
+            structure=self.case.structure,
+            source=self.case.source,
+            opi=self.opi,
+        )
+
+
+def _batch_key(cfg: RunConfig) -> tuple[Any, ...]:
+    return (
+        id(cfg.plant),
+        cfg.scenario.t_final,
+        cfg.dt,
+        cfg.method,
+        cfg.decimation,
+        cfg.divergence_threshold,
+    )
+
+
+def run_cases(
+    cases: Sequence[Case],
+    *,
+    store: bool = True,
+    on_batch: Callable[[int, int], None] | None = None,
+) -> list[CaseRun]:
+    """Simulate the cases, one batched engine call per group of compatible cases.
+
+    Cases share a call when they have the same plant, horizon, step, method, decimation
+    and divergence threshold (the engine's batch requirements); the members of a call run
+    in parallel.
+
+    Parameters
+    ----------
+    cases
+        The cases (see :func:`discover_cases`).
+    store
+        Keep trajectories (needed for figures).
+    on_batch
+        Called as ``on_batch(done_batches, n_batches)`` after each engine call.
+
+    Returns
+    -------
+    list of CaseRun
+        In the order of ``cases``.
+    """
+    groups: dict[tuple[Any, ...], list[int]] = {}
+    for i, case in enumerate(cases):
+        groups.setdefault(_batch_key(case.config), []).append(i)
+    results: dict[int, SimulationResult] = {}
+    for done, idx in enumerate(groups.values(), 1):
+        first = cases[idx[0]].config
+        batch = simulate_batch(
+            first.plant,
+            [cases[i].config.controller for i in idx],
+            [cases[i].config.scenario for i in idx],
+            dt=first.dt,
+            method=first.method,
+            store=store,
+            decimation=first.decimation,
+            divergence_threshold=first.divergence_threshold,
+        )
+        for j, i in enumerate(idx):
+            results[i] = batch.member(j)
+        if on_batch is not None:
+            on_batch(done, len(groups))
+    return [
+        CaseRun(case, results[i], results[i].opi(case.config.weights))
+        for i, case in enumerate(cases)
+    ]
+
+
+def _num(x: float | None) -> float | None:
+    return None if x is None or not math.isfinite(x) else float(x)
+
+
+def computed_record(
+    result: SimulationResult,
+    *,
+    scenario: int | None,
+    structure: str,
+    source: str,
+    opi: float | None,
+    extra: bool = False,
+) -> dict[str, Any]:
+    """The metrics record of one computed run (metrics null if it diverged).
+
+    Keys: ``scenario, structure, source, itae, isu, iau, opi, diverged, diverged_at``;
+    with ``extra`` also ``iae`` and ``ise``.
+    """
+    m = result.metrics
+    rec: dict[str, Any] = {
+        "scenario": scenario,
+        "structure": structure,
+        "source": source,
+        "itae": _num(m["itae"]) if m else None,
+        "isu": _num(m["isu"]) if m else None,
+        "iau": _num(m["iau"]) if m else None,
+        "opi": _num(opi) if m else None,
+        "diverged": bool(result.diverged),
+        "diverged_at": _num(result.diverged_at) if result.diverged else None,
+    }
+    if extra:
+        rec["iae"] = _num(m["iae"]) if m else None
+        rec["ise"] = _num(m["ise"]) if m else None
+    return rec
+
+
+def paper_records() -> list[dict[str, Any]]:
+    """Records of the paper's Tables I–III (IAU and OPI null: the paper gives none)."""
+    return [
+        {
+            "scenario": s,
+            "structure": structure,
+            "source": "paper",
+            "itae": vals["itae"],
+            "isu": vals["isu"],
+            "iau": None,
+            "opi": None,
+            "diverged": False,
+            "diverged_at": None,
+        }
+        for s, table in PAPER_TABLES.items()
+        for structure, vals in table.items()
+    ]
+
+
+def build_records(runs: Sequence[CaseRun]) -> list[dict[str, Any]]:
+    """Paper records and computed records, ordered by scenario, source, structure."""
+    recs = paper_records() + [r.record for r in runs]
+
+    def key(rec: dict[str, Any]) -> tuple[int, int, int]:
+        src = rec["source"]
+        st = rec["structure"]
+        return (
+            rec["scenario"],
+            SOURCE_ORDER.index(src) if src in SOURCE_ORDER else 99,
+            STRUCTURE_ORDER.index(st) if st in STRUCTURE_ORDER else 99,
+        )
+
+    return sorted(recs, key=key)  # stable: runs keep their order within a key
+
+
+# ----------------------------------------------------------------------------- facts
+def trivial_itae(cfg: RunConfig, dt: float = 1e-4) -> float:
+    r"""ITAE of the trivial controller :math:`y \equiv 0`: :math:`\int_0^{t_f} t\,|r|\,dt`.
+
+    Computed numerically (trapezoid on a grid of step ``dt``) from the scenario's
+    reference, over the scenario's horizon.
+    """
+    t_f = cfg.scenario.t_final
+    t = np.linspace(0.0, t_f, round(t_f / dt) + 1)
+    return itae(t, np.zeros_like(t), cfg.scenario.reference.evaluate(t))
+
+
+def observer_roots(cfg: RunConfig) -> NDArray[np.complex128]:
+    r"""Roots of :math:`s^{\rho+1} + \beta_1 s^\rho + \dots + \beta_{\rho+1}`, eq. (9).
+
+    For a linear ESO these are the poles of its estimation error; for the INLESO (whose
+    injection g(e) is nonlinear) they are the poles with unit injection gain.
+    """
+    c = cfg.controller
+    alphas = [c.value(f"eso.alpha{i}") for i in range(1, c.rho + 2)]
+    betas = eso_gains(c.value("eso.omega0"), alphas)
+    return np.roots(np.r_[1.0, betas]).astype(np.complex128)
+
+
+def itd_gain(cfg: RunConfig) -> float | None:
+    r"""Steady-state gain :math:`(1-a)/b` of the improved TD (21), or None for other TDs."""
+    c = cfg.controller
+    if c.td != "improved":
+        return None
+    return itd_steady_state(1.0, c.value("td.a"), c.value("td.b"))
+
+
+def output_ratio(run: CaseRun, window: float = 5.0) -> float | None:
+    """Peak |y| over the last ``window`` seconds divided by peak |r| there (None if diverged).
+
+    About 1 for good tracking of a sine, near 0 when the output barely moves.
+    """
+    res = run.result
+    if res.diverged or res.t.size == 0:
+        return None
+    sel = res.t >= res.t[-1] - window
+    r_peak = float(np.max(np.abs(res["r"][sel])))
+    if r_peak == 0.0:
+        return None
+    return float(np.max(np.abs(res["y"][sel]))) / r_peak
+
+
+def closed_loop_verdict(cfg: RunConfig) -> dict[str, Any]:
+    """Closed-loop linearisation verdict of a case.
+
+    Uses :func:`aiofl.analysis.linearize.closed_loop_verdict` (``{"verdict": str, "eigenvalues":
+    [[re, im], ...]}``).  A failure of the analysis is reported in the verdict, not raised.
+    """
+    try:
+        return dict(_linearized_verdict(cfg))
+    except Exception as exc:  # the report must not fail because one analysis did
+        return {"verdict": f"analysis failed: {type(exc).__name__}: {exc}", "eigenvalues": []}
+
+
+# ----------------------------------------------------------------------- orchestration
+@dataclass(frozen=True)
+class Reproduction:
+    """Everything :func:`reproduce` computed, for the tables, figures and report."""
+
+    runs: list[CaseRun]
+    records: list[dict[str, Any]]
+    trivial: dict[int, float]
+    verdicts: dict[str, dict[str, Any]]
+    engine: dict[str, str]
+    timings: dict[str, float]
+
+    def scenario_runs(self, scenario: int) -> list[CaseRun]:
+        """The runs of one scenario, in table order."""
+        return [r for r in self.runs if r.case.scenario == scenario]
+
+    def config(self, preset: str) -> RunConfig:
+        """The config of a case by preset name."""
+        return next(r.case.config for r in self.runs if r.case.preset == preset)
+
+
+def _engine_settings(cases: Sequence[Case], n_batches: int) -> dict[str, str]:
+    import numba
+
+    def distinct(values: Iterable[Any]) -> str:
+        return ", ".join(str(v) for v in dict.fromkeys(values))
+
+    cfgs = [c.config for c in cases]
+    return {
+        "integrator": distinct(c.method.upper() for c in cfgs) + " (fixed step)",
+        "step dt [s]": distinct(c.dt for c in cfgs),
+        "horizon [s]": distinct(c.scenario.t_final for c in cfgs),
+        "trajectory decimation": distinct(c.decimation for c in cfgs)
+        + " (every n-th step stored; metrics are integrated at every step)",
+        "divergence threshold": distinct(f"{c.divergence_threshold:g}" for c in cfgs)
+        + " (|state| or non-finite stops a member)",
+        "cases / engine calls": f"{len(cases)} / {n_batches} (batched, members in parallel)",
+        "numba threads": str(numba.config.NUMBA_NUM_THREADS),
+        "versions": (
+            f"aiofl {__import__('aiofl').__version__}, numpy {np.__version__}, "
+            f"numba {numba.__version__}, Python {platform.python_version()}"
+        ),
+    }
+
+
+def compute(
+    *,
+    available: Iterable[str] | None = None,
+    on_stage: Callable[[str], None] | None = None,
+) -> Reproduction:
+    """Discover and simulate all cases and derive the facts the report needs."""
+    stage = on_stage or (lambda _msg: None)
+    t0 = time.perf_counter()
+    stage("loading presets")
+    cases = discover_cases(available)
+    n_batches = len({_batch_key(c.config) for c in cases})
+    stage(f"simulating {len(cases)} cases in {n_batches} batched call(s) (first call compiles)")
+    t1 = time.perf_counter()
+    runs = run_cases(cases)
+    t2 = time.perf_counter()
+    trivial = {s: trivial_itae(next(c for c in cases if c.scenario == s).config) for s in SCENARIOS}
+    stage("closed-loop analysis")
+    verdicts = {r.case.preset: closed_loop_verdict(r.case.config) for r in runs}
+    t3 = time.perf_counter()
+    return Reproduction(
+        runs=runs,
+        records=build_records(runs),
+        trivial=trivial,
+        verdicts=verdicts,
+        engine=_engine_settings(cases, n_batches),
+        timings={"load": t1 - t0, "simulate": t2 - t1, "analysis": t3 - t2},
+    )
