@@ -1,0 +1,167 @@
+"""The package's architecture: imports run one way, from higher layers to lower ones.
+
+The import graph of every module under ``src/aiofl`` is read with :mod:`ast` (imports at
+module level, inside functions and under ``TYPE_CHECKING`` alike: a lazy import that goes
+back up is still a circle).  The test fails on any import cycle and on any import from a
+lower layer to a higher one, per :data:`LAYERS`.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+SRC = Path(__file__).resolve().parents[1] / "src"
+PACKAGE = SRC / "aiofl"
+
+LAYERS: tuple[tuple[str, ...], ...] = (
+    # lowest first; a module may import from its own layer (without a cycle) or below
+    ("aiofl.components", "aiofl.outputs"),  # the paper's pieces; atomic file output
+    ("aiofl.layout",),  # the member vocabulary: component kinds, parameter columns
+    ("aiofl.controller", "aiofl.scenario"),  # plain descriptions of a design and a test
+    ("aiofl.plants",),
+    ("aiofl.engine",),
+    ("aiofl.config",),  # TOML -> plant + scenario + controller (+ run settings)
+    ("aiofl.analysis",),
+    ("aiofl.export",),
+    ("aiofl.tuning",),
+    ("aiofl.reporting",),
+    ("aiofl.cli", "aiofl.__main__"),
+)
+"""The layers, lowest first."""
+
+FACADE = "aiofl"  # the top-level package: names imported lazily, by string, on first use
+MAX_LINES = 650
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(SRC).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+MODULES = {_module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+def _resolve(name: str) -> str | None:
+    """The aiofl module an imported dotted name refers to (a module, or a name in one)."""
+    while name:
+        if name in MODULES:
+            return name
+        name = name.rpartition(".")[0]
+    return None
+
+
+def _imports(module: str) -> set[str]:
+    path = MODULES[module]
+    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+    found: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            names = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")
+                anchor = anchor[: len(anchor) - node.level + 1]
+                base = ".".join([*anchor, base] if base else anchor)
+            # ``from pkg import sub`` imports module pkg.sub; ``from pkg import name``, pkg
+            names = [
+                f"{base}.{a.name}" if f"{base}.{a.name}" in MODULES else base for a in node.names
+            ]
+        else:
+            continue
+        for name in names:
+            target = _resolve(name)
+            if target is not None and target != module:
+                found.add(target)
+    return found
+
+
+GRAPH = {m: _imports(m) for m in MODULES}
+
+
+def _layer(module: str) -> int | None:
+    for i, prefixes in enumerate(LAYERS):
+        if any(module == p or module.startswith(p + ".") for p in prefixes):
+            return i
+    return None
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_the_graph_is_read() -> None:
+    """The walker sees the imports it must see (a broken walker would pass everything)."""
+    assert "aiofl.engine.simulation" in GRAPH["aiofl.reporting.cases"]
+    assert "aiofl.plants.base" in GRAPH["aiofl.engine.simulation"] or any(
+        m.startswith("aiofl.plants") for m in GRAPH["aiofl.engine.simulation"]
+    )
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_no_import_cycles() -> None:
+    cycles = _cycles(GRAPH)
+    assert not cycles, "import cycles: " + "; ".join(" <-> ".join(c) for c in cycles)
+
+
+def test_every_module_has_a_layer() -> None:
+    missing = [m for m in MODULES if m != FACADE and _layer(m) is None]
+    assert not missing, f"add these modules to a layer in LAYERS: {missing}"
+
+
+@pytest.mark.parametrize("module", sorted(m for m in MODULES if m != FACADE))
+def test_imports_run_downward(module: str) -> None:
+    here = _layer(module)
+    assert here is not None
+    upward = sorted(t for t in GRAPH[module] if t != FACADE and (_layer(t) or 0) > here)
+    assert not upward, f"{module} (layer {here}) imports from higher layers: {upward}"
+    assert FACADE not in GRAPH[module] or module.startswith("aiofl.cli"), (
+        f"{module} imports the top-level facade 'aiofl'; import from the defining module"
+    )
+
+
+def test_modules_are_read_in_a_sitting() -> None:
+    long = {
+        m: n
+        for m, p in MODULES.items()
+        if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_LINES
+        and not m.endswith("_generated")
+    }
+    assert not long, f"modules over {MAX_LINES} lines (split them along their seams): {long}"
