@@ -1,6 +1,6 @@
 r"""Linearisation of the whole closed loop (plant + TD + ESO + SEF + law) and its stability.
 
-The closed loop of :mod:`aiofl.engine.simulation` is an ODE
+The closed loop of :mod:`aiofl.engine.kernel` is an ODE
 :math:`\dot z = F(z; r, \tau_d, n)`.  This module writes the same equations in Python
 (:class:`ClosedLoop`, checked against the engine in the tests), finds the operating point
 :math:`z^*` with the reference held at a constant :math:`r^*` and the disturbance at its final
