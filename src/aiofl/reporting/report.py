@@ -319,8 +319,9 @@ def open_settings(rep: Reproduction) -> list[tuple[str, str, str]]:
             "Solver",
             "MATLAB ode45 (adaptive)",
             f"fixed-step {s1.method.upper()}, dt = {s1.dt:g} s, compiled: an adaptive solver "
-            "on a loop with sign() and |e|^α (α < 1) chatters and crawls (scipy RK45 took "
-            "113 s for the first 0.2 s of the LESO loop, see DESIGN.md); rerun a preset with "
+            "on a loop with sign() and |e|^α (α < 1) chatters and crawls "
+            "(benchmarks/bench_engine.py times scipy's RK45 against the engine on these "
+            "loops); rerun a preset with "
             "`aiofl simulate NAME --dt 5e-5` to check convergence in dt",
         ),
         (
