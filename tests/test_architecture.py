@@ -18,7 +18,8 @@ PACKAGE = SRC / "aiofl"
 
 LAYERS: tuple[tuple[str, ...], ...] = (
     # lowest first; a module may import from its own layer (without a cycle) or below
-    ("aiofl.components", "aiofl.outputs"),  # the paper's pieces; atomic file output
+    # the paper's pieces; atomic file output; the bounds on every input size
+    ("aiofl.components", "aiofl.outputs", "aiofl.limits"),
     ("aiofl.layout",),  # the member vocabulary: component kinds, parameter columns
     ("aiofl.controller", "aiofl.scenario"),  # plain descriptions of a design and a test
     ("aiofl.plants",),

@@ -7,6 +7,7 @@ import subprocess
 import sys
 import tomllib
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -40,6 +41,95 @@ def test_help_lists_the_commands() -> None:
     assert res.exit_code == 0
     for cmd in ("presets", "show", "simulate", "reproduce"):
         assert cmd in res.stdout
+
+
+def _click_group() -> Any:
+    import typer.main
+
+    return typer.main.get_command(app)
+
+
+COMMANDS = ("presets", "show", "simulate", "reproduce", "tune", "analyze")
+
+
+@pytest.mark.parametrize("flag", ["--version", "-V"])
+def test_version_prints_the_installed_version(flag: str) -> None:
+    from importlib.metadata import version
+
+    res = runner.invoke(app, [flag])
+    assert res.exit_code == 0
+    assert res.stdout.strip() == f"aiofl {version('aiofl')}"
+
+
+def test_python_dash_m_aiofl_is_the_same_command_line() -> None:
+    from importlib.metadata import version
+
+    out = subprocess.run(
+        [sys.executable, "-m", "aiofl", "--version"], capture_output=True, text=True, check=True
+    )
+    assert out.stdout.strip() == f"aiofl {version('aiofl')}"
+    bad = subprocess.run(
+        [sys.executable, "-m", "aiofl", "show", "no-such-preset"], text=True, capture_output=True
+    )
+    assert bad.returncode == 2 and "no-such-preset" in bad.stderr
+
+
+def test_the_commands_are_the_documented_ones() -> None:
+    assert tuple(_click_group().commands) == COMMANDS
+
+
+@pytest.mark.parametrize("command", [[], *([c] for c in COMMANDS)])
+def test_dash_h_is_help_on_every_command(command: list[str]) -> None:
+    long = runner.invoke(app, [*command, "--help"], env={"COLUMNS": "120"})
+    short = runner.invoke(app, [*command, "-h"], env={"COLUMNS": "120"})
+    assert long.exit_code == short.exit_code == 0
+    assert short.stdout == long.stdout
+    assert "Usage: aiofl" in short.stdout
+
+
+@pytest.mark.parametrize("command", [[], *([c] for c in COMMANDS)])
+def test_flags_are_shown_without_a_type(command: list[str]) -> None:
+    res = runner.invoke(app, [*command, "--help"], env={"COLUMNS": "160"})
+    assert "<bool>" not in res.stdout
+    group = _click_group()
+    cmd = group.commands[command[0]] if command else group
+    flags = [o for p in cmd.params if getattr(p, "is_flag", False) for o in p.opts]
+    for flag in flags:  # every flag is still listed
+        assert flag in res.stdout
+
+
+@pytest.mark.parametrize("name", COMMANDS)
+def test_every_command_has_examples_that_parse(name: str) -> None:
+    """Each example is shown in the help and parses with the command's own parser (its
+    options exist, their values have the right types, the arguments are all there)."""
+    import shlex
+
+    from aiofl.cli.app import EXAMPLES
+
+    res = runner.invoke(app, [name, "--help"], env={"COLUMNS": "200"})
+    assert "Examples:" in res.stdout
+    cmd = _click_group().commands[name]
+    assert EXAMPLES[name]
+    for example in EXAMPLES[name]:
+        assert example in res.stdout
+        words = shlex.split(example.split(">")[0])
+        assert words[:2] == ["aiofl", name]
+        with cmd.make_context(name, words[2:]) as ctx:  # raises a UsageError if wrong
+            given = {k for k, v in ctx.params.items() if v not in (None, False)}
+        flags = [w for w in words[2:] if w.startswith("--")]
+        assert len(given) >= len(flags), example
+
+
+def test_method_lists_its_choices_and_refuses_others(tmp_path: Path) -> None:
+    res = runner.invoke(app, ["simulate", "--help"], env={"COLUMNS": "160"})
+    assert "rk4|euler" in res.stdout
+    assert "[s]" in res.stdout  # units in brackets survive the rich markup
+    bad = runner.invoke(
+        app, ["simulate", "paper-s1-leso", "--method", "rk45", "-o", str(tmp_path / "o")]
+    )
+    assert bad.exit_code == 2
+    assert "'rk4'" in bad.stderr and "'euler'" in bad.stderr
+    assert _leftovers(tmp_path, "o") == []
 
 
 def test_presets_lists_every_shipped_preset() -> None:
@@ -201,3 +291,86 @@ def test_simulate_dt_override_is_used(tmp_path: Path) -> None:
     assert np.allclose(np.diff(t), 10 * 2e-4)  # decimation 10 of the preset
     rec = json.loads((out / "metrics.json").read_text())
     assert rec["scenario"] is None  # a custom file whose name encodes no paper scenario
+
+
+# ------------------------------------------------------------------------ best.toml
+PEND_PLANT = """
+name = "pendulum_file"
+states = ["theta", "theta_dot"]
+f = ["theta_dot", "-g/l*sin(theta) - c/(m*l**2)*theta_dot"]
+g = ["0", "1/(m*l**2)"]
+h = "theta"
+[params]
+m = 1.0
+l = 0.5
+c = 0.1
+g = 9.81
+"""
+
+COMMENTED_RUN = """# My pendulum run: keep this comment
+name = "pend-tune"
+plant = "plants/pend.toml"   # relative to this file
+
+[scenario]
+t_final = 2.0   # seconds
+[scenario.reference]
+kind = "step"
+amplitude = 0.5
+
+[controller]
+structure = "LADRC"
+rho = 2
+[controller.eso]
+omega0 = 60.0   # observer bandwidth
+alpha = [3.0, 3.0, 1.0]   # binomial for rho = 2
+[controller.td]
+omega = 8.0
+[controller.sef]
+omega_c = 8.0
+[controller.law]
+b0 = 4.0   # 1/(m l^2)
+
+[simulation]
+dt = 1e-3
+
+[tune]
+t_final = 1.0
+population = 4
+generations = 2
+seed = 3
+[tune.parameters]
+"eso.omega0" = { lo = 20.0, hi = 200.0, log = true }   # tuned
+"eso.alpha2" = { lo = 1.0, hi = 5.0 }
+"""
+
+
+@pytest.mark.slow  # compiles a kernel for the plant file and runs a tiny GA
+def test_best_toml_keeps_comments_and_a_relative_plant(tmp_path: Path, monkeypatch) -> None:
+    (tmp_path / "cfg" / "plants").mkdir(parents=True)
+    (tmp_path / "cfg" / "plants" / "pend.toml").write_text(PEND_PLANT)
+    (tmp_path / "cfg" / "run.toml").write_text(COMMENTED_RUN)
+    (tmp_path / "a").mkdir()
+    (tmp_path / "b").mkdir()
+    monkeypatch.chdir(tmp_path / "a")
+    res = runner.invoke(app, ["tune", "../cfg/run.toml", "--out", "../out", "--quiet"])
+    assert res.exit_code == 0, res.stderr
+    best_text = (tmp_path / "out" / "best.toml").read_text()
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    best = tomllib.loads(best_text)
+    # only the tuned values and the plant path changed; every other line is kept verbatim
+    assert best["plant"] == "../cfg/plants/pend.toml"
+    assert best["controller"]["eso"]["omega0"] == summary["best_values"]["eso.omega0"]
+    assert best["controller"]["eso"]["alpha"] == [3.0, summary["best_values"]["eso.alpha2"], 1.0]
+    changed = ("plant =", "omega0 =", "alpha =")
+    for line in COMMENTED_RUN.splitlines():
+        if not line.startswith(changed):
+            assert line in best_text.splitlines(), line
+    assert "# observer bandwidth" in best_text and "# binomial for rho = 2" in best_text
+    assert best_text.startswith("# Tuned by `aiofl tune`")
+    # it runs from another working folder and gives the tuned config's numbers
+    monkeypatch.chdir(tmp_path / "b")
+    sim = runner.invoke(app, ["simulate", "../out/best.toml", "--out", "sim"])
+    assert sim.exit_code == 0, sim.stderr
+    rec = json.loads((tmp_path / "b" / "sim" / "metrics.json").read_text())
+    full = summary["full_horizon"]
+    assert (rec["itae"], rec["isu"], rec["iau"]) == (full["itae"], full["isu"], full["iau"])

@@ -20,6 +20,7 @@ pytestmark = pytest.mark.slow
 
 FILES = ("metrics.json", "tables.md", "fig3.png", "fig4.png", "fig5.png", "report.html")
 KEYS = {"scenario", "structure", "source", "itae", "isu", "iau", "opi", "diverged", "diverged_at"}
+COMPUTED_KEYS = KEYS | {"preset", "tracking", "linearisation"}  # what the report measured
 
 
 def _records(reproduced) -> list[dict]:
@@ -49,7 +50,7 @@ def test_reproduce_succeeds_and_writes_every_file(reproduced) -> None:
 
 def test_metrics_has_paper_and_printed_records_for_every_case(reproduced) -> None:
     recs = _records(reproduced)
-    assert all(set(r) == KEYS for r in recs)
+    assert all(set(r) == (KEYS if r["source"] == "paper" else COMPUTED_KEYS) for r in recs)
     core = [r for r in recs if r["source"] in ("paper", "printed")]
     assert len(core) == 12
     assert {(r["scenario"], r["structure"], r["source"]) for r in core} == {
@@ -161,7 +162,8 @@ def test_extra_preset_patterns() -> None:
 def test_an_extra_preset_becomes_an_extra_row_everywhere(monkeypatch) -> None:
     import aiofl.reporting.cases as rp
     from aiofl.reporting.figures import scenario_figure
-    from aiofl.reporting.report import findings, tables_markdown
+    from aiofl.reporting.findings import findings
+    from aiofl.reporting.tables import tables_markdown
 
     real = rp.load_config
     # pretend a re-tuned preset is shipped: the printed INLESO set under another name
@@ -177,14 +179,15 @@ def test_an_extra_preset_becomes_an_extra_row_everywhere(monkeypatch) -> None:
     md = tables_markdown(rep)
     assert "| INLESO (retuned) | retuned-s1-inleso |" in md
     assert any("retuned-s1-inleso" in f for f in findings(rep))
-    assert len(scenario_figure(rep, 1).axes) == 2 * len(rep.scenario_runs(1)) == 2 * 3
+    # one row of three panels (output, tracking error, control) per run
+    assert len(scenario_figure(rep, 1).axes) == 3 * len(rep.scenario_runs(1)) == 3 * 3
 
 
 def test_report_groups_numerically_split_repeated_roots() -> None:
     import numpy as np
 
     from aiofl.components.observers import binomial_alphas, eso_gains
-    from aiofl.reporting.report import _roots_text
+    from aiofl.reporting.tables import _roots_text
 
     # a 5-fold observer pole at -44.7 comes back from np.roots split by ~1e-3 relative
     split = np.roots(np.r_[1.0, eso_gains(44.7, binomial_alphas(4))]).astype(complex)
@@ -193,3 +196,35 @@ def test_report_groups_numerically_split_repeated_roots() -> None:
     # distinct roots stay distinct, conjugate pairs print once with ±
     assert _roots_text(np.array([-1 + 2j, -1 - 2j, -1 + 2j, -1 - 2j, -3])) == "-1 ± 2j (×2), -3"
     assert _roots_text(np.array([0.5 + 3j, 0.5 - 3j, -2.0])) == "0.5 ± 3j, -2"
+
+
+def test_report_findings_are_few_and_verdicts_sit_beside_runs(reproduced) -> None:
+    page = (reproduced.out / "report.html").read_text()
+    (items,) = re.findall(r'<ul class="findings">(.*?)</ul>', page)
+    assert 3 <= items.count("<li>") <= 8
+    assert "Closed-loop linearisation beside the simulation" in page
+    md = (reproduced.out / "tables.md").read_text()
+    assert "## Closed-loop linearisation beside the simulation" in md
+    for rec in _records(reproduced):
+        if rec["source"] == "paper":
+            continue
+        row = next(line for line in md.splitlines() if line.startswith(f"| {rec['preset']}"))
+        if rec["diverged"]:
+            assert f"diverges at t = {rec['diverged_at']:.2f} s" in row
+        else:
+            assert f"{rec['tracking']['max_abs_error']:.3g} rad" in row
+    # tables are in the SLFJM's units
+    assert "ITAE computed [rad·s²]" in md and "ISU computed [V²·s]" in md
+
+
+def test_report_cites_only_files_in_the_repository(reproduced) -> None:
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    page = (reproduced.out / "report.html").read_text()
+    page = re.sub(r'src="data:[^"]*"', "", page)
+    cited = set(re.findall(r"[\w./-]+\.(?:py|md|toml|txt|json|csv|html|png|ipynb)\b", page))
+    written = set(FILES) | {"trajectory.csv"}
+    missing = [c for c in cited if c not in written and not (root / c).exists()]
+    assert not missing, missing
+    assert "benchmarks/bench_engine.py" in cited  # the check is not vacuous

@@ -2,7 +2,11 @@
 
 A config file (or a preset name such as ``paper-s1-leso``) describes one run: the plant,
 the scenario, the controller, the simulation settings and the OPI weights.  Every table
-rejects unknown keys; every number is range-checked; a bad file raises
+rejects unknown keys; every number is range-checked and strictly typed (``true`` or
+``"50 "`` is no number; an integer field takes only an integer); a config must set the
+:data:`REQUIRED_KEYS` (an empty or cut-off file is refused, not run with defaults); the
+horizon must be a whole number of steps, events must fall within it, and the run's size
+is bounded before anything is allocated (:mod:`aiofl.limits`).  A bad file raises
 :class:`ConfigError` whose message names the field and the allowed range.
 
 .. code-block:: toml
@@ -23,18 +27,22 @@ rejects unknown keys; every number is range-checked; a bad file raises
 
     [controller]
     structure = "LESO"               # LESO | INLESO | LADRC | IOFL (sets the kinds)
-    rho = 4
-    n_feedback = 2
+    rho = 4                          # default: the plant's relative degree
+    n_feedback = 2                   # default: rho; 2 behind the Han TD / ITD (LESO, INLESO)
+    # allow_rho_mismatch = true      # accept a rho other than the plant's relative degree
+    # allow_b0_sign_mismatch = true  # accept a b0 whose sign differs from the plant's beta
     [controller.eso]
     omega0 = 513.8283
-    alpha = [8.772, 0.1946, 0.7384, 9.6881e-3, 2.2651e-6]   # or "binomial"
+    alpha = [8.772, 0.1946, 0.7384, 9.6881e-3, 2.2651e-6]   # default "binomial" (Gao)
+    init = "zero"                    # or "output": xi_hat_1(0) = the first measurement
     [controller.td]
     R = 2408.6918
     [controller.sef]
-    alpha = [0.3804, 0.4583]
+    alpha = [0.3804, 0.4583]         # one entry per fed-back state (>= n_feedback)
     delta = [16.6108, 14.6238]
     [controller.law]
-    b0 = 22.771
+    b0 = 22.771                      # finite, non-zero, with the sign of the plant's beta
+    u_max = inf                      # actuator range [u_min, u_max]; u_min omitted: -u_max
 
     [simulation]
     dt = 1e-4
@@ -51,6 +59,7 @@ paper; each maps onto the engine columns of :data:`aiofl.layout.FLOAT_COLUMNS`
 
 from __future__ import annotations
 
+import copy
 import math
 import tomllib
 from dataclasses import dataclass
@@ -63,18 +72,34 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_valida
 from aiofl import layout as L
 from aiofl.components.metrics import OPIWeights
 from aiofl.controller import STRUCTURES, Controller
+from aiofl.limits import (
+    DT_MAX,
+    MAX_NOISE_SAMPLES,
+    MAX_STEPS,
+    MAX_TRAJECTORY_BYTES,
+    T_FINAL_MAX,
+    check_run_size,
+)
 from aiofl.plants.base import Plant, PlantError
 from aiofl.scenario import Reference, Scenario
 
 __all__ = [
+    "MAX_NOISE_SAMPLES",
+    "MAX_STEPS",
+    "MAX_TRAJECTORY_BYTES",
+    "REQUIRED_KEYS",
     "ConfigError",
     "RunConfig",
+    "check_run_size",
     "list_presets",
     "load_config",
     "parse_config",
     "preset_text",
     "resolve_plant",
 ]
+
+#: keys every config must set (an empty or cut-off file is refused, not run with defaults)
+REQUIRED_KEYS = ("plant", "scenario.t_final", "controller.structure", "simulation.dt")
 
 PosFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
@@ -86,7 +111,9 @@ class ConfigError(ValueError):
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # strict: no bool or string coercion into numbers (``true``, ``"50 "`` are refused); a
+    # float field takes a TOML integer or float, an int field only an integer
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
 
 # ---------------------------------------------------------------------- scenario
@@ -110,7 +137,7 @@ class ReferenceModel(_Model):
 class ScenarioModel(_Model):
     name: str = "custom"
     reference: ReferenceModel = Field(default_factory=ReferenceModel)
-    t_final: Annotated[float, Field(gt=0, le=1e4)] = 20.0
+    t_final: Annotated[float, Field(gt=0, le=T_FINAL_MAX, allow_inf_nan=False)] = 20.0
     disturbance_amplitude: Finite = 0.0
     disturbance_time: NonNegFloat = 0.0
     plant_scale: dict[str, PosFloat] = Field(default_factory=dict)
@@ -118,8 +145,25 @@ class ScenarioModel(_Model):
     parameter_change_time: NonNegFloat = 0.0
     noise_variance: NonNegFloat = 0.0
     noise_hold: PosFloat = 1e-3
-    noise_seed: Annotated[int, Field(ge=0)] = 0
+    noise_seed: Annotated[int, Field(ge=0, lt=2**63)] = 0
     x0: list[Finite] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _events_within_horizon(self) -> ScenarioModel:
+        # an event after the horizon never happens: refused, so a typo (10 for 1.0, or a
+        # 10-s event in a 5-s run) is not silently ignored
+        events = {
+            "disturbance_time": self.disturbance_time,
+            "parameter_change_time": self.parameter_change_time,
+            "reference.t_step": self.reference.t_step,
+        }
+        for key, t in events.items():
+            if t > self.t_final:
+                raise ValueError(
+                    f"scenario.{key} = {t:g} s is after the horizon t_final = "
+                    f"{self.t_final:g} s; allowed: 0 <= {key} <= t_final"
+                )
+        return self
 
     def build(self) -> Scenario:
         ref = Reference(**{**self.reference.model_dump(), "samples": tuple(self.reference.samples)})
@@ -136,6 +180,8 @@ class ESOModel(_Model):
     k_beta: NonNegFloat = 0.0
     g_alpha: Annotated[float, Field(gt=0, le=2)] = 1.0
     g_beta: Annotated[float, Field(ge=0, le=2)] = 0.0
+    # "zero": xi_hat(0) = 0; "output": xi_hat_1(0) = y_meas(0), the first measurement
+    init: Literal["zero", "output"] = "zero"
 
 
 class TDModel(_Model):
@@ -158,8 +204,32 @@ class SEFModel(_Model):
 
 
 class LawModel(_Model):
-    b0: PosFloat = 1.0
-    u_max: Annotated[float, Field(gt=0)] = math.inf
+    b0: Finite = 1.0  # non-zero; negative for a plant whose high-frequency gain is negative
+    u_max: float = math.inf  # actuator range [u_min, u_max]; u_min omitted: [-u_max, u_max]
+    u_min: float | None = None
+
+    @field_validator("b0")
+    @classmethod
+    def _b0(cls, v: float) -> float:
+        if v == 0.0:
+            raise ValueError(
+                "b0 = 0; allowed: finite and non-zero (negative for a plant "
+                "whose high-frequency gain is negative)"
+            )
+        return v
+
+    @model_validator(mode="after")
+    def _range(self) -> LawModel:
+        lo, hi = self.u_min, self.u_max
+        if math.isnan(hi) or (lo is not None and math.isnan(lo)):
+            raise ValueError("u_min / u_max must be numbers (inf for no limit), not nan")
+        if lo is None and not hi > 0:
+            raise ValueError(
+                f"u_max = {hi}; allowed: > 0 (the range is [-u_max, u_max] unless u_min is given)"
+            )
+        if lo is not None and not lo < hi:
+            raise ValueError(f"u_min = {lo} must be < u_max = {hi}")
+        return self
 
 
 class ControllerModel(_Model):
@@ -169,7 +239,10 @@ class ControllerModel(_Model):
     sef_kind: Literal["nonlinear", "improved", "linear"] | None = None
     law_kind: Literal["aiofl", "iofl"] | None = None
     rho: Annotated[int, Field(ge=1, le=L.RHO_MAX)] | None = None
-    n_feedback: Annotated[int, Field(ge=1, le=L.RHO_MAX)] = 2
+    # default: rho, or the paper's 2 behind the Han TD / ITD (controller.default_n_feedback)
+    n_feedback: Annotated[int, Field(ge=1, le=L.RHO_MAX)] | None = None
+    allow_rho_mismatch: bool = False  # run a rho other than the plant's relative degree
+    allow_b0_sign_mismatch: bool = False  # run a b0 whose sign differs from the plant's beta
     eso: ESOModel = Field(default_factory=ESOModel)
     td: TDModel = Field(default_factory=TDModel)
     sef: SEFModel = Field(default_factory=SEFModel)
@@ -187,6 +260,7 @@ class ControllerModel(_Model):
         values: dict[str, float] = {}
         eso = self.eso.model_dump()
         alphas = eso.pop("alpha")
+        eso_init = eso.pop("init")
         for key, val in eso.items():
             values[f"eso.{key}"] = val
         if alphas == "binomial":
@@ -201,6 +275,7 @@ class ControllerModel(_Model):
         values.update({f"eso.alpha{i}": a for i, a in enumerate(alphas, 1)})
         for key, val in self.td.model_dump().items():
             values[f"td.{key}"] = val
+        vectors = {k: v for k, v in self.sef.model_dump().items() if isinstance(v, list)}
         for key, val in self.sef.model_dump().items():
             if isinstance(val, list):
                 if len(val) > L.RHO_MAX:
@@ -209,25 +284,39 @@ class ControllerModel(_Model):
             elif val is not None:
                 values[f"sef.{key}"] = val
         for key, val in self.law.model_dump().items():
-            values[f"law.{key}"] = val
-        return Controller(
+            if val is not None:  # u_min omitted: the symmetric range [-u_max, u_max]
+                values[f"law.{key}"] = val
+        controller = Controller(
             eso=kinds["eso"],
             td=kinds["td"],
             sef=kinds["sef"],
             law=kinds["law"],
             rho=rho,
-            n_feedback=self.n_feedback,
+            n_feedback=self.n_feedback,  # None: rho, or 2 behind the Han TD / ITD
             values=values,
             structure=self.structure or "custom",
+            eso_init=eso_init,
+            allow_rho_mismatch=self.allow_rho_mismatch,
+            allow_b0_sign_mismatch=self.allow_b0_sign_mismatch,
         )
+        m = controller.n_feedback
+        for key, val in vectors.items():  # a short vector is refused, never padded
+            if len(val) < m:  # type: ignore[operator]
+                raise ValueError(
+                    f"controller.sef.{key} has {len(val)} entries; allowed: one per fed-back "
+                    f"state, {m}..{L.RHO_MAX} (n_feedback = {m}; missing entries are not "
+                    "filled in)"
+                )
+        return controller
 
 
 # -------------------------------------------------------------------- the rest
 class SimulationModel(_Model):
-    dt: Annotated[float, Field(gt=0, le=0.1)] = 1e-4
+    dt: Annotated[float, Field(gt=0, le=DT_MAX, allow_inf_nan=False)] = 1e-4
     method: Literal["rk4", "euler"] = "rk4"
-    decimation: Annotated[int, Field(ge=1)] = 10
-    divergence_threshold: Annotated[float, Field(gt=0)] = 1e10
+    decimation: Annotated[int, Field(ge=1, le=MAX_STEPS)] = 10
+    # finite: an infinite threshold would switch divergence detection off
+    divergence_threshold: Annotated[float, Field(gt=0, le=1e300, allow_inf_nan=False)] = 1e10
 
 
 class MetricsModel(_Model):
@@ -294,6 +383,28 @@ class RunConfig:
             divergence_threshold=self.divergence_threshold,
         )
 
+    def with_overrides(
+        self,
+        *,
+        t_final: float | None = None,
+        dt: float | None = None,
+        method: str | None = None,
+        source: str = "",
+    ) -> RunConfig:
+        """This config with ``[scenario] t_final`` and ``[simulation] dt`` / ``method``
+        replaced, validated again by :func:`parse_config`: a command-line override passes
+        exactly the checks a value in the file does (types, ranges, run size, events within
+        the horizon).  Raises :class:`ConfigError`; ``source`` names the override in it."""
+        data = copy.deepcopy(self.raw)
+        for table, key, value in (
+            ("scenario", "t_final", t_final),
+            ("simulation", "dt", dt),
+            ("simulation", "method", method),
+        ):
+            if value is not None:
+                data.setdefault(table, {})[key] = value
+        return parse_config(data, source or f"{self.name} (overridden)")
+
 
 def _allowed_keys(loc: tuple[Any, ...]) -> list[str]:
     """Field names of the table at ``loc[:-1]`` (walking the config models)."""
@@ -310,16 +421,90 @@ def _allowed_keys(loc: tuple[Any, ...]) -> list[str]:
     return list(model.model_fields)
 
 
+def _field_range(loc: tuple[Any, ...]) -> str:
+    """'a number, > 0, <= 0.1' for the field at ``loc`` (from its pydantic constraints)."""
+    model: Any = ConfigModel
+    field: Any = None
+    for part in loc:
+        if not isinstance(part, str) or model is None:
+            return ""
+        field = model.model_fields.get(part)
+        if field is None:
+            return ""
+        candidates = (field.annotation, *getattr(field.annotation, "__args__", ()))
+        models = [a for a in candidates if isinstance(a, type) and issubclass(a, BaseModel)]
+        model = models[0] if models else None
+    if field is None:
+        return ""
+    metadata = list(field.metadata)
+    for arg in getattr(field.annotation, "__args__", ()):  # Annotated[...] | None
+        metadata += list(getattr(arg, "__metadata__", ()))
+        for inner in getattr(arg, "__metadata__", ()):
+            metadata += list(getattr(inner, "metadata", ()))
+    words = {"gt": ">", "ge": ">=", "lt": "<", "le": "<="}
+    bounds = [
+        f"{words[k]} {getattr(m, k):g}"
+        for m in metadata
+        for k in words
+        if isinstance(getattr(m, k, None), (int, float))
+    ]
+    text = repr(field.annotation)
+    kind = "an integer" if "int" in text and "float" not in text else "a number"
+    if "float" not in text and "int" not in text:
+        return ""
+    return ", ".join([kind, *bounds])
+
+
+_BOUNDS = {
+    "greater_than": ("gt", "greater than"),
+    "greater_than_equal": ("ge", "greater than or equal to"),
+    "less_than": ("lt", "less than"),
+    "less_than_equal": ("le", "less than or equal to"),
+}
+
+
 def _format_error(exc: ValidationError, source: str) -> str:
     lines = [f"invalid config {source}:"]
     for err in exc.errors():
         loc = ".".join(str(p) for p in err["loc"])
-        msg = err["msg"]
+        msg = err["msg"].removeprefix("Value error, ")
+        bound = _BOUNDS.get(err["type"])
+        if bound is not None and bound[0] in err.get("ctx", {}):  # pydantic prints 1e300 in full
+            msg = f"Input should be {bound[1]} {err['ctx'][bound[0]]:g}"
         if err["type"] == "extra_forbidden":
             allowed = _allowed_keys(err["loc"])
             msg = "unknown key" + (f"; allowed: {', '.join(allowed)}" if allowed else "")
-        lines.append(f"  {loc}: {msg} (got {err.get('input')!r})")
+        elif err["type"].endswith(("_type", "_parsing", "from_float", "finite_number")):
+            allowed = _field_range(err["loc"])
+            msg += f"; allowed: {allowed}" if allowed else ""
+        if isinstance(err.get("input"), dict) and err["type"] == "value_error":
+            # a table's own check: its message names the fields and values
+            lines.append(f"  {msg}" if msg.startswith(f"{loc}.") else f"  {loc}: {msg}")
+            continue
+        got = repr(err.get("input"))
+        got = got if len(got) <= 100 else got[:97] + "..."
+        lines.append(f"  {loc or 'config'}: {msg} (got {got})")
     return "\n".join(lines)
+
+
+def _missing_keys(data: dict[str, Any]) -> list[str]:
+    """The :data:`REQUIRED_KEYS` that ``data`` does not set."""
+    missing = []
+    for key in REQUIRED_KEYS:
+        node: Any = data
+        for part in key.split("."):
+            node = node.get(part) if isinstance(node, dict) else None
+        if node is None:
+            missing.append(key)
+    return missing
+
+
+def _missing_text(missing: list[str]) -> str:
+    return (
+        f"  missing required key(s) {', '.join(missing)}; a config sets at least "
+        f"{', '.join(REQUIRED_KEYS)} (an empty or cut-off file is refused rather than run "
+        "with defaults)"
+    )
 
 
 _FILE_PLANTS: dict[tuple[str, int], Plant] = {}
@@ -359,11 +544,23 @@ def parse_config(
     """Validate a config dict and build the engine objects; raises :class:`ConfigError`.
 
     ``base_dir`` resolves a relative ``plant = "file.toml"`` (defaults to the working folder).
+    Types are strict (no bool or string coercion into numbers), the :data:`REQUIRED_KEYS`
+    must be set, and the run's size is bounded before anything is allocated
+    (:func:`check_run_size`).
     """
+    if not isinstance(data, dict):
+        raise ConfigError(f"invalid config {source}: a TOML table expected, got {type(data)}")
+    missing = _missing_keys(data)
+    note = "\n" + _missing_text(missing) if missing else ""
     try:
         model = ConfigModel.model_validate(data)
     except ValidationError as exc:
-        raise ConfigError(_format_error(exc, source)) from None
+        raise ConfigError(_format_error(exc, source) + note) from None
+    sim, sc = model.simulation, model.scenario
+    try:
+        check_run_size(sc.t_final, sim.dt, noise_hold=sc.noise_hold)
+    except ValueError as exc:
+        raise ConfigError(f"invalid config {source}: {exc}{note}") from None
     plant = resolve_plant(model.plant, base_dir)
     plant_file = Path(model.plant)
     if base_dir is not None and plant_file.suffix == ".toml" and not plant_file.is_absolute():
@@ -378,14 +575,16 @@ def parse_config(
                 f"scenario.x0 has {len(scenario.x0)} entries; plant {plant.name!r} has "
                 f"{plant.n_states} states"
             )
-        if controller.law == "iofl" and plant.normal_form is None:
-            raise ValueError(
-                f"controller.law_kind = 'iofl' needs the plant's normal form; plant "
-                f"{plant.name!r} has none"
-            )
+        # the plant's functions are finite at the initial state; rho vs the relative degree,
+        # IOFL's normal form, the sign of b0 (Controller.check_plant)
+        plant.check(scenario.x0 or [0.0] * plant.n_states)
+        controller.check_plant(plant, scenario.x0 or None)
+        columns = len(L.trajectory_columns(plant.n_states))
+        check_run_size(sc.t_final, sim.dt, trajectory_columns=columns, decimation=sim.decimation)
     except (ValueError, PlantError) as exc:
-        raise ConfigError(f"invalid config {source}: {exc}") from None
-    sim = model.simulation
+        raise ConfigError(f"invalid config {source}: {exc}{note}") from None
+    if missing:
+        raise ConfigError(f"invalid config {source}:{note}")
     return RunConfig(
         name=model.name,
         description=model.description,
@@ -424,11 +623,15 @@ def load_config(path_or_preset: str | Path) -> RunConfig:
     if p.suffix == ".toml" or p.exists():
         if not p.is_file():
             raise ConfigError(f"config file {str(p)!r} does not exist")
-        text, source, base = p.read_text(encoding="utf-8"), str(p), p.parent
+        source, base = str(p), p.parent
+        try:
+            text = p.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError) as exc:
+            raise ConfigError(f"config file {source!r} cannot be read: {exc}") from None
     else:
         text, source, base = preset_text(str(path_or_preset)), f"preset {path_or_preset!r}", None
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
+    except tomllib.TOMLDecodeError as exc:  # its message names the line and column
         raise ConfigError(f"malformed TOML in {source}: {exc}") from None
     return parse_config(data, source, base)

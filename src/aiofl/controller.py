@@ -1,17 +1,37 @@
-"""A controller as data: component kinds plus named parameter values.
+r"""A controller as data: component kinds plus named parameter values.
 
 :class:`Controller` is the host-side description of one closed-loop controller (ESO,
 tracking differentiator, state error feedback, linearizing law).  It packs into one
 integer row and one float row of the engine's batch arrays (:mod:`aiofl.layout`); a batch
 of controllers that differ only in parameter values is built with
 :func:`controller_batch`, which is what the tuner does for a whole population.
+
+Defaults are chosen so that a controller built with few arguments works:
+
+* ``n_feedback`` (how many estimated states the SEF feeds back) defaults to ρ, full state
+  feedback of the chain of integrators (14), which a linear SEF needs to place all ρ
+  tracking poles; only with Han's TD (18) or the ITD (21), which supply r and ṙ alone (the
+  paper's LESO and INLESO structures), it defaults to the paper's 2 (min(2, ρ)).
+* the ESO's :math:`\alpha_i` default to Gao's binomial :math:`\binom{\rho+1}{i}`
+  (observer poles at :math:`-\omega_0`, :func:`aiofl.components.observers.binomial_alphas`),
+  as ``alpha = "binomial"`` does in a TOML config.
+* the actuator range is :math:`[u_{min}, u_{max}] = [-\infty, \infty]`; a ``law.u_max``
+  alone gives the symmetric range :math:`[-u_{max}, u_{max}]`.
+
+:meth:`Controller.check_plant` refuses a controller that cannot drive a plant: ρ different
+from the plant's known relative degree (unless ``allow_rho_mismatch``), an IOFL law on a
+plant without a normal form (or where β(x0) = 0), and a ``law.b0`` whose sign differs
+from the plant's high-frequency gain :math:`\beta = L_gL_f^{\rho-1}h` at the initial state
+(unless ``allow_b0_sign_mismatch``).  The engine and the config loader call it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+import math
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from types import MappingProxyType
+from typing import Any, Protocol
 
 import numpy as np
 from numpy.typing import NDArray
@@ -19,7 +39,14 @@ from numpy.typing import NDArray
 from aiofl import layout as L
 from aiofl.components.observers import binomial_alphas
 
-__all__ = ["STRUCTURES", "Controller", "ControllerBatch", "controller_batch"]
+__all__ = [
+    "STRUCTURES",
+    "Controller",
+    "ControllerBatch",
+    "PlantLike",
+    "controller_batch",
+    "default_n_feedback",
+]
 
 STRUCTURES = MappingProxyType(
     {
@@ -37,7 +64,8 @@ _DEFAULTS: dict[str, float] = {name: 0.0 for name in L.FLOAT_COLUMNS}
 _DEFAULTS.update(
     {
         "law.b0": 1.0,
-        "law.u_max": float("inf"),
+        "law.u_max": math.inf,
+        "law.u_min": math.nan,  # "not given": the kernel uses -u_max (a symmetric range)
         "eso.omega0": 10.0,
         "eso.k_alpha": 1.0,
         "eso.k_beta": 0.0,
@@ -59,9 +87,37 @@ for _i in range(1, L.RHO_MAX + 1):
     _DEFAULTS[f"sef.delta{_i}"] = 1.0
 
 
+def default_n_feedback(rho: int, td: str) -> int:
+    r"""The default number of fed-back estimated states for order ``rho`` and TD kind ``td``.
+
+    ρ (full state feedback of the chain (14); a linear SEF needs all ρ to place ρ poles),
+    except behind Han's TD (18) or the ITD (21), which supply only :math:`r_1, r_2`: there
+    the paper's 2 (text after eq. 22), i.e. :math:`\min(2, \rho)`.
+    """
+    return min(2, rho) if td in ("han", "improved") else rho
+
+
+class PlantLike(Protocol):
+    """What :meth:`Controller.check_plant` reads of a plant (:class:`aiofl.plants.base.Plant`)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def n_states(self) -> int: ...
+
+    @property
+    def relative_degree(self) -> int | None: ...
+
+    @property
+    def normal_form(self) -> Callable[..., Any] | None: ...
+
+    def param_vector(self) -> NDArray[np.float64]: ...
+
+
 @dataclass(frozen=True)
 class Controller:
-    """One controller: which components, their order, and every parameter value by name.
+    r"""One controller: which components, their order, and every parameter value by name.
 
     Parameters
     ----------
@@ -72,13 +128,26 @@ class Controller:
     rho
         Controller order ρ (the plant's relative degree); the ESO has ρ+1 states.
     n_feedback
-        How many estimated states the SEF feeds back (paper: 2).
+        How many estimated states the SEF feeds back, 1..ρ.  Default
+        (:func:`default_n_feedback`): ρ, or the paper's 2 behind Han's TD / the ITD, which
+        supply only two reference derivatives.
     values
         Parameter values by :data:`aiofl.layout.FLOAT_COLUMNS` name; unspecified ones take
-        neutral defaults.  ``eso.alpha1..`` may be replaced by Gao's binomial choice with
-        :meth:`with_binomial_alphas`.
+        defaults (:meth:`value`): ``eso.alpha1..alpha{ρ+1}`` Gao's binomial
+        :math:`\binom{\rho+1}{i}`, ``law.b0`` 1, no actuator limits, unit SEF vectors.
+        ``law.b0`` must be finite and non-zero (negative for a plant whose high-frequency
+        gain is negative); ``law.u_min < law.u_max`` (``u_min`` omitted: ``-u_max``).
     structure
         Label used in reports (``"LESO"``, ``"INLESO"``, ``"LADRC"``, ``"IOFL"``, ...).
+    eso_init
+        ``"zero"``: :math:`\hat\xi(0) = 0`; ``"output"``: :math:`\hat\xi_1(0) = y_m(0)`, the
+        first measurement, the other states 0 (no initial output-estimate error).
+    allow_rho_mismatch
+        Let :meth:`check_plant` accept a ρ different from the plant's known relative degree
+        (e.g. to study a reduced-order design); refused otherwise.
+    allow_b0_sign_mismatch
+        Let :meth:`check_plant` accept a ``law.b0`` whose sign differs from the plant's
+        :math:`\beta(x_0)`; refused otherwise.
     """
 
     eso: str = "linear"
@@ -86,9 +155,12 @@ class Controller:
     sef: str = "nonlinear"
     law: str = "aiofl"
     rho: int = 4
-    n_feedback: int = 2
+    n_feedback: int | None = None
     values: Mapping[str, float] = field(default_factory=dict)
     structure: str = "custom"
+    eso_init: str = "zero"
+    allow_rho_mismatch: bool = False
+    allow_b0_sign_mismatch: bool = False
 
     def __post_init__(self) -> None:
         for kind, table in (
@@ -96,18 +168,23 @@ class Controller:
             ("td", L.TD_KINDS),
             ("sef", L.SEF_KINDS),
             ("law", L.LAW_KINDS),
+            ("eso_init", L.ESO_INIT_KINDS),
         ):
             if getattr(self, kind) not in table:
                 raise ValueError(
                     f"controller.{kind} = {getattr(self, kind)!r}; allowed: {', '.join(table)}"
                 )
+        if isinstance(self.rho, bool) or not isinstance(self.rho, (int, np.integer)):
+            raise ValueError(f"controller.rho = {self.rho!r}; allowed: an integer 1..{L.RHO_MAX}")
         if not 1 <= self.rho <= L.RHO_MAX:
             raise ValueError(f"controller.rho = {self.rho}; allowed: 1..{L.RHO_MAX}")
-        if not 1 <= self.n_feedback <= self.rho:
+        if self.n_feedback is None:
+            object.__setattr__(self, "n_feedback", default_n_feedback(self.rho, self.td))
+        if not 1 <= self.n_feedback <= self.rho:  # type: ignore[operator]
             raise ValueError(
                 f"controller.n_feedback = {self.n_feedback}; allowed: 1..rho ({self.rho})"
             )
-        if self.td in ("han", "improved") and self.n_feedback > 2:
+        if self.td in ("han", "improved") and self.n_feedback > 2:  # type: ignore[operator]
             raise ValueError(
                 f"controller.n_feedback = {self.n_feedback} needs {self.n_feedback} reference "
                 f"derivatives but the {self.td!r} differentiator supplies 2; allowed: 1..2 "
@@ -118,30 +195,167 @@ class Controller:
             raise ValueError(f"unknown controller parameter(s): {', '.join(unknown)}")
         vals = {k: float(v) for k, v in self.values.items()}
         object.__setattr__(self, "values", MappingProxyType(vals))
+        b0 = self.value("law.b0")
+        if not (math.isfinite(b0) and b0 != 0.0):
+            raise ValueError(
+                f"controller.law.b0 = {b0}; allowed: finite and non-zero (negative for a "
+                "plant whose high-frequency gain is negative)"
+            )
+        self.u_range()  # validates law.u_min / law.u_max
 
     @classmethod
-    def from_structure(cls, structure: str, *, rho: int = 4, **kwargs: object) -> Controller:
-        """A controller with the component kinds of a named structure (see STRUCTURES)."""
+    def from_structure(cls, structure: str, *, rho: int = 4, **kwargs: Any) -> Controller:
+        """A controller with the component kinds of a named structure (see STRUCTURES).
+
+        The other fields (``n_feedback``, ``values``, ...) are passed on; their defaults are
+        the class's (binomial ESO α, ``n_feedback`` from :func:`default_n_feedback`).
+        """
         if structure not in STRUCTURES:
             raise ValueError(f"structure {structure!r}; allowed: {', '.join(STRUCTURES)}")
         eso, td, sef, law = STRUCTURES[structure]
-        return cls(eso=eso, td=td, sef=sef, law=law, rho=rho, structure=structure, **kwargs)  # type: ignore[arg-type]
+        return cls(eso=eso, td=td, sef=sef, law=law, rho=rho, structure=structure, **kwargs)
 
     def value(self, name: str) -> float:
-        """Parameter ``name``, or its default."""
-        return self.values.get(name, _DEFAULTS[name])
+        r"""Parameter ``name``, or its default.
+
+        Defaults: ``eso.alpha{i}`` (i ≤ ρ+1) Gao's :math:`\binom{\rho+1}{i}`;
+        ``law.u_min`` :math:`-u_{max}`; the rest from a fixed table (``law.b0`` 1,
+        ``law.u_max`` ∞, SEF ``k``/``alpha``/``delta`` 1, ...).
+        """
+        if name in self.values:
+            return self.values[name]
+        if name.startswith("eso.alpha"):
+            i = int(name[len("eso.alpha") :])
+            if i <= self.rho + 1:
+                return float(binomial_alphas(self.rho)[i - 1])
+        if name == "law.u_min":
+            return -self.value("law.u_max")
+        return _DEFAULTS[name]
+
+    def u_range(self) -> tuple[float, float]:
+        """The actuator range :math:`(u_{min}, u_{max})` the law's output is clipped to."""
+        u_max = self.value("law.u_max")
+        u_min = self.value("law.u_min")
+        if math.isnan(u_max) or math.isnan(u_min):
+            raise ValueError(
+                f"controller.law.u_min = {u_min}, u_max = {u_max}; allowed: numbers (±inf "
+                "for no limit)"
+            )
+        if not u_min < u_max:
+            given = "law.u_min" in self.values
+            raise ValueError(
+                f"controller.law.u_min = {u_min} must be < u_max = {u_max}"
+                if given
+                else f"controller.law.u_max = {u_max}; allowed: > 0 (the range is "
+                "[-u_max, u_max] unless u_min is given)"
+            )
+        return u_min, u_max
 
     def with_values(self, **values: float) -> Controller:
         """A copy with some parameters replaced; dotted names via ``**{"eso.omega0": 50}``."""
         return replace(self, values={**self.values, **values})
 
     def with_binomial_alphas(self) -> Controller:
-        r"""A copy with Gao's :math:`\alpha_i = \binom{\rho+1}{i}` (observer poles at -ω0)."""
+        r"""A copy with Gao's :math:`\alpha_i = \binom{\rho+1}{i}` (observer poles at -ω0)
+        written explicitly (they are also the default of unset α)."""
         alphas = binomial_alphas(self.rho)
         return self.with_values(**{f"eso.alpha{i + 1}": a for i, a in enumerate(alphas)})
 
+    # ------------------------------------------------------------------ plant checks
+    def plant_beta(self, plant: PlantLike, x0: Sequence[float] | None = None) -> float | None:
+        r"""The plant's high-frequency gain :math:`\beta(x_0) = L_gL_f^{\rho-1}h(x_0)`.
+
+        From its normal form at the nominal parameters and the initial state ``x0``
+        (default: 0, the engine's default initial state); None if the plant has no normal
+        form or no known relative degree.
+        """
+        rd = plant.relative_degree
+        nf = plant.normal_form
+        if nf is None or rd is None:
+            return None
+        x = np.zeros(plant.n_states) if not x0 else np.asarray(x0, dtype=np.float64)
+        if x.shape != (plant.n_states,):
+            raise ValueError(f"x0 has {x.size} entries; plant {plant.name!r} has {plant.n_states}")
+        try:
+            out = np.asarray(nf(x, plant.param_vector()), dtype=np.float64).ravel()
+        except Exception as exc:  # a user function that fails at x0
+            raise ValueError(
+                f"plant {plant.name!r}: normal_form(x, p) failed at x0 = {x.tolist()}: {exc}"
+            ) from exc
+        if out.shape != (rd + 2,):
+            raise ValueError(
+                f"plant {plant.name!r}: normal_form(x, p) must return ρ+2 = {rd + 2} floats "
+                f"(ξ_1..ξ_ρ, α, β); got {out.shape[0]}"
+            )
+        return float(out[rd + 1])
+
+    def check_plant(self, plant: PlantLike, x0: Sequence[float] | None = None) -> None:
+        r"""Raise ``ValueError`` if this controller cannot drive ``plant`` from ``x0``.
+
+        * ρ must equal the plant's relative degree where it is known (an AIOFL loop of
+          another order runs but tracks the wrong derivative chain), unless
+          ``allow_rho_mismatch``;
+        * the IOFL law needs the plant's normal form, ρ equal to the relative degree (no
+          override: the law is built from that normal form) and
+          :math:`\beta(x_0) \ne 0` (it divides by β);
+        * ``law.b0`` must have the sign of :math:`\beta(x_0)` (the ESO's input gain, eq. 5:
+          with the wrong sign the loop's feedback is positive), unless
+          ``allow_b0_sign_mismatch``.
+        """
+        rd = plant.relative_degree
+        name = plant.name
+        if self.law == "iofl":
+            if plant.normal_form is None or rd is None:
+                raise ValueError(
+                    f"controller.law = 'iofl' needs the plant's normal form (ξ, α(x), β(x)); "
+                    f"plant {name!r} has none: give the Plant normal_form and relative_degree, "
+                    "use a symbolic plant file, or law = 'aiofl' (which needs only ρ and b0)"
+                )
+            if rd != self.rho:
+                raise ValueError(
+                    f"controller.rho = {self.rho} but plant {name!r} has relative degree {rd}; "
+                    "the IOFL law is built from the plant's normal form and needs them equal "
+                    f"(set controller.rho = {rd})"
+                )
+        elif rd is not None and rd != self.rho and not self.allow_rho_mismatch:
+            raise ValueError(
+                f"controller.rho = {self.rho} but plant {name!r} has relative degree {rd}; "
+                f"set controller.rho = {rd}, or controller.allow_rho_mismatch = true "
+                "(Python: Controller(..., allow_rho_mismatch=True)) to run a controller of "
+                "another order"
+            )
+        if x0 and len(x0) != plant.n_states:
+            raise ValueError(
+                f"scenario.x0 has {len(x0)} entries; plant {name!r} has {plant.n_states} states"
+            )
+        beta = self.plant_beta(plant, x0)
+        where = f"x0 = {list(x0) if x0 else [0.0] * plant.n_states}"
+        if self.law == "iofl" and (beta is None or not math.isfinite(beta) or beta == 0.0):
+            raise ValueError(
+                f"plant {name!r}: β = L_g L_f^(ρ-1) h = {beta} at {where}: the relative degree "
+                "is not defined there and the IOFL law u = (v - α)/β divides by it; start "
+                "elsewhere (scenario.x0) or use law = 'aiofl'"
+            )
+        b0 = self.value("law.b0")
+        if (
+            beta is not None
+            and rd == self.rho
+            and math.isfinite(beta)
+            and beta != 0.0
+            and (b0 > 0) != (beta > 0)
+            and not self.allow_b0_sign_mismatch
+        ):
+            raise ValueError(
+                f"controller.law.b0 = {b0:g} has the opposite sign of plant {name!r}'s "
+                f"high-frequency gain β = L_g L_f^(ρ-1) h = {beta:.6g} at {where} (nominal "
+                "parameters): the loop would feed back with the wrong sign; give b0 the sign "
+                "of β, or set controller.allow_b0_sign_mismatch = true (Python: "
+                "Controller(..., allow_b0_sign_mismatch=True))"
+            )
+
+    # ------------------------------------------------------------------ packing
     def int_row(self) -> NDArray[np.int64]:
-        """The engine's integer row (kinds, ρ, number of fed-back states)."""
+        """The engine's integer row (kinds, ρ, number of fed-back states, ESO start)."""
         row = np.zeros(L.N_INT, dtype=np.int64)
         row[L.I_ESO] = L.ESO_KINDS[self.eso]
         row[L.I_TD] = L.TD_KINDS[self.td]
@@ -149,11 +363,18 @@ class Controller:
         row[L.I_LAW] = L.LAW_KINDS[self.law]
         row[L.I_RHO] = self.rho
         row[L.I_NFB] = self.n_feedback
+        row[L.I_ESO_INIT] = L.ESO_INIT_KINDS[self.eso_init]
         return row
 
     def float_row(self) -> NDArray[np.float64]:
-        """The engine's float row, every column of :data:`aiofl.layout.FLOAT_COLUMNS`."""
+        r"""The engine's float row, every column of :data:`aiofl.layout.FLOAT_COLUMNS`.
+
+        Unset α are the binomial defaults; an unset ``law.u_min`` is NaN, which the kernel
+        reads as :math:`-u_{max}` (so a batch that varies ``law.u_max`` stays symmetric).
+        """
         row = np.array([_DEFAULTS[n] for n in L.FLOAT_COLUMNS], dtype=np.float64)
+        alphas = binomial_alphas(self.rho)
+        row[L.F_ALPHA : L.F_ALPHA + self.rho + 1] = alphas
         for name, val in self.values.items():
             row[L.FLOAT_COLUMNS[name]] = val
         return row

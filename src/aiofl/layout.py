@@ -38,6 +38,10 @@ SEF_KINDS = MappingProxyType(
     {"nonlinear": SEF_NONLINEAR, "improved": SEF_IMPROVED, "linear": SEF_LINEAR}
 )
 
+ESO_INIT_ZERO = 0  #: ξ̂(0) = 0
+ESO_INIT_OUTPUT = 1  #: ξ̂_1(0) = y_meas(0), the first measurement; ξ̂_2..ξ̂_{ρ+1}(0) = 0
+ESO_INIT_KINDS = MappingProxyType({"zero": ESO_INIT_ZERO, "output": ESO_INIT_OUTPUT})
+
 LAW_AIOFL = 0  #: u = v - ξ̂_{ρ+1}/b0, eq. (14)
 LAW_IOFL = 1  #: classical model-based IOFL, u = (-α(x) + v)/β(x)
 LAW_KINDS = MappingProxyType({"aiofl": LAW_AIOFL, "iofl": LAW_IOFL})
@@ -55,13 +59,21 @@ STATUS_OK = 0
 STATUS_DIVERGED = 1
 
 # --------------------------------------------------------------------- integer row
-I_ESO, I_TD, I_SEF, I_LAW, I_RHO, I_NFB = range(6)
-N_INT = 6
-INT_NAMES = ("eso.kind", "td.kind", "sef.kind", "law.kind", "rho", "sef.n_feedback")
+I_ESO, I_TD, I_SEF, I_LAW, I_RHO, I_NFB, I_ESO_INIT = range(7)
+N_INT = 7
+INT_NAMES = (
+    "eso.kind",
+    "td.kind",
+    "sef.kind",
+    "law.kind",
+    "rho",
+    "sef.n_feedback",
+    "eso.init",
+)
 
 
 def _float_columns() -> dict[str, int]:
-    names: list[str] = ["law.b0", "law.u_max", "eso.omega0"]
+    names: list[str] = ["law.b0", "law.u_max", "law.u_min", "eso.omega0"]
     names += [f"eso.alpha{i}" for i in range(1, RHO_MAX + 2)]
     names += ["eso.k_alpha", "eso.k_beta", "eso.g_alpha", "eso.g_beta"]
     names += ["td.R", "td.a", "td.b", "td.c", "td.rho", "td.omega"]
@@ -77,6 +89,8 @@ N_FLOAT = len(FLOAT_COLUMNS)
 
 F_B0 = FLOAT_COLUMNS["law.b0"]
 F_UMAX = FLOAT_COLUMNS["law.u_max"]
+F_UMIN = FLOAT_COLUMNS["law.u_min"]
+"""Lower actuator limit; NaN (the default) means -u_max, a symmetric range."""
 F_OMEGA0 = FLOAT_COLUMNS["eso.omega0"]
 F_ALPHA = FLOAT_COLUMNS["eso.alpha1"]
 F_KA = FLOAT_COLUMNS["eso.k_alpha"]

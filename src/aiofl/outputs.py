@@ -1,45 +1,236 @@
-"""Output directories that are written all-or-nothing, and atomic file writes.
+"""Output directories replaced as a whole, and atomic file writes.
 
 Every command that writes results uses :func:`atomic_output_dir`: files are written into a
-hidden staging directory next to the target and moved in only when the command succeeds,
-so a run that fails on bad input (or crashes) leaves nothing partial behind.
+hidden staging directory next to the target, ``.NAME.staging-PID-XXXX``, and when the
+command succeeds the directory is swapped in as a whole::
+
+    out  -> .NAME.trash-PID-XXXX      (rename)
+    .NAME.staging-PID-XXXX -> out     (rename)
+    rm -r .NAME.trash-PID-XXXX
+
+Both renames are atomic on one file system, so a reader sees the complete old directory,
+no directory at all (between the two renames), or the complete new one, never a mix of old
+and new files.  A run that fails (bad input, a crash, an exception) leaves ``out`` as it
+was.  A run killed mid-way (``kill -9``) leaves its staging or trash folder behind; the
+next run into the same ``out`` removes every such folder whose owning process (the PID in
+its name) is no longer alive (:func:`remove_stale`).
+
+An existing ``out`` is replaced only if it is empty or was written by aiofl (it holds the
+marker file :data:`MARKER`), so ``--out .`` or ``--out ~/papers`` never deletes a user's
+files: :func:`check_replaceable` refuses such a directory before any work is done.
 """
 
 from __future__ import annotations
 
 import os
+import re
 import shutil
 import tempfile
-from collections.abc import Iterator
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["atomic_output_dir", "atomic_write_bytes", "atomic_write_text"]
+__all__ = [
+    "MARKER",
+    "OutputDirError",
+    "atomic_output_dir",
+    "atomic_write_bytes",
+    "atomic_write_text",
+    "check_replaceable",
+    "ensure_output_dir",
+    "is_aiofl_dir",
+    "remove_stale",
+]
+
+#: file in every output directory aiofl writes; only such a directory is replaced
+MARKER = ".aiofl-output"
+_MARKER_TEXT = "Written by aiofl; aiofl replaces this directory as a whole on its next run.\n"
+
+
+class OutputDirError(FileExistsError):
+    """``out`` cannot be used: it is a file, or a non-empty directory aiofl did not write."""
+
+
+def _is_empty_dir(path: Path) -> bool:
+    return path.is_dir() and next(path.iterdir(), None) is None
+
+
+def is_aiofl_dir(path: str | Path) -> bool:
+    """Whether ``path`` is a directory aiofl wrote (holds :data:`MARKER`)."""
+    path = Path(path)
+    return path.is_dir() and (path / MARKER).is_file()
+
+
+def check_replaceable(out: str | Path, *, force: bool = True) -> None:
+    """Refuse an ``out`` that :func:`atomic_output_dir` must not replace.
+
+    Parameters
+    ----------
+    out
+        The output directory.
+    force
+        Whether an existing non-empty directory written by aiofl may be replaced.  With
+        ``force=False`` (``aiofl simulate`` without ``--force``) any non-empty ``out`` is
+        refused.
+
+    Raises
+    ------
+    OutputDirError
+        ``out`` exists and is not a directory; or it is a non-empty directory and either
+        ``force`` is false or it lacks :data:`MARKER` (aiofl did not write it).
+    """
+    out = Path(out)
+    if out.is_symlink() or (out.exists() and not out.is_dir()):
+        raise OutputDirError(f"--out {str(out)!r} exists and is not a directory")
+    if out.exists() and Path.cwd().resolve().is_relative_to(out.resolve()):
+        raise OutputDirError(
+            f"--out {str(out)!r} is the working folder or contains it; choose a new folder"
+        )
+    if not out.exists() or _is_empty_dir(out):
+        return
+    if not force:
+        raise OutputDirError(
+            f"--out {str(out)!r} exists and is not empty; pass --force to replace it "
+            "(its files are removed), or choose another --out"
+        )
+    if not is_aiofl_dir(out):
+        raise OutputDirError(
+            f"--out {str(out)!r} is a non-empty directory that aiofl did not write (no "
+            f"{MARKER} file); aiofl replaces its output directory as a whole, so choose an "
+            "empty or new --out"
+        )
+
+
+def ensure_output_dir(out: str | Path) -> Path:
+    """Create ``out`` (with :data:`MARKER`) if it does not exist; for files written into
+    ``out`` while a command runs (a tuning checkpoint).  Refuses like
+    :func:`check_replaceable`."""
+    out = Path(out)
+    check_replaceable(out)
+    out.mkdir(parents=True, exist_ok=True)
+    if not (out / MARKER).exists():
+        atomic_write_text(out / MARKER, _MARKER_TEXT)
+    return out
+
+
+_LEFTOVER = re.compile(r"^\.(?P<name>.+)\.(?:staging|trash)-(?P<pid>\d+)-[^/]*$")
+
+
+def _pid_alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else
+        return True
+    return True
+
+
+def remove_stale(out: str | Path) -> list[Path]:
+    """Remove the staging and trash folders of ``out`` left by runs that were killed.
+
+    A folder ``.NAME.staging-PID-*`` or ``.NAME.trash-PID-*`` next to ``out`` is removed
+    when process PID is no longer alive; folders of live processes (another run writing
+    the same ``out`` right now) are left alone.  A run killed between its two renames
+    leaves no ``out`` and the old directory in its trash folder: that old directory is put
+    back as ``out`` first (the newest one if there are several), so nothing that was
+    complete is lost.  Returns the removed paths.
+    """
+    out = _absolute(out)
+    parent = out.parent
+    removed: list[Path] = []
+    if not parent.is_dir():
+        return removed
+    stale = []
+    for item in parent.iterdir():
+        m = _LEFTOVER.match(item.name)
+        if m is None or m["name"] != out.name or not item.is_dir() or item.is_symlink():
+            continue
+        if not _pid_alive(int(m["pid"])):
+            stale.append(item)
+    if not out.exists():
+        olds = [p / "old" for p in stale if ".trash-" in p.name and (p / "old").is_dir()]
+        if olds:
+            os.replace(max(olds, key=lambda p: p.stat().st_mtime_ns), out)
+    for item in stale:
+        shutil.rmtree(item, ignore_errors=True)
+        removed.append(item)
+    return removed
+
+
+def _absolute(path: str | Path) -> Path:
+    """``path`` made absolute and normalised (``.`` and ``..`` removed), symlinks kept."""
+    return Path(os.path.abspath(path))
+
+
+def _carry_over(out: Path, stage: Path, keep: Iterable[str]) -> None:
+    """Hard-link (or copy) the files named in ``keep`` from the old ``out`` into ``stage``."""
+    for name in keep:
+        src, dst = out / name, stage / name
+        if not src.is_file() or dst.exists():
+            continue
+        try:
+            os.link(src, dst)
+        except OSError:
+            shutil.copy2(src, dst)
 
 
 @contextmanager
-def atomic_output_dir(out: str | Path) -> Iterator[Path]:
-    """Yield a staging directory; on success move its files into ``out``.
+def atomic_output_dir(out: str | Path, *, keep: Iterable[str] = ()) -> Iterator[Path]:
+    """Yield a staging directory; on success it replaces ``out`` as a whole.
 
-    Existing files in ``out`` with other names are kept; files of the same name are
-    replaced.  On an exception in the body the staging directory is removed and ``out`` is
-    untouched (not even created); the staging directory is also removed when moving the
-    files in fails (e.g. ``out`` is an existing file).
+    Parameters
+    ----------
+    out
+        The output directory.  It may not exist; if it exists it must be empty or written
+        by aiofl (:func:`check_replaceable`), and every file in it is replaced.
+    keep
+        Names of files in the old ``out`` to carry into the new one (e.g. a tuning
+        checkpoint written while the command ran), unless the body wrote a file of the
+        same name.
+
+    Notes
+    -----
+    On an exception in the body the staging directory is removed and ``out`` is untouched
+    (not even created).  Stale staging/trash folders of killed runs are removed first
+    (:func:`remove_stale`).  The swap is two renames (see the module docstring): a reader
+    never sees a mix of old and new files.
     """
-    out = Path(out)
-    parent = out.resolve().parent
+    out = _absolute(out)
+    check_replaceable(out)
+    parent = out.parent
     parent.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.staging-", dir=parent))
+    remove_stale(out)
+    pid = os.getpid()
+    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.staging-{pid}-", dir=parent))
+    trash: Path | None = None
     try:
+        atomic_write_text(stage / MARKER, _MARKER_TEXT)
         yield stage
-        out.mkdir(parents=True, exist_ok=True)
-        for item in sorted(stage.iterdir()):
-            target = out / item.name
-            if target.is_dir() and not target.is_symlink():
-                shutil.rmtree(target)
-            os.replace(item, target)
+        check_replaceable(out)  # it may have changed while the body ran
+        if out.is_dir():
+            _carry_over(out, stage, keep)
+            trash = Path(tempfile.mkdtemp(prefix=f".{out.name}.trash-{pid}-", dir=parent))
+            os.replace(out, trash / "old")  # trash/old: the directory as it was
+        os.chmod(stage, 0o777 & ~_umask())  # mkdtemp makes 0700; give the usual mode
+        try:
+            os.replace(stage, out)
+        except BaseException:
+            if trash is not None and not out.exists():
+                os.replace(trash / "old", out)  # put the old directory back
+            raise
     finally:
         shutil.rmtree(stage, ignore_errors=True)
+        if trash is not None:
+            shutil.rmtree(trash, ignore_errors=True)
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
 
 
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
@@ -51,9 +242,7 @@ def atomic_write_bytes(path: str | Path, data: bytes) -> None:
             fh.write(data)
             fh.flush()
             os.fsync(fh.fileno())
-        umask = os.umask(0)  # mkstemp makes 0600; give the file the usual mode
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
+        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; give the file the usual mode
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)

@@ -26,26 +26,61 @@ Defaults and non-smooth elements (how each is handled)
   linearised with the loop (their poles appear among the eigenvalues).
 * Under the IOFL law the ESO is integrated by the engine but not used: its poles appear
   among the eigenvalues without interacting with the loop.
+
+Exact derivatives and the operating point
+-----------------------------------------
+In ``"linearise"`` mode the right-hand side is complex-safe: the secant gains are numbers
+computed once at the real amplitude ε, the saturation chooses its branch by the real part,
+the ITD's tanh is :func:`numpy.tanh`, and the plant's functions are evaluated through
+:class:`aiofl.analysis.derivatives.PlantDerivatives`.  :meth:`ClosedLoop.linear_model`
+then takes every Jacobian by the complex step (exact to rounding, so a repeated pole stays
+repeated).  :meth:`ClosedLoop.operating_point` solves :math:`F(z^*) = 0` with
+:func:`scipy.optimize.root` on a scaled problem with that exact Jacobian.
+
+The loop can also be *broken at the plant input* (``u_plant``): the plant is driven by an
+external input while the controller's own output u (which its ESO also sees) is returned;
+:mod:`aiofl.analysis.frequency` takes its gain, phase and delay margins.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-from aiofl.components.differentiators import han_td_rhs, improved_td_rhs, linear_prefilter_rhs
+from aiofl import layout as L
+from aiofl.analysis.derivatives import COMPLEX_STEP, PlantDerivatives
+from aiofl.components.differentiators import (
+    han_td_rhs,
+    improved_td_constants,
+    improved_td_rhs,
+    linear_prefilter_coefficients,
+    linear_prefilter_rhs,
+    linear_prefilter_update,
+)
 from aiofl.components.feedback import fal, inlsef_limit, inlsef_term, linear_sef_gains
 from aiofl.components.observers import eso_gains, inleso_injection
 from aiofl.controller import Controller
 from aiofl.plants.base import Plant
 from aiofl.scenario import Reference, Scenario
 
-__all__ = ["DEFAULT_AMPLITUDE", "ClosedLoop", "reference_operating_value"]
+__all__ = [
+    "DEFAULT_AMPLITUDE",
+    "OPERATING_POINT_RTOL",
+    "ClosedLoop",
+    "reference_operating_value",
+]
 
 DEFAULT_AMPLITUDE = 1e-3
 """Default error amplitude ε for the secant gains of the non-smooth nonlinearities."""
+
+OPERATING_POINT_RTOL = 1e-9
+r"""An operating point is accepted when every equation's residual is at most this times the
+size of its terms, :math:`|F_i(z)| \le 10^{-9} \sum_j |J_{ij}|\,\max(|z_j|, s_j) + 10^{-12}`
+(s: the typical magnitudes of the scaled solve)."""
 
 
 def reference_operating_value(ref: Reference) -> float:
@@ -110,6 +145,9 @@ class ClosedLoop:
         self.p_nom = plant.param_vector()
         self.b0 = c.value("law.b0")
         self.u_max = c.value("law.u_max")
+        u_min = c.value("law.u_min") if "law.u_min" in L.FLOAT_COLUMNS else math.nan
+        self.u_min = -self.u_max if math.isnan(u_min) else u_min
+        self.derivatives = PlantDerivatives(plant)
         alphas = [c.value(f"eso.alpha{i}") for i in range(1, c.rho + 2)]
         self.betas = eso_gains(c.value("eso.omega0"), alphas)
         wc = c.value("sef.omega_c")
@@ -184,16 +222,26 @@ class ClosedLoop:
                 if mode == "linearise"
                 else "Han TD (18) integrated exactly"
             )
+        if c.td == "improved":
+            self.itd_constants = improved_td_constants(
+                c.value("td.a"), c.value("td.b"), c.value("td.c")
+            )
+        if c.td == "linear":
+            self.prefilter = linear_prefilter_coefficients(c.rho, c.value("td.omega"))
         self.r_op = reference_operating_value(scenario.reference)
         self.d_op = float(scenario.disturbance_amplitude)
+        self.n_ref = c.rho + 1 if c.td == "exact" else 1
+        # inputs of linear_model: r, with the exact TD its derivatives r^(1)..r^(ρ)
+        # (r_d1..), the disturbance d and the measurement noise n
+        self.input_names = ("r", *(f"r_d{k}" for k in range(1, self.n_ref)), "d", "n")
 
     # ---------------------------------------------------------------- pieces
-    def _sef(self, e: NDArray[np.float64], rff: float) -> float:
+    def _sef(self, e: NDArray[Any], rff: Any) -> Any:
         c, m = self.controller, self.m
         if c.sef == "linear":
-            return (rff + float(np.dot(self.lin_k[:m], e[:m]))) / self.b0
+            return (rff + np.dot(self.lin_k[:m], e[:m])) / self.b0
         if self.mode == "linearise":
-            return float(np.dot(self.k_sef, e[:m]))
+            return np.dot(self.k_sef, e[:m])
         if c.sef == "nonlinear":
             return sum(
                 c.value(f"sef.k{i + 1}")
@@ -213,7 +261,7 @@ class ClosedLoop:
         dl = c.value("sef.v_limit")
         return inlsef_limit(s, dl)
 
-    def _injection(self, e: float) -> float:
+    def _injection(self, e: Any) -> Any:
         c = self.controller
         if c.eso == "linear":
             return e
@@ -227,19 +275,35 @@ class ClosedLoop:
             c.value("eso.g_beta"),
         )
 
+    def _saturate(self, u: Any) -> Any:
+        """The actuator range :math:`[u_{min}, u_{max}]`, branch chosen by the real part
+        (slope 1 inside, 0 at a limit; the engine's ``saturate_range``)."""
+        if u.real > self.u_max:
+            return self.u_max
+        if u.real < self.u_min:
+            return self.u_min
+        return u
+
+    def _plant(self, name: str, x: NDArray[Any], p: NDArray[np.float64]) -> NDArray[Any]:
+        if self.mode == "exact":
+            return np.asarray(getattr(self.plant, name)(x, p), dtype=np.float64).reshape(-1)
+        return self.derivatives.evaluate(name, x, p)
+
     def rhs(
         self,
-        z: NDArray[np.float64],
-        rd: Sequence[float] | None = None,
-        d: float | None = None,
-        noise: float = 0.0,
-    ) -> tuple[NDArray[np.float64], float, float]:
+        z: NDArray[Any],
+        rd: Sequence[Any] | NDArray[Any] | None = None,
+        d: Any = None,
+        noise: Any = 0.0,
+        u_plant: Any = None,
+    ) -> tuple[NDArray[Any], Any, Any]:
         r""":math:`(\dot z, y, u)` at state z.
 
         Parameters
         ----------
         z
-            State (layout of :attr:`state_names`).
+            State (layout of :attr:`state_names`); complex in ``"linearise"`` mode for the
+            complex step.
         rd
             :math:`(r, \dot r, \dots, r^{(\rho)})`; default the operating point
             :math:`(r^*, 0, \dots)`.
@@ -247,23 +311,36 @@ class ClosedLoop:
             Disturbance :math:`\tau_d` (default: its operating value).
         noise
             Measurement noise added to y for the ESO.
+        u_plant
+            If given, the loop is broken at the plant input: the plant is driven by
+            ``u_plant`` and the returned u is the controller's output (which its ESO uses).
         """
         c, rho, m, n = self.controller, self.rho, self.m, self.n
-        z = np.asarray(z, dtype=np.float64)
-        rdv = np.zeros(rho + 1)
+        cplx = (
+            np.iscomplexobj(z)
+            or (rd is not None and np.iscomplexobj(rd))
+            or np.iscomplexobj(d)
+            or np.iscomplexobj(noise)
+            or np.iscomplexobj(u_plant)
+        )
+        if cplx and self.mode == "exact":
+            raise ValueError("complex arguments need mode = 'linearise'")
+        dtype = np.complex128 if cplx else np.float64
+        z = np.asarray(z, dtype=dtype)
+        rdv = np.zeros(rho + 1, dtype=dtype)
         if rd is None:
             rdv[0] = self.r_op
         else:
             k = min(len(rd), rho + 1)
-            rdv[:k] = np.asarray(rd, dtype=np.float64)[:k]
-        d = self.d_op if d is None else float(d)
+            rdv[:k] = np.asarray(rd, dtype=dtype)[:k]
+        d = self.d_op if d is None else d
         x = z[:n]
         td = z[self.o_td : self.o_td + self.n_td]
         xi = z[self.o_eso : self.o_eso + rho + 1]
-        dz = np.zeros(self.n_z)
+        dz = np.zeros(self.n_z, dtype=dtype)
         r = rdv[0]
-        rff = 0.0
-        prof = np.zeros(rho)
+        rff: Any = 0.0
+        prof = np.zeros(rho, dtype=dtype)
         if c.td == "exact":
             prof[:] = rdv[:rho]
             rff = rdv[rho]
@@ -274,55 +351,131 @@ class ClosedLoop:
             else:
                 prof[0] = r
         elif c.td == "improved":
-            a, b, cc, rr = (c.value(k) for k in ("td.a", "td.b", "td.c", "td.rho"))
-            dz[self.o_td], dz[self.o_td + 1] = improved_td_rhs(td[0], td[1], r, a, b, cc, rr)
+            if self.mode == "exact":
+                a, b, cc, rr = (c.value(k) for k in ("td.a", "td.b", "td.c", "td.rho"))
+                dz[self.o_td], dz[self.o_td + 1] = improved_td_rhs(td[0], td[1], r, a, b, cc, rr)
+            else:  # eq. (21) with numpy's tanh (the engine's fast_tanh is tanh to 2 ulp)
+                b_over_c, gain = self.itd_constants
+                rr = c.value("td.rho")
+                dz[self.o_td] = td[1]
+                dz[self.o_td + 1] = -rr * rr * np.tanh(b_over_c * td[0] - gain * r) - rr * td[1]
             prof[:2] = td[:2]
         else:
             d_td = dz[self.o_td : self.o_td + rho]  # a view: the prefilter writes into dz
-            rff = linear_prefilter_rhs(td[:rho], d_td, rho, r, c.value("td.omega"))
+            if self.mode == "exact":
+                rff = linear_prefilter_rhs(td[:rho], d_td, rho, r, c.value("td.omega"))
+            else:  # the same update in Python, so it runs on complex numbers
+                rff = linear_prefilter_update.py_func(td, d_td, 0, rho, r, self.prefilter, 0)
             prof[:] = td[:rho]
         p_true = self.p_true
-        y = float(np.asarray(self.plant.h(x, p_true), dtype=np.float64).reshape(()))
+        y = self._plant("h", x, p_true)[0]
         if c.law == "aiofl":
             e = prof[:m] - xi[:m]
             u = self._sef(e, rff) - xi[rho] / self.b0
         else:
-            nfx = np.asarray(self.plant.normal_form(x, self.p_nom), dtype=np.float64)  # type: ignore[misc]
-            acc = rff + float(np.dot(self.lin_k[:m], prof[:m] - nfx[:m]))
+            nfx = self._plant("normal_form", x, self.p_nom)
+            acc = rff + np.dot(self.lin_k[:m], prof[:m] - nfx[:m])
             u = (-nfx[rho] + acc) / nfx[rho + 1]
-        u = min(max(u, -self.u_max), self.u_max)
+        u = self._saturate(u)
         inj = self._injection(y + noise - xi[0])
         o = self.o_eso
         dz[o : o + rho] = xi[1 : rho + 1] + self.betas[:rho] * inj
         dz[o + rho - 1] += self.b0 * u
         dz[o + rho] = self.betas[rho] * inj
-        fx = np.asarray(self.plant.f(x, p_true), dtype=np.float64)
-        gx = np.asarray(self.plant.g(x, p_true), dtype=np.float64)
-        dz[:n] = fx + gx * u
+        u_in = u if u_plant is None else u_plant
+        dz[:n] = self._plant("f", x, p_true) + self._plant("g", x, p_true) * u_in
         if d != 0.0 and self.plant.bd is not None:
-            dz[:n] += np.asarray(self.plant.bd(x, p_true), dtype=np.float64) * d
+            dz[:n] += self._plant("bd", x, p_true) * d
+        if not cplx:
+            y, u = float(y), float(u)
         return dz, y, u
 
+    # ------------------------------------------------------------ linear models
+    def _inputs_split(self, v: NDArray[Any]) -> tuple[NDArray[Any], Any, Any]:
+        nr = self.n_ref
+        return v[:nr], v[nr], v[nr + 1]
+
+    def operating_inputs(self) -> NDArray[np.float64]:
+        """The inputs at the operating point, in the order of :attr:`input_names`."""
+        v = np.zeros(len(self.input_names))
+        v[0], v[self.n_ref] = self.r_op, self.d_op
+        return v
+
+    def linear_model(
+        self, z: NDArray[np.float64], *, broken: bool = False
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        r"""Exact Jacobians :math:`(A, B, C, D)` at z by the complex step.
+
+        Closed loop (``broken=False``): :math:`\dot{\delta z} = A\,\delta z + B\,\delta v`,
+        :math:`(\delta y, \delta u) = C\,\delta z + D\,\delta v` with v the inputs of
+        :attr:`input_names`.  Loop broken at the plant input (``broken=True``): input the
+        plant's :math:`u_p` (held at the controller's :math:`u^*`), output the controller's
+        u; closing :math:`u_p = u` gives back the closed loop's A
+        (:math:`A_{cl} = A + BC` when D = 0).
+
+        Each column is :math:`\operatorname{Im} F(\cdot + ihe_j)/h` with h =
+        :data:`aiofl.analysis.derivatives.COMPLEX_STEP` (module docstring of
+        :mod:`aiofl.analysis.derivatives`).
+        """
+        if self.mode != "linearise":
+            raise ValueError("linear_model needs mode = 'linearise'")
+        z = np.asarray(z, dtype=np.float64)
+        self.derivatives.verify(z[: self.n], self.p_true)
+        if self.controller.law == "iofl":
+            self.derivatives.verify(z[: self.n], self.p_nom)
+        v = self.operating_inputs()
+        u_star = self.rhs(z)[2] if broken else None
+        n_in = 1 if broken else v.size
+        cols: list[NDArray[np.float64]] = []
+        for j in range(self.n_z + n_in):
+            zc = z.astype(np.complex128)
+            vc = v.astype(np.complex128)
+            up: Any = None if u_star is None else complex(u_star)
+            if j < self.n_z:
+                zc[j] += 1j * COMPLEX_STEP
+            elif broken:
+                up += 1j * COMPLEX_STEP
+            else:
+                vc[j - self.n_z] += 1j * COMPLEX_STEP
+            rd, d, noise = self._inputs_split(vc)
+            dz, y, u = self.rhs(zc, rd=rd, d=d, noise=noise, u_plant=up)
+            cols.append(np.concatenate([dz.imag, [np.imag(y), np.imag(u)]]) / COMPLEX_STEP)
+        jac = np.column_stack(cols)
+        nz = self.n_z
+        a, b = jac[:nz, :nz], jac[:nz, nz:]
+        c, d = jac[nz:, :nz], jac[nz:, nz:]
+        if broken:  # output: the controller's u only
+            return a, b, c[1:], d[1:]
+        return a, b, c, d
+
+    def jacobian(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
+        r""":math:`A = \partial F/\partial z` at z by the complex step (for the operating-point
+        search; :meth:`linear_model` also checks the plant's derivatives at z first)."""
+        z = np.asarray(z, dtype=np.float64)
+        cols = []
+        for j in range(self.n_z):
+            zc = z.astype(np.complex128)
+            zc[j] += 1j * COMPLEX_STEP
+            cols.append(self.rhs(zc)[0].imag / COMPLEX_STEP)
+        return np.column_stack(cols)
+
+    # ----------------------------------------------------------- operating point
     def initial_guess(self) -> NDArray[np.float64]:
         """A starting point for the operating-point search (plant at x0, TD settled)."""
         z = np.zeros(self.n_z)
         x0 = np.array(self.scenario.x0 or [0.0] * self.n, dtype=np.float64)
         # move x0 onto the output level h(x) = r* (Gauss-Newton steps along ∇h)
         for _ in range(20):
-            hx = float(np.asarray(self.plant.h(x0, self.p_true)).reshape(()))
-            if abs(hx - self.r_op) < 1e-12 * (1.0 + abs(self.r_op)):
+            hx = float(self._plant("h", x0, self.p_true)[0])
+            if not math.isfinite(hx) or abs(hx - self.r_op) < 1e-12 * (1.0 + abs(self.r_op)):
                 break
             grad = np.array(
                 [
-                    (
-                        float(np.asarray(self.plant.h(x0 + dx, self.p_true)).reshape(()))
-                        - float(np.asarray(self.plant.h(x0 - dx, self.p_true)).reshape(()))
-                    )
-                    / 2e-6
-                    for dx in np.eye(self.n) * 1e-6
+                    self._plant("h", x0 + 1j * COMPLEX_STEP * e, self.p_true)[0].imag / COMPLEX_STEP
+                    for e in np.eye(self.n)
                 ]
             )
-            if not np.any(grad):
+            if not np.all(np.isfinite(grad)) or not np.any(grad):
                 break
             x0 = x0 + (self.r_op - hx) * grad / float(grad @ grad)
         z[: self.n] = x0
@@ -331,55 +484,93 @@ class ClosedLoop:
             z[self.o_td] = (1.0 - c.value("td.a")) * r / c.value("td.b")
         elif self.n_td:
             z[self.o_td] = r
-        z[self.o_eso] = float(np.asarray(self.plant.h(x0, self.p_true)).reshape(()))
+        z[self.o_eso] = float(self._plant("h", x0, self.p_true)[0])
         return z
 
-    def jacobian(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
-        """:math:`\\partial F/\\partial z` at z by central differences."""
-        cols = []
-        for j in range(self.n_z):
-            h = 1e-6 * max(1.0, abs(z[j]))
-            zp, zm = z.copy(), z.copy()
-            zp[j] += h
-            zm[j] -= h
-            cols.append((self.rhs(zp)[0] - self.rhs(zm)[0]) / (2.0 * h))
-        return np.column_stack(cols)
+    def _residual(self, z: NDArray[np.float64], typical: NDArray[np.float64]) -> float:
+        """Largest residual relative to the size of its equation's terms (see
+        :data:`OPERATING_POINT_RTOL`); inf where F is not finite."""
+        f = self.rhs(z)[0]
+        if not np.all(np.isfinite(f)):
+            return math.inf
+        terms = np.abs(self.jacobian(z)) @ np.maximum(np.abs(z), typical)
+        return float(np.max(np.abs(f) / (OPERATING_POINT_RTOL * terms + 1e-12)))
+
+    def _scaled_solve(self, guess: NDArray[np.float64], method: str) -> NDArray[np.float64]:
+        """:func:`scipy.optimize.root` on :math:`G(w) = F(s\\odot w)/t` with s the
+        typical magnitudes of the states and t those of the equations."""
+        from scipy.optimize import root
+
+        f0, j0 = self.rhs(guess)[0], self.jacobian(guess)
+        try:
+            newton = guess - np.linalg.lstsq(j0, f0, rcond=None)[0]
+        except np.linalg.LinAlgError:
+            newton = guess
+        s = np.maximum.reduce([np.abs(guess), np.abs(np.nan_to_num(newton)), np.ones_like(guess)])
+        t = np.abs(j0) @ s + np.abs(f0)
+        t = np.where(t > 0.0, t, 1.0)
+
+        def fun(w: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+            zz = s * w
+            return self.rhs(zz)[0] / t, self.jacobian(zz) * s[None, :] / t[:, None]
+
+        options = {"xtol": 1e-14} if method == "hybr" else {"xtol": 1e-14, "ftol": 1e-14}
+        sol = root(fun, guess / s, jac=True, method=method, options=options)
+        self._typical = s
+        return np.asarray(sol.x, dtype=np.float64) * s
+
+    def _guesses(self, base: NDArray[np.float64]) -> list[NDArray[np.float64]]:
+        """The given start, its Newton step, the plain start (x0, rest 0) and two seeded
+        perturbations of it (10 % of the typical magnitudes)."""
+        out = [base]
+        try:
+            step = np.linalg.lstsq(self.jacobian(base), self.rhs(base)[0], rcond=None)[0]
+            out.append(base - step)
+        except (np.linalg.LinAlgError, ValueError, ArithmeticError):
+            pass
+        plain = np.zeros(self.n_z)
+        plain[: self.n] = np.array(self.scenario.x0 or [0.0] * self.n, dtype=np.float64)
+        out.append(plain)
+        rng = np.random.default_rng(0)
+        scale = np.maximum(np.abs(base), 1.0)
+        out += [base + 0.1 * scale * rng.standard_normal(self.n_z) for _ in range(2)]
+        return [g for g in out if np.all(np.isfinite(g))]
 
     def operating_point(self, z0: NDArray[np.float64] | None = None) -> NDArray[np.float64]:
-        """Solve :math:`F(z^*) = 0` (Newton with backtracking from :meth:`initial_guess`).
+        """Solve :math:`F(z^*) = 0` with :func:`scipy.optimize.root` on a scaled problem.
+
+        From :meth:`initial_guess` (or ``z0``), its Newton step and a few nearby starts,
+        methods ``hybr`` then ``lm``, each with the exact Jacobian; the first point whose
+        residual passes :data:`OPERATING_POINT_RTOL` is returned.
 
         Raises
         ------
         ValueError
-            When no equilibrium is found.
+            When no start converges (the loop may have no equilibrium at r*).
         """
-        z = self.initial_guess() if z0 is None else np.asarray(z0, dtype=np.float64).copy()
-
-        def res_norm(zz: NDArray[np.float64]) -> float:
-            return float(np.linalg.norm(self.rhs(zz)[0]))
-
-        fz = res_norm(z)
-        for _ in range(60):
-            if fz < 1e-10 * (1.0 + float(np.linalg.norm(z))):
-                return z
-            jac = self.jacobian(z)
-            try:
-                step = np.linalg.lstsq(jac, -self.rhs(z)[0], rcond=None)[0]
-            except np.linalg.LinAlgError:
-                break
-            lam = 1.0
-            while lam > 1e-6:
-                zn = z + lam * step
-                fn = res_norm(zn)
-                if np.isfinite(fn) and fn < fz:
-                    break
-                lam *= 0.5
-            else:
-                break
-            z, fz = zn, fn
-        if fz < 1e-7 * (1.0 + float(np.linalg.norm(z))):
-            return z
+        base = self.initial_guess() if z0 is None else np.asarray(z0, dtype=np.float64).copy()
+        best, best_res, errors = base, math.inf, []
+        for guess in self._guesses(base):
+            for method in ("hybr", "lm"):
+                try:
+                    with np.errstate(all="ignore"):
+                        z = self._scaled_solve(guess, method)
+                        res = self._residual(z, self._typical)
+                except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+                    errors.append(f"{type(exc).__name__}: {exc}")
+                    continue
+                if res <= 1.0:
+                    return z
+                if res < best_res:
+                    best, best_res = z, res
+        detail = (
+            f"smallest relative residual {best_res * OPERATING_POINT_RTOL:.3g} at z = "
+            f"[{', '.join(f'{v:.4g}' for v in best)}]"
+            if math.isfinite(best_res)
+            else "every start failed" + (f" ({errors[-1]})" if errors else "")
+        )
         raise ValueError(
-            f"no closed-loop operating point found with r held at {self.r_op:g} "
-            f"(residual {fz:.3g}); the loop may have no equilibrium there"
+            f"no closed-loop operating point found with r held at {self.r_op:g}: "
+            f"scipy.optimize.root (hybr, lm) from {len(self._guesses(base))} starts did not "
+            f"converge; {detail}; the loop may have no equilibrium there"
         )

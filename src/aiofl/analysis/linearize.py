@@ -1,32 +1,53 @@
 r"""Linearisation of the whole closed loop (plant + TD + ESO + SEF + law) and its stability.
 
 The closed loop of :mod:`aiofl.engine.kernel` is an ODE
-:math:`\dot z = F(z; r, \tau_d, n)`.  This module writes the same equations in Python
-(:class:`ClosedLoop`, checked against the engine in the tests), finds the operating point
-:math:`z^*` with the reference held at a constant :math:`r^*` and the disturbance at its final
-value, and linearises by central finite differences,
+:math:`\dot z = F(z; r, \tau_d, n)`.  :class:`aiofl.analysis.closed_loop.ClosedLoop` writes
+the same equations in Python (checked against the engine in the tests); this module finds
+the operating point :math:`z^*` with the reference held at a constant :math:`r^*` and the
+disturbance at its final value (:func:`scipy.optimize.root`, scaled), and takes the
+Jacobians exactly, by complex-step differentiation
+(:mod:`aiofl.analysis.derivatives`),
 
 .. math:: A = \frac{\partial F}{\partial z}(z^*),\qquad
           \dot{\delta z} = A\,\delta z + B\,(\delta r, \delta\tau_d, \delta n),\quad
           (\delta y, \delta u) = C\,\delta z + D\,(\delta r, \delta\tau_d, \delta n).
 
+With the exact reference profile (``td = "exact"``) the loop is driven by r *and* its
+derivatives :math:`r^{(1)}..r^{(\rho)}`, which are inputs of their own (``r_d1..``);
+:meth:`Linearization.tracking_statespace` folds them into the single input r.
+
 The verdict is *stable* if every eigenvalue of A has a negative real part, *unstable* if
 one has a positive real part, *marginal* otherwise (within a relative tolerance).
 
-The closed loop itself, and how its non-smooth elements are linearised, is
-:mod:`aiofl.analysis.closed_loop`.
+**Repeated eigenvalues.**  A k-fold defective eigenvalue (a Jordan block: Gao's
+bandwidth tuning puts ρ+1 observer poles on −ω0) is computed by any eigenvalue routine
+only to :math:`O(\epsilon^{1/k})`: a cluster of k values (for Gao's LADRC with ρ = 4 on a
+chain of integrators the five poles at −50 come out up to 0.1 apart, from an exact A).
+The *mean* of the cluster is well-conditioned, :math:`O(\epsilon)` (Kato, *Perturbation
+Theory for Linear Operators*, ch. II §1: the weighted mean of the λ-group is analytic in
+the perturbation where its members have branch points).  :func:`group_eigenvalues` finds
+such clusters — eigenvalues whose distances are within how far they move when A is
+perturbed at 1000 × rounding level — and reports each as its mean with a multiplicity, so
+−50 ×3 prints as −50 ×3.  Eigenvalues that rounding cannot have made differ are not
+merged (two simple eigenvalues 1e-6 apart stay two; see the tests).
+
+Frequency-domain margins (the loop broken at the plant input) are
+:mod:`aiofl.analysis.frequency`; the closed loop itself, and how its non-smooth elements
+are linearised, is :mod:`aiofl.analysis.closed_loop`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from aiofl.analysis.closed_loop import DEFAULT_AMPLITUDE, ClosedLoop
+from aiofl.analysis.frequency import LoopMargins, loop_margins, loop_transfer
 from aiofl.components.observers import eso_error_matrix, eso_gains
 from aiofl.controller import Controller
 from aiofl.plants.base import Plant
@@ -38,12 +59,79 @@ __all__ = [
     "closed_loop_verdict",
     "eso_statespace",
     "format_linearization_text",
+    "group_eigenvalues",
     "linear_eso_statespace",
     "linearize_closed_loop",
 ]
 
 SWEEP_AMPLITUDES = (1e-4, 1e-3, 1e-2, 1e-1)
 """Amplitudes for ``verdicts_by_amplitude`` when the verdict may depend on ε."""
+
+
+# ------------------------------------------------------------ repeated eigenvalues
+def group_eigenvalues(
+    a: ArrayLike, *, trials: int = 4, level: float = 1e3, seed: int = 0
+) -> tuple[tuple[complex, int], ...]:
+    r"""Eigenvalues of A with numerically repeated ones merged: ``((λ, multiplicity), ...)``.
+
+    A is balanced (:func:`scipy.linalg.matrix_balance`) and its eigenvalues computed; then
+    ``trials`` seeded perturbations :math:`A + E`, :math:`\|E\|_2 = \text{level}\cdot
+    \epsilon\,\|A\|_2`, give how far each eigenvalue :math:`\lambda_i` moves,
+    :math:`s_i` (eigenvalues matched by :func:`scipy.optimize.linear_sum_assignment`).
+    :math:`\lambda_i` and :math:`\lambda_j` belong to one group when
+    :math:`|\lambda_i - \lambda_j| \le 2(s_i + s_j)`: rounding alone could have made them
+    differ.  A group is reported as its mean (well-conditioned where its members are not;
+    module docstring), real when the group is closed under conjugation.  Sorted by
+    decreasing real part.
+    """
+    from scipy.linalg import eigvals, matrix_balance
+    from scipy.optimize import linear_sum_assignment
+
+    a = np.asarray(a, dtype=np.float64)
+    n = a.shape[0]
+    if n == 0:
+        return ()
+    bal, _ = matrix_balance(a, permute=False)
+    lam = eigvals(bal)
+    if not np.all(np.isfinite(lam)):
+        return tuple((complex(v), 1) for v in lam)
+    rng = np.random.default_rng(seed)
+    size = level * np.finfo(np.float64).eps * np.linalg.norm(bal, 2)
+    move = np.zeros(n)
+    for _ in range(trials):
+        e = rng.standard_normal((n, n))
+        mu = eigvals(bal + size * e / np.linalg.norm(e, 2))
+        dist = np.abs(lam[:, None] - mu[None, :])
+        rows, cols = linear_sum_assignment(dist)
+        move[rows] = np.maximum(move[rows], dist[rows, cols])
+    parent = list(range(n))
+
+    def find(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for i in range(n):
+        for j in range(i + 1, n):
+            if abs(lam[i] - lam[j]) <= 2.0 * (move[i] + move[j]):
+                parent[find(i)] = find(j)
+    groups: dict[int, list[int]] = {}
+    for i in range(n):
+        groups.setdefault(find(i), []).append(i)
+    out = []
+    for members in groups.values():
+        vals = lam[members]
+        mean = complex(vals.mean())
+        if len(members) > 1:
+            conj = np.sort_complex(np.conj(vals))
+            if np.allclose(
+                np.sort_complex(vals), conj, rtol=0, atol=4 * float(move[members].max())
+            ):
+                mean = complex(mean.real, 0.0)
+        out.append((mean, len(members)))
+    out.sort(key=lambda g: (-g[0].real, g[0].imag))
+    return tuple(out)
 
 
 # ------------------------------------------------------------------ linearisation
@@ -54,18 +142,27 @@ class Linearization:
     Attributes
     ----------
     a, b, c, d
-        State-space matrices; inputs ``(r, d, n)`` (reference, disturbance, measurement
-        noise), outputs ``(y, u)``.
+        State-space matrices; inputs :attr:`input_names` (reference r, with the exact TD
+        its derivatives ``r_d1..r_dρ``, disturbance d, measurement noise n), outputs
+        ``(y, u)``.
     state_names
         Names of the states (see :class:`ClosedLoop`).
     z_op, r_op, d_op
         Operating point.
     eigenvalues
-        Eigenvalues of ``a``, sorted by decreasing real part.
+        Eigenvalues of ``a`` (numerically repeated ones as their group's mean, repeated),
+        sorted by decreasing real part.
     amplitude
         Error amplitude ε of the secant gains.
     notes
         How each non-smooth element was handled, and other remarks.
+    input_names
+        Names of the columns of ``b`` and ``d``.
+    eigenvalue_groups
+        ``((λ, multiplicity), ...)`` (:func:`group_eigenvalues`).
+    loop
+        ``(A, B, C, D)`` of the loop broken at the plant input (input the plant's
+        :math:`u_p`, output the controller's u), for :mod:`aiofl.analysis.frequency`.
     """
 
     a: NDArray[np.float64]
@@ -79,8 +176,10 @@ class Linearization:
     eigenvalues: NDArray[np.complex128]
     amplitude: float
     notes: tuple[str, ...]
+    input_names: tuple[str, ...] = ("r", "d", "n")
+    eigenvalue_groups: tuple[tuple[complex, int], ...] = ()
+    loop: tuple[NDArray[np.float64], ...] = field(default=(), repr=False)
 
-    input_names = ("r", "d", "n")
     output_names = ("y", "u")
 
     @property
@@ -102,8 +201,14 @@ class Linearization:
         """The eigenvalue with the most negative real part."""
         return complex(self.eigenvalues[-1])
 
+    @property
+    def n_reference_inputs(self) -> int:
+        """1, or ρ+1 with the exact TD (r and its derivatives are the first inputs)."""
+        return sum(1 for k in self.input_names if k == "r" or k.startswith("r_d"))
+
     def statespace(self) -> Any:
-        """The linearised loop as a ``control.StateSpace`` (python-control)."""
+        """The linearised loop as a ``control.StateSpace`` (python-control), inputs
+        :attr:`input_names`, outputs (y, u)."""
         import control
 
         return control.ss(
@@ -116,11 +221,95 @@ class Linearization:
             outputs=list(self.output_names),
         )
 
+    def tracking_statespace(self) -> Any:
+        r"""The reference-to-output model r → y as a SISO ``control.StateSpace``.
+
+        With the exact TD the loop sees :math:`r^{(k)}`, k = 0..ρ, through columns
+        :math:`B_k`, :math:`D_k`, so :math:`Y(s) = \sum_k s^k [C_y(sI-A)^{-1}B_k + D_{y,k}]R(s)`.
+        With :math:`s^k(sI-A)^{-1} = A^k(sI-A)^{-1} + \sum_{j<k} s^{k-1-j}A^j` this is
+
+        .. math:: \frac{Y}{R}(s) = C_y(sI-A)^{-1}\tilde B + \tilde D,\quad
+                  \tilde B = \sum_k A^k B_k,\quad
+                  \tilde D = D_{y,0} + \sum_{k\ge1} C_y A^{k-1} B_k,
+
+        provided the polynomial part vanishes, :math:`D_{y,m} + \sum_{k>m} C_y A^{k-1-m}B_k
+        = 0` for m ≥ 1 — true when y does not react to :math:`r^{(m)}` faster than the plant's
+        relative degree allows, which is checked.  (r → u is improper under the exact TD —
+        u holds :math:`r^{(\rho)}/b_0` — so it has no state-space model of r alone; use
+        :meth:`reference_response`.)
+
+        Raises
+        ------
+        ValueError
+            When the polynomial part does not vanish.
+        """
+        import control
+
+        nr = self.n_reference_inputs
+        a, cy = self.a, self.c[:1]
+        bks = [self.b[:, [k]] for k in range(nr)]
+        dks = [self.d[:1, [k]] for k in range(nr)]
+        b_t = np.zeros_like(bks[0])
+        for bk in reversed(bks):  # Horner: B0 + A(B1 + A(B2 + ...))
+            b_t = bk + a @ b_t
+        d_t = dks[0].copy()
+        # Markov terms C A^j B_k
+        for m in range(1, nr):
+            coeff, size = dks[m].copy(), np.abs(dks[m]).copy()
+            for k in range(m + 1, nr):
+                term = cy @ np.linalg.matrix_power(a, k - 1 - m) @ bks[k]
+                coeff += term
+                size += np.abs(term)
+            if np.any(np.abs(coeff) > 1e-8 * size + 1e-300):
+                raise ValueError(
+                    f"r → y holds r's derivative of order {m} directly (coefficient "
+                    f"{float(coeff.ravel()[0]):.3g}); it has no proper state-space model"
+                )
+        for k in range(1, nr):
+            d_t = d_t + cy @ np.linalg.matrix_power(a, k - 1) @ bks[k]
+        return control.ss(
+            a, b_t, cy, d_t, states=list(self.state_names), inputs=["r"], outputs=["y"]
+        )
+
+    def reference_response(self, omega: ArrayLike) -> NDArray[np.complex128]:
+        r"""Frequency response of (y, u) to :math:`r = e^{j\omega t}` with its derivatives
+        :math:`r^{(k)} = (j\omega)^k r` (exact TD) fed forward: shape (2, len(ω)).
+
+        :math:`\sum_k (j\omega)^k [C(j\omega I - A)^{-1}B_k + D_k]`, one linear solve per
+        frequency (an independent check of :meth:`tracking_statespace`)."""
+        w = np.atleast_1d(np.asarray(omega, dtype=np.float64))
+        nr, n = self.n_reference_inputs, self.a.shape[0]
+        out = np.empty((2, w.size), dtype=np.complex128)
+        for i, wi in enumerate(w):
+            s = 1j * wi
+            powers = s ** np.arange(nr)
+            bw = self.b[:, :nr] @ powers
+            dw = self.d[:, :nr] @ powers
+            out[:, i] = self.c @ np.linalg.solve(s * np.eye(n) - self.a, bw) + dw
+        return out
+
+    def loop_transfer(self) -> Any:
+        r"""The loop transfer function :math:`L(s)` at the plant input as a
+        ``control.StateSpace`` (:func:`aiofl.analysis.frequency.loop_transfer`)."""
+        return loop_transfer(*self.loop)
+
+    @cached_property
+    def margins(self) -> LoopMargins:
+        """Gain, phase, delay margins, :math:`M_s` and least damping
+        (:func:`aiofl.analysis.frequency.loop_margins`)."""
+        return loop_margins(self.loop_transfer(), self.eigenvalues)
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary (``verdict``, ``eigenvalues`` as [[re, im], ...], ...)."""
-        return {
+        """JSON-ready summary (``verdict``, ``eigenvalues`` as [[re, im], ...], the margins
+        ``gain_margin_db``, ``phase_margin_deg``, ``delay_margin_s``, ``ms``,
+        ``min_damping``, ...)."""
+        out = {
             "verdict": self.verdict(),
             "eigenvalues": [[float(z.real), float(z.imag)] for z in self.eigenvalues],
+            "eigenvalue_groups": [
+                {"value": [lam.real, lam.imag], "multiplicity": k}
+                for lam, k in self.eigenvalue_groups
+            ],
             "max_real": self.max_real,
             "slowest": [self.slowest.real, self.slowest.imag],
             "fastest": [self.fastest.real, self.fastest.imag],
@@ -133,6 +322,8 @@ class Linearization:
             "amplitude": self.amplitude,
             "notes": list(self.notes),
         }
+        out.update(self.margins.to_dict())
+        return out
 
 
 def _verdict(eig: NDArray[np.complex128], rtol: float = 1e-6) -> str:
@@ -162,9 +353,11 @@ def linearize_closed_loop(
         A :class:`aiofl.config.RunConfig`, a preset name or a config path (or None with
         ``plant``, ``controller``, ``scenario``).
     amplitude
-        Error amplitude ε for the secant gains of fal / g(e) / INLSEF (module docstring).
+        Error amplitude ε for the secant gains of fal / g(e) / INLSEF (module docstring of
+        :mod:`aiofl.analysis.closed_loop`).
     r_op
-        Reference value to hold (default: see :func:`reference_operating_value`).
+        Reference value to hold (default:
+        :func:`aiofl.analysis.closed_loop.reference_operating_value`).
 
     Returns
     -------
@@ -182,44 +375,21 @@ def linearize_closed_loop(
     if r_op is not None:
         loop.r_op = float(r_op)
     z = loop.operating_point()
-    a = loop.jacobian(z)
-    # input and output matrices by central differences
-    rho = controller.rho
-    h = 1e-6
-
-    def evaluate(zz: NDArray[np.float64], dr: float = 0.0, dd: float = 0.0, dn: float = 0.0) -> Any:
-        rd = np.zeros(rho + 1)
-        rd[0] = loop.r_op + dr
-        return loop.rhs(zz, rd=rd, d=loop.d_op + dd, noise=dn)
-
-    b_cols, d_cols = [], []
-    for kw in ({"dr": h}, {"dd": h}, {"dn": h}):
-        neg = {k: -v for k, v in kw.items()}
-        fp, yp, up = evaluate(z, **kw)
-        fm, ym, um = evaluate(z, **neg)
-        b_cols.append((fp - fm) / (2 * h))
-        d_cols.append([(yp - ym) / (2 * h), (up - um) / (2 * h)])
-    c_rows = np.zeros((2, loop.n_z))
-    for j in range(loop.n_z):
-        hj = 1e-6 * max(1.0, abs(z[j]))
-        zp, zm = z.copy(), z.copy()
-        zp[j] += hj
-        zm[j] -= hj
-        _, yp, up = evaluate(zp)
-        _, ym, um = evaluate(zm)
-        c_rows[:, j] = [(yp - ym) / (2 * hj), (up - um) / (2 * hj)]
-    eig = np.linalg.eigvals(a)
-    eig = eig[np.lexsort((eig.imag, -eig.real))]
+    a, b, c, d = loop.linear_model(z)
+    broken = loop.linear_model(z, broken=True)
+    groups = group_eigenvalues(a)
+    eig = np.array([lam for lam, k in groups for _ in range(k)], dtype=np.complex128)
     notes = list(loop.nonsmooth)
     if controller.law == "iofl":
         notes.append("IOFL law: the ESO is integrated but not used; its poles do not interact")
     if scenario.noise_variance > 0:
         notes.append("measurement noise set to 0 at the operating point (it is an input n)")
+    notes += loop.derivatives.notes
     return Linearization(
         a=a,
-        b=np.column_stack(b_cols),
-        c=c_rows,
-        d=np.array(d_cols).T,
+        b=b,
+        c=c,
+        d=d,
         state_names=loop.state_names,
         z_op=z,
         r_op=loop.r_op,
@@ -227,6 +397,9 @@ def linearize_closed_loop(
         eigenvalues=eig,
         amplitude=float(amplitude),
         notes=tuple(notes),
+        input_names=loop.input_names,
+        eigenvalue_groups=groups,
+        loop=broken,
     )
 
 
@@ -248,7 +421,7 @@ def _depends_on_amplitude(controller: Controller) -> bool:
 def closed_loop_verdict(
     run_config: Any, amplitude: float = DEFAULT_AMPLITUDE, linearization: Any = None
 ) -> dict[str, Any]:
-    """Stability verdict of a run config's linearised closed loop.
+    """Stability verdict, damping and margins of a run config's linearised closed loop.
 
     ``run_config`` is a :class:`~aiofl.config.RunConfig` or a config path / preset name;
     ``linearization`` reuses a :func:`linearize_closed_loop` result at ``amplitude``
@@ -259,8 +432,12 @@ def closed_loop_verdict(
     dict
         ``{"verdict": "stable"|"unstable"|"marginal", "eigenvalues": [[re, im], ...],
         "max_real", "slowest", "fastest", "states", "operating_point", "amplitude",
-        "notes"}`` and, when the secant gains depend on ε, ``"verdicts_by_amplitude"``
-        (ε -> verdict over :data:`SWEEP_AMPLITUDES`).
+        "notes"}``; ``"min_damping"`` (least ζ of the eigenvalues) and the margins of the
+        loop broken at the plant input, ``"gain_margin_db"``, ``"phase_margin_deg"``,
+        ``"delay_margin_s"``, ``"ms"`` (None where undefined or infinite,
+        ``"margin_notes"`` says which; :mod:`aiofl.analysis.frequency`); and, when the
+        secant gains depend on ε, ``"verdicts_by_amplitude"`` (ε -> verdict over
+        :data:`SWEEP_AMPLITUDES`).
     """
     cfg = run_config
     if isinstance(cfg, str) or hasattr(cfg, "__fspath__"):
@@ -327,28 +504,69 @@ def _fmt(z: complex) -> str:
     return f"{z.real:.6g} {'+' if z.imag >= 0 else '−'} {abs(z.imag):.6g}j"
 
 
+def _fmt_margin(value: float | None, unit: str, none: str) -> str:
+    if value is None or not np.isfinite(value):
+        return none
+    return f"{value:.4g}{unit}"
+
+
+def format_margins_text(lin: Linearization) -> list[str]:
+    """Text lines for the damping and the margins (:mod:`aiofl.analysis.frequency`)."""
+    m = lin.margins
+    out = []
+    if m.min_damping is not None and m.least_damped is not None:
+        out.append(f"  least damping: ζ = {m.min_damping:.4g} (λ = {_fmt(m.least_damped)})")
+    gm = _fmt_margin(m.gain_margin_db, " dB", "∞ (no phase crossover)")
+    if np.isfinite(m.phase_crossover):
+        gm += f" at {m.phase_crossover:.4g} rad/s"
+    pm = _fmt_margin(m.phase_margin_deg, "°", "∞ (|L| never crosses 1)")
+    if np.isfinite(m.gain_crossover):
+        pm += f" at {m.gain_crossover:.4g} rad/s"
+    if np.isnan(m.delay_margin_s):
+        dm = "undefined (closed loop not stable)"
+    else:
+        dm = _fmt_margin(m.delay_margin_s, " s", "∞")
+    ms_at = "" if not np.isfinite(m.ms_frequency) else f" at {m.ms_frequency:.4g} rad/s"
+    if m.ms_frequency == np.inf:
+        ms_at = " (as ω → ∞)"
+    out.append("  loop broken at the plant input (L = −(u_p → u)):")
+    out.append(f"    gain margin {gm}; phase margin {pm}")
+    out.append(f"    delay margin {dm}; sensitivity peak Ms = {m.ms:.4g}{ms_at}")
+    if m.open_loop_rhp_poles:
+        out.append(f"    L has {m.open_loop_rhp_poles} right-half-plane pole(s)")
+    return out
+
+
 def format_linearization_text(
     lin: Linearization, name: str = "", extra: dict[str, Any] | None = None
 ) -> str:
-    """Plain-text report of a :class:`Linearization` (``aiofl analyze CONFIG --closed-loop``)."""
+    """Plain-text report of a :class:`Linearization` (``aiofl analyze CONFIG --closed-loop``).
+
+    Eigenvalues are listed once per group with their multiplicity (``−50 ×3``,
+    :func:`group_eigenvalues`)."""
     out = [f"Closed-loop linearisation{f' of {name}' if name else ''}"]
     out.append(
         f"  operating point: r = {lin.r_op:g}, τ_d = {lin.d_op:g}; states: "
         + ", ".join(lin.state_names)
     )
     out.append(f"  z* = [{', '.join(f'{v:.6g}' for v in lin.z_op)}]")
-    out.append(f"  eigenvalues ({len(lin.eigenvalues)}):")
-    for z in lin.eigenvalues:
+    groups = lin.eigenvalue_groups or tuple((complex(z), 1) for z in lin.eigenvalues)
+    out.append(f"  eigenvalues ({len(lin.eigenvalues)}, exact Jacobian by the complex step):")
+    for z, k in groups:
         if z.real < 0:
             tau = f"   decays, τ = {1 / abs(z.real):.4g} s"
         elif z.real > 0:
             tau = f"   GROWS, τ = {1 / z.real:.4g} s"
         else:
             tau = ""
-        out.append(f"    {_fmt(z)}{tau}")
+        mult = f" ×{k}" if k > 1 else ""
+        out.append(f"    {_fmt(z)}{mult}{tau}")
     out.append(f"  slowest mode: {_fmt(lin.slowest)}   fastest mode: {_fmt(lin.fastest)}")
     out.append(f"  verdict: {lin.verdict().upper()} (max Re = {lin.max_real:.6g})")
+    out += format_margins_text(lin)
     for note in lin.notes:
+        out.append(f"  note: {note}")
+    for note in lin.margins.notes:
         out.append(f"  note: {note}")
     if extra and "verdicts_by_amplitude" in extra:
         sweep = ", ".join(f"ε={k}: {v}" for k, v in extra["verdicts_by_amplitude"].items())

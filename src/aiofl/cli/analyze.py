@@ -5,9 +5,13 @@
   defined, α, β, the normal-form coordinates ξ and, where ρ < n, the zero dynamics with a
   stability verdict (Section III).  ``--latex`` prints LaTeX, ``--json`` JSON.
 * ``aiofl analyze CONFIG.toml|PRESET --closed-loop``: eigenvalues of the closed loop
-  linearised at its operating point, slowest / fastest modes and a verdict
-  (:mod:`aiofl.analysis.linearize`); ``--json`` prints ``{"verdict": ..., "eigenvalues": [[re, im],
-  ...], ...}``.
+  linearised at its operating point (exact Jacobian; repeated ones with their
+  multiplicity), slowest / fastest modes and a verdict (:mod:`aiofl.analysis.linearize`);
+  the least damping ratio and the gain, phase and delay margins and sensitivity peak Ms of
+  the loop broken at the plant input (:mod:`aiofl.analysis.frequency`); ``--json`` prints
+  ``{"verdict": ..., "eigenvalues": [[re, im], ...], "gain_margin_db": ...,
+  "phase_margin_deg": ..., "delay_margin_s": ..., "ms": ..., "min_damping": ..., ...}``;
+  ``--figure FILE.png`` writes its Bode and Nyquist plots.
 
 sympy, numpy and the engine are imported inside the command, so registering it keeps
 ``aiofl --help`` fast.
@@ -15,6 +19,7 @@ sympy, numpy and the engine are imported inside the command, so registering it k
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -46,9 +51,17 @@ def analyze_command(
         float | None,
         typer.Option(help="Reference value held at the operating point (--closed-loop)."),
     ] = None,
+    figure: Annotated[
+        Path | None,
+        typer.Option(
+            help="Write the Bode and Nyquist plots of the loop broken at the plant input "
+            "to this file (.png, .pdf or .svg; --closed-loop)."
+        ),
+    ] = None,
 ) -> None:
     """Analyse a plant symbolically (Section III) or a closed loop by linearisation."""
     import json
+    import math
 
     from rich.console import Console
 
@@ -56,8 +69,12 @@ def analyze_command(
 
     console = Console(highlight=False, markup=False, soft_wrap=True)
     with bad_input_exits():
-        if not amplitude > 0:
-            raise ValueError(f"--amplitude = {amplitude}; allowed: > 0")
+        if not (amplitude > 0 and math.isfinite(amplitude)):
+            raise ValueError(f"--amplitude = {amplitude}; allowed: finite and > 0")
+        if r_op is not None and not math.isfinite(r_op):
+            raise ValueError(f"--r-op = {r_op}; allowed: a finite number")
+        if figure is not None:
+            _check_figure_path(figure, closed_loop)
         if closed_loop:
             if latex:
                 raise ValueError("--latex applies to the plant analysis, not to --closed-loop")
@@ -76,6 +93,19 @@ def analyze_command(
                 if r_op is None
                 else lin.to_dict()
             )
+            if figure is not None:
+                from aiofl.analysis.frequency import loop_figure_bytes
+                from aiofl.outputs import atomic_write_bytes
+
+                title = (
+                    f"{cfg.name}: loop broken at the plant input, linearised at r = {lin.r_op:g}"
+                )
+                if lin.notes and any("secant" in n for n in lin.notes):
+                    title += f" (secant gains at ε = {amplitude:g})"
+                data = loop_figure_bytes(
+                    lin.loop_transfer(), lin.margins, title, figure.suffix.lower().lstrip(".")
+                )
+                atomic_write_bytes(figure, data)
             if as_json:
                 typer.echo(json.dumps(info, indent=2))
             else:
@@ -97,3 +127,21 @@ def analyze_command(
             typer.echo(format_analysis_latex(analysis))
         else:
             console.print(format_analysis_text(analysis))
+
+
+def _check_figure_path(figure: Path, closed_loop: bool) -> None:
+    """Refuse a ``--figure`` that cannot be written, before any work is done."""
+    from aiofl.analysis.frequency import FIGURE_FORMATS
+
+    if not closed_loop:
+        raise ValueError("--figure applies only with --closed-loop")
+    suffix = figure.suffix.lower().lstrip(".")
+    if suffix not in FIGURE_FORMATS:
+        raise ValueError(
+            f"--figure {str(figure)!r}: file type {suffix or '(none)'!r}; allowed: "
+            + ", ".join(f".{f}" for f in FIGURE_FORMATS)
+        )
+    if figure.is_dir():
+        raise ValueError(f"--figure {str(figure)!r} is a directory; give a file name")
+    if not figure.resolve().parent.is_dir():
+        raise ValueError(f"--figure {str(figure)!r}: folder {str(figure.parent)!r} does not exist")

@@ -7,7 +7,9 @@ Commands
 ``aiofl show NAME``
     Print a preset's TOML verbatim (copy it, edit it, pass the file to ``simulate``).
 ``aiofl simulate CONFIG.toml|PRESET --out DIR``
-    One run: ``DIR/metrics.json``, ``DIR/trajectory.csv``, ``DIR/figure.png``.
+    One run: ``DIR/metrics.json``, ``DIR/trajectory.csv`` (a header of column names, then a
+    ``# name [unit],...`` line with the plant's units, then the data) and ``DIR/figure.png``
+    (output vs reference, tracking error, control; axes in the plant's units).
 ``aiofl reproduce --out DIR``
     The paper's Tables I–III and Figures 3–5, and a self-contained HTML report.
 ``aiofl tune CONFIG --out DIR``
@@ -25,13 +27,38 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import typer
+from typer.core import TyperCommand, TyperGroup
 
 from aiofl.cli.errors import _check_out, bad_input_exits
 
-__all__ = ["app", "main"]
+__all__ = ["EXAMPLES", "app", "main"]
+
+
+def _flags_without_type(params: list[Any]) -> list[Any]:
+    """Show on/off flags as ``--force``, not ``--force <bool>`` (typer's rich help prints a
+    type for every option; an empty metavar leaves it out)."""
+    for param in params:
+        if getattr(param, "is_flag", False) and param.metavar is None:
+            param.metavar = ""
+    return params
+
+
+class _Command(TyperCommand):
+    """Every ``aiofl`` command: flags shown without a type (see :func:`_flags_without_type`)."""
+
+    def get_params(self, ctx: Any) -> list[Any]:
+        return _flags_without_type(super().get_params(ctx))
+
+
+class _Group(TyperGroup):
+    """The ``aiofl`` group: flags shown without a type (``--version``, ``-h/--help``)."""
+
+    def get_params(self, ctx: Any) -> list[Any]:
+        return _flags_without_type(super().get_params(ctx))
+
 
 app = typer.Typer(
     name="aiofl",
@@ -40,7 +67,56 @@ app = typer.Typer(
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
+    cls=_Group,
+    context_settings={"help_option_names": ["-h", "--help"]},
 )
+
+EXAMPLES: dict[str, tuple[str, ...]] = {
+    "presets": ("aiofl presets",),
+    "show": ("aiofl show paper-s1-leso > my-run.toml",),
+    "simulate": (
+        "aiofl simulate paper-s1-inleso --out runs/s1",
+        "aiofl simulate my-run.toml -o runs/mine --dt 5e-5 --method euler --force",
+    ),
+    "reproduce": ("aiofl reproduce --out results",),
+    "tune": (
+        "aiofl tune retuned-s1-ladrc --out tuned --generations 5 --population 16",
+        "aiofl tune my-run.toml -o tuned --resume --dask-workers 2",
+    ),
+    "analyze": (
+        "aiofl analyze slfjm --latex",
+        "aiofl analyze retuned-s1-ladrc --closed-loop --json",
+    ),
+}
+"""Example invocations shown at the end of each command's ``--help``."""
+
+
+def _print_version(value: bool) -> None:
+    if value:
+        from importlib.metadata import PackageNotFoundError, version
+
+        try:
+            v = version("aiofl")
+        except PackageNotFoundError:  # pragma: no cover - running from a source tree
+            from aiofl import __version__ as v
+        typer.echo(f"aiofl {v}")
+        raise typer.Exit()
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version",
+            "-V",
+            callback=_print_version,
+            is_eager=True,
+            help="Print the version and exit.",
+        ),
+    ] = False,
+) -> None:
+    """ESO-based active input-output feedback linearization (ADRC)."""
 
 
 def _stderr_console() -> Any:
@@ -97,14 +173,52 @@ def _trajectory_columns(result: Any, cfg: Any) -> list[str]:
     return [col for col in cols if col == "t" or col in result.signals]
 
 
-def _csv_text(result: Any, columns: list[str]) -> str:
+def _column_labels(cfg: Any, columns: list[str]) -> list[str]:
+    """Name and unit of every trajectory.csv column, from the plant's declared units.
+
+    t [s]; r, y, y_meas in the output unit; u in the input unit; d in the disturbance unit;
+    x_i as the plant's state name and unit; the ESO's ξ̂_i and the TD's r_i estimate
+    y^(i−1) (ξ̂_(ρ+1) the total disturbance, in y^(ρ)'s unit), so their unit is
+    [y]/s^(i−1).  A unit the plant does not declare is left out.
+    """
+    from aiofl.plants.base import derivative_unit, unit_label
+
+    plant = cfg.plant
+    fixed = {
+        "t": "s",
+        "r": plant.output_unit,
+        "y": plant.output_unit,
+        "y_meas": plant.output_unit,
+        "u": plant.input_unit,
+        "d": plant.disturbance_unit,
+    }
+    labels = []
+    for col in columns:
+        if col in fixed:
+            labels.append(unit_label(col, fixed[col]))
+        elif col.startswith("xi_hat") or (col[0] == "r" and col[1:].isdigit()):
+            k = int(col[6:] if col.startswith("xi_hat") else col[1:]) - 1
+            labels.append(unit_label(col, derivative_unit(plant.output_unit, k)))
+        else:  # x1..xn
+            labels.append(plant.state_label(int(col[1:]) - 1))
+    return [lab.replace(",", ";") for lab in labels]
+
+
+def _csv_text(result: Any, columns: list[str], labels: list[str] | None = None) -> str:
+    """trajectory.csv: a header of column names, then (with ``labels``) a ``#`` line giving
+    each column's name and unit (``# t [s],r [rad],...``), then the data.
+
+    The units line is a comment, so ``numpy.loadtxt(path, delimiter=",", skiprows=1)`` and
+    ``pandas.read_csv(path, comment="#")`` read the numbers unchanged.
+    """
     import io
 
     import numpy as np
 
     data = np.column_stack([result.t if c == "t" else result.signals[c] for c in columns])
+    header = ",".join(columns) + ("\n# " + ",".join(labels) if labels else "")
     buf = io.StringIO()
-    np.savetxt(buf, data, delimiter=",", header=",".join(columns), comments="", fmt="%.10g")
+    np.savetxt(buf, data, delimiter=",", header=header, comments="", fmt="%.10g")
     return buf.getvalue()
 
 
@@ -138,53 +252,75 @@ def simulate_command(
     config: Annotated[str, typer.Argument(help="A TOML config file or a preset name.")],
     out: Annotated[Path, typer.Option("--out", "-o", help="Output directory.")],
     dt: Annotated[
-        float | None, typer.Option(help="Override the fixed step [s] (0 < dt <= 0.1).")
+        float | None, typer.Option(help="Override the fixed step \\[s] (0 < dt <= 0.1).")
     ] = None,
     method: Annotated[
-        str | None, typer.Option(help="Override the integrator: rk4 or euler.")
+        Literal["rk4", "euler"] | None, typer.Option(help="Override the integrator.")
     ] = None,
+    t_final: Annotated[
+        float | None,
+        typer.Option("--t-final", help="Override the horizon \\[s] (0 < t_final <= 1e4)."),
+    ] = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="Replace an existing non-empty OUT.")
+    ] = False,
+    check: Annotated[
+        bool,
+        typer.Option("--check", help="Only validate CONFIG and OUT; run and write nothing."),
+    ] = False,
 ) -> None:
     """Simulate one config: metrics.json, trajectory.csv and figure.png in OUT.
 
     A run that diverges is reported as diverged with the time (metrics null); it is not
-    an error.
+    an error.  An existing non-empty OUT is refused unless --force (then it is replaced
+    as a whole).  --dt, --t-final and --method pass the same checks as the config's values.
     """
     import json
-    from dataclasses import replace
 
     from aiofl.config import ConfigError, load_config
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 
     console = _stderr_console()
     with bad_input_exits():
-        _check_out(out)
+        _check_out(out, force=force)
         cfg = load_config(config)
-        if dt is not None:
-            if not 0 < dt <= 0.1:
-                raise ConfigError(f"--dt = {dt}; allowed: 0 < dt <= 0.1 s")
-            cfg = replace(cfg, dt=dt)
-        if method is not None:
-            if method not in ("rk4", "euler"):
-                raise ConfigError(f"--method = {method!r}; allowed: rk4, euler")
-            cfg = replace(cfg, method=method)
+        if method is not None and method not in ("rk4", "euler"):
+            raise ConfigError(f"--method = {method!r}; allowed: rk4, euler")
+        given = {"--dt": dt, "--t-final": t_final, "--method": method}
+        if any(v is not None for v in given.values()):
+            flags = " ".join(f"{k} {v}" for k, v in given.items() if v is not None)
+            cfg = cfg.with_overrides(
+                t_final=t_final, dt=dt, method=method, source=f"{config} with {flags}"
+            )
+    if check:
+        steps = round(cfg.scenario.t_final / cfg.dt)
+        typer.echo(
+            f"{config}: valid; {steps} {cfg.method} steps of {cfg.dt:g} s over "
+            f"{cfg.scenario.t_final:g} s, plant {cfg.plant.name}, "
+            f"{cfg.controller.structure} controller; nothing run or written"
+        )
+        return
     with bad_input_exits(run=True), atomic_output_dir(out) as stage:
         with console.status(f"simulating {cfg.name} (first run compiles the kernel)"):
             result = cfg.simulate(store=True)
         record = simulation_record(cfg, result, config)
         atomic_write_text(stage / "metrics.json", json.dumps(record, indent=2) + "\n")
+        columns = _trajectory_columns(result, cfg)
         atomic_write_text(
-            stage / "trajectory.csv", _csv_text(result, _trajectory_columns(result, cfg))
+            stage / "trajectory.csv", _csv_text(result, columns, _column_labels(cfg, columns))
         )
         from aiofl.reporting.figures import figure_png, result_figure, scenario_events
 
-        title = f"{cfg.name}: output vs reference and control signal"
+        title = f"{cfg.name}: output vs reference, tracking error and control signal"
         fig = result_figure(
             result,
             title,
             cfg.scenario.t_final,
             cfg.controller.structure,
             cfg.scenario.reference.evaluate,
-            scenario_events(cfg.scenario),
+            scenario_events(cfg.scenario, cfg.plant.disturbance_unit),
+            output_unit=cfg.plant.output_unit,
+            input_unit=cfg.plant.input_unit,
         )
         atomic_write_bytes(stage / "figure.png", figure_png(fig))
     _print_records([record], title=f"aiofl simulate {config}")
@@ -194,7 +330,7 @@ def simulate_command(
 # -------------------------------------------------------------------------- reproduce
 def _short(x: float | None) -> str:
     """4 significant digits, compact exponent (1.205e5), dash for None."""
-    from aiofl.reporting.report import fmt
+    from aiofl.reporting.tables import fmt
 
     return fmt(x, 4).replace("e+0", "e").replace("e-0", "e-").replace("e+", "e")
 
@@ -285,3 +421,17 @@ def register_feature(name: str, target: str) -> None:
 # --- feature commands ---
 register_feature("tune", "aiofl.cli.tune:tune_command")
 register_feature("analyze", "aiofl.cli.analyze:analyze_command")
+
+
+def _finish_commands() -> None:
+    """Give every registered command the flag display of :class:`_Command` and its
+    :data:`EXAMPLES` as the help's epilog (run once, after the last command is added)."""
+    for info in app.registered_commands:
+        if info.cls in (None, TyperCommand):
+            info.cls = _Command
+        examples = EXAMPLES.get(info.name or "")
+        if examples and info.epilog is None:
+            info.epilog = "Examples:\n\n" + "\n\n".join(f"  $ {e}" for e in examples)
+
+
+_finish_commands()

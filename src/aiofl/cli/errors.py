@@ -25,17 +25,21 @@ def _input_errors(run: bool) -> tuple[type[BaseException], ...]:
     from aiofl.config import ConfigError
     from aiofl.plants.base import PlantError
 
-    if run:
-        return (ConfigError, OSError)
+    if run:  # a user plant that fails to compile or raises at run time is bad input too
+        return (ConfigError, PlantError, OSError)
     return (ConfigError, PlantError, ValueError, OSError, tomllib.TOMLDecodeError)
 
 
-def _check_out(out: Path) -> None:
-    """Reject an output path that exists and is not a directory (before any work)."""
-    from aiofl.config import ConfigError
+def _check_out(out: Path, *, force: bool = True) -> None:
+    """Reject an ``--out`` that the command could not replace, before any work.
 
-    if out.exists() and not out.is_dir():
-        raise ConfigError(f"--out {str(out)!r} exists and is not a directory")
+    A file, a non-empty directory aiofl did not write, or (``force=False``, ``aiofl
+    simulate`` without ``--force``) any non-empty directory
+    (:func:`aiofl.outputs.check_replaceable`).
+    """
+    from aiofl.outputs import check_replaceable
+
+    check_replaceable(out, force=force)
 
 
 @contextmanager
@@ -44,8 +48,9 @@ def bad_input_exits(*, run: bool = False) -> Iterator[None]:
 
     Wrap the validation of a command's input with it.  Around the work itself use
     ``run=True``: then only a :class:`~aiofl.config.ConfigError` (e.g. a checkpoint from
-    another run) or an ``OSError`` (an unwritable ``--out``) is bad input; any other
-    exception is a bug and propagates with its traceback.
+    another run), a :class:`~aiofl.plants.base.PlantError` (a user plant function that does
+    not compile, or raises at run time) or an ``OSError`` (an unwritable ``--out``) is bad
+    input; any other exception is a bug and propagates with its traceback.
     """
     try:
         yield

@@ -15,7 +15,7 @@ from typing import Annotated
 
 import typer
 
-from aiofl.cli.errors import bad_input_exits
+from aiofl.cli.errors import _check_out, bad_input_exits
 
 __all__ = ["tune_command"]
 
@@ -28,7 +28,10 @@ def tune_command(
     ] = False,
     scheduler: Annotated[
         str | None,
-        typer.Option("--scheduler", help="Dask scheduler address tcp://HOST:PORT."),
+        typer.Option(
+            "--scheduler",
+            help="Dask scheduler address tcp://HOST:PORT (exit 2 if unreachable within 5 s).",
+        ),
     ] = None,
     dask_workers: Annotated[
         int | None,
@@ -49,7 +52,7 @@ def tune_command(
     convergence.png and summary.json; OUT/checkpoint.npz is updated after every
     generation so `--resume` continues a killed run with the same final result.
     """
-    from aiofl.tuning.checkpoint import CHECKPOINT
+    from aiofl.tuning.checkpoint import CHECKPOINT, load_checkpoint
     from aiofl.tuning.results import write_outputs
     from aiofl.tuning.search import prepare, tune
 
@@ -58,8 +61,11 @@ def tune_command(
             raise ValueError("give --scheduler or --dask-workers, not both")
         if dask_workers is not None and dask_workers < 1:
             raise ValueError(f"--dask-workers = {dask_workers}; allowed: >= 1")
-        prepare(config, None, seed=seed, generations=generations, population=population)
-        if resume and not (out / CHECKPOINT).is_file():
+        _check_out(out)
+        prep = prepare(config, None, seed=seed, generations=generations, population=population)
+        if resume and (out / CHECKPOINT).exists():
+            load_checkpoint(out / CHECKPOINT, prep.fingerprint)  # a damaged one: exit 2 now
+        elif resume:
             typer.echo(f"aiofl: no checkpoint in {out}; starting from scratch", err=True)
     with bad_input_exits(run=True):
         try:

@@ -15,7 +15,9 @@ r"""Linearizing control laws: the active law (AIOFL, eq. 14) and classical IOFL 
 
   which needs the full model.
 
-Both optionally saturate: :math:`u \leftarrow \operatorname{sat}_{u_{max}}(u)`.
+Both optionally saturate to the actuator range,
+:math:`u \leftarrow \min(\max(u, u_{min}), u_{max})` (:func:`saturate_range`; the engine's
+default range is :math:`u_{min} = -u_{max}`, :math:`u_{max} = \infty`, i.e. none).
 """
 
 from __future__ import annotations
@@ -24,7 +26,7 @@ from numba import njit
 
 from aiofl.components.fastmath import JIT_OPTIONS
 
-__all__ = ["aiofl_law", "iofl_law", "saturate"]
+__all__ = ["aiofl_law", "iofl_law", "saturate", "saturate_range"]
 
 
 @njit(**JIT_OPTIONS)
@@ -34,6 +36,24 @@ def saturate(u: float, u_max: float) -> float:
         return u_max
     if u < -u_max:
         return -u_max
+    return u
+
+
+@njit(**JIT_OPTIONS)
+def saturate_range(u: float, u_min: float, u_max: float) -> float:
+    r"""Clip ``u`` to the actuator range :math:`[u_{min}, u_{max}]` (asymmetric allowed).
+
+    .. math:: \operatorname{sat}(u) = \begin{cases} u_{max} & u > u_{max} \\
+              u_{min} & u < u_{min} \\ u & \text{otherwise} \end{cases}
+
+    ``u_min = -inf`` / ``u_max = inf`` leave that side open; NaN passes through (so the
+    engine's divergence check sees it).  With ``u_min = -u_max`` this is :func:`saturate`
+    exactly.  The caller guarantees :math:`u_{min} < u_{max}`.
+    """
+    if u > u_max:
+        return u_max
+    if u < u_min:
+        return u_min
     return u
 
 

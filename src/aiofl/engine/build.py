@@ -14,6 +14,19 @@ functions are generated at run time (no source file) is compiled in every proces
 function releases the GIL and each thread claims the next unclaimed member, so a member that
 diverges early frees its core at once.  Members are independent, so a member's numbers do
 not depend on the batch it is in, the thread count or the scheduling (bitwise).
+
+**User plants that fail.**  A plant whose functions are defined outside aiofl is
+type-checked (:meth:`aiofl.plants.base.Plant.typecheck`) before its kernel is compiled
+when the kernel is not loaded from the disk cache, and again whenever compiling the kernel
+fails, so a function numba cannot compile, or one that returns complex numbers, is a
+:class:`~aiofl.plants.base.PlantError` naming the plant and the function, not a numba
+traceback; a failure not caused by a plant function stays a traceback.  At run time a
+division by zero or a math domain error in a plant function gives inf/NaN (numba's
+``numpy`` error model), which the kernel reports as the member diverging at that time.  A
+plant function that *raises* stops the run: :func:`run_members` then replays that member
+once in a diagnostic kernel whose plant functions are wrapped to report which of them
+raised and at which state (:class:`PlantFailure`), and raises a PlantError
+``plant function f failed at state x = [...]: ValueError: ...``.
 """
 
 from __future__ import annotations
@@ -30,9 +43,16 @@ from typing import Any
 
 from aiofl import layout as L
 from aiofl.engine import kernel
-from aiofl.plants.base import Plant
+from aiofl.plants.base import Plant, PlantError
 
-__all__ = ["Kernel", "kernel_for", "run_members"]
+__all__ = ["Kernel", "PlantFailure", "kernel_for", "run_members"]
+
+_PLANT_FUNCTIONS = ("f", "g", "h", "bd", "normal_form")
+
+
+class PlantFailure(Exception):
+    """Raised inside a diagnostic kernel by a plant function that raised:
+    ``(index into _PLANT_FUNCTIONS, x_1, ..., x_n)``."""
 
 
 @dataclass(frozen=True)
@@ -47,6 +67,17 @@ class Kernel:
 
 _KERNELS: dict[int, tuple[Plant, Kernel]] = {}
 _KERNELS_LOCK = threading.Lock()
+_PLANT_OF_MEMBER: dict[int, Plant] = {}  # id(kernel.member) -> its plant, for diagnosis
+
+
+def _user_functions(plant: Plant) -> bool:
+    """Whether any plant function is defined outside aiofl (aiofl's own are tested)."""
+    for fname in _PLANT_FUNCTIONS:
+        fn = getattr(plant, fname)
+        mod = getattr(getattr(fn, "py_func", fn), "__module__", None) or ""
+        if fn is not None and not mod.startswith("aiofl."):
+            return True
+    return False
 
 
 def _source_digest(path: str) -> str:
@@ -79,8 +110,10 @@ def _kernel_fingerprint(plant: Plant) -> str | None:
     """A digest of everything the compiled kernel of ``plant`` depends on, or None if a
     plant function cannot be fingerprinted (the kernel is then compiled every process)."""
     parts = [sys.version, __import__("numba").__version__, str(plant.n_states)]
-    # the layout, the templates, how they are compiled (this module) and what they call
-    for mod in (L, kernel, sys.modules[__name__], *_component_modules()):
+    # the layout, the templates, how they are compiled (this module and, for the plant
+    # functions' compile flags, plants.base) and what they call
+    base = sys.modules[Plant.__module__]
+    for mod in (L, kernel, sys.modules[__name__], base, *_component_modules()):
         parts.append(_source_digest(mod.__file__))
     for fname in ("f", "g", "h", "bd", "normal_form"):
         fn = getattr(plant, fname)
@@ -126,7 +159,7 @@ def _component_functions() -> dict[str, Any]:
         "_INLESO": ob.inleso_injection,
         "_AIOFL_LAW": law.aiofl_law,
         "_IOFL_LAW": law.iofl_law,
-        "_SATURATE": law.saturate,
+        "_SATURATE": law.saturate_range,
     }
 
 
@@ -144,18 +177,23 @@ def _instantiate(tpl: Any, ns: dict[str, Any], suffix: str, **jit_options: Any) 
     return njit(**jit_options)(fn)
 
 
-def _build_kernel(plant: Plant, *, cache: bool | None = None) -> Kernel:
+def _build_kernel(plant: Plant, *, cache: bool | None = None, guarded: bool = False) -> Kernel:
     """Compile the closed-loop functions for one plant (see the module notes).
 
     The templates read their globals from ``ns``: a copy of :mod:`aiofl.engine.kernel`'s
     globals (layout constants, ``L``, ``np``) with the placeholders bound for this plant.
+    ``guarded`` builds the diagnostic kernel of :func:`run_members` (never cached).
     """
 
     f, g, h, bd, nf = plant.compiled
-    fingerprint = _kernel_fingerprint(plant)
+    fingerprint = None if guarded else _kernel_fingerprint(plant)
     use_cache = _cache_enabled() if cache is None else cache
     use_cache = use_cache and fingerprint is not None
     n = plant.n_states
+    if not use_cache and _user_functions(plant):
+        plant.typecheck()  # numba compiles them now rather than inside the kernel
+    if guarded:
+        f, g, h, bd, nf = (_guarded(fn, k, n) for k, fn in enumerate((f, g, h, bd, nf)))
     ns = dict(vars(kernel))
     ns.update(
         _N=n,
@@ -190,7 +228,27 @@ def _build_kernel(plant: Plant, *, cache: bool | None = None) -> Kernel:
         _prune_stale_cache(member, plant_key, suffix)
     evaluate = _instantiate(kernel._tpl_eval, ns, suffix, **opts)
     n_cols = kernel.N_SIG + n + (L.RHO_MAX + 1) + L.RHO_MAX
+    _PLANT_OF_MEMBER[id(member)] = plant
     return Kernel(member=member, evaluate=evaluate, n_cols=n_cols, cached=use_cache)
+
+
+def _guarded(fn: Any, index: int, n: int) -> Any:
+    """``fn`` wrapped so that an exception it raises becomes
+    ``PlantFailure(index, x_1, ..., x_n)`` (numba cannot bind the exception itself)."""
+    from numba import njit
+
+    state = "".join(f", x[{i}]" for i in range(n))
+    src = (
+        "def guarded(x, p):\n"
+        "    try:\n"
+        "        return fn(x, p)\n"
+        "    except Exception:\n"
+        "        pass\n"
+        f"    raise PlantFailure({index}{state})\n"
+    )
+    ns: dict[str, Any] = {"fn": fn, "PlantFailure": PlantFailure}
+    exec(compile(src, "<aiofl.engine.build guard>", "exec"), ns)  # fixed source, no input
+    return njit(error_model="numpy")(ns["guarded"])
 
 
 def _unmanaged_intrinsic() -> Any:
@@ -270,22 +328,19 @@ def run_members(member: Any, n_members: int, *args: Any) -> None:
     import numba
 
     n_threads = max(1, min(numba.get_num_threads(), n_members))
-    if n_threads == 1:
-        for i in range(n_members):
-            member(i, *args)
-        return
     claim = itertools.count()  # next() on a count is atomic under the GIL
-    errors: list[BaseException] = []
+    errors: list[tuple[int, BaseException]] = []
 
     def work() -> None:
+        i = -1
         try:
             while not errors:
                 i = next(claim)
                 if i >= n_members:
                     return
                 member(i, *args)
-        except BaseException as exc:  # pragma: no cover - re-raised below
-            errors.append(exc)
+        except BaseException as exc:  # re-raised below
+            errors.append((i, exc))
 
     threads = [threading.Thread(target=work, daemon=True) for _ in range(n_threads - 1)]
     for th in threads:
@@ -294,4 +349,30 @@ def run_members(member: Any, n_members: int, *args: Any) -> None:
     for th in threads:
         th.join()
     if errors:
-        raise errors[0]
+        i, exc = errors[0]
+        if isinstance(exc, Exception):
+            _explain_failure(member, i, exc, args)
+        raise exc
+
+
+def _explain_failure(member: Any, i: int, exc: Exception, args: tuple[Any, ...]) -> None:
+    """Raise a PlantError if a user plant's function caused ``exc`` (see the module notes);
+    return otherwise, so the caller re-raises ``exc`` with its traceback."""
+    from numba.core.errors import NumbaError
+
+    plant = _PLANT_OF_MEMBER.get(id(member))
+    if plant is None or not _user_functions(plant):
+        return
+    if isinstance(exc, NumbaError):  # compiling the kernel failed: a plant function?
+        plant.typecheck()
+        return
+    try:  # replay the member with every plant function reporting where it raised
+        _build_kernel(plant, cache=False, guarded=True).member(i, *args)
+    except PlantFailure as failure:
+        index, *state = failure.args
+        raise PlantError(
+            f"plant {plant.name!r}: plant function {_PLANT_FUNCTIONS[index]} failed at state "
+            f"x = {[float(v) for v in state]}: {type(exc).__name__}: {exc}"
+        ) from None
+    except Exception:  # not a plant function: the caller re-raises the original
+        pass

@@ -14,9 +14,13 @@ State of one member (only the active part is integrated)::
     z = [ x (n) | ITAE IAE ISE ISU IAU | TD state (0, 2 or ρ) | ESO state ξ̂ (ρ+1) ]
 
 Component kinds come from the integer row (data), so every structure shares one compiled
-function per plant.  Divergence is data, not an exception: a member whose state becomes
-non-finite or exceeds the threshold stops, with its status set to diverged and the time
-recorded.  Trajectories are stored only when asked for, every ``decimation``-th step.
+function per plant.  The plant starts at the scenario's x0, the differentiator at 0 and the
+ESO at 0, or (``eso.init = "output"``) with :math:`\hat\xi_1(0) = y_m(0)`, the first
+measurement.  The law's output is clipped to the actuator range :math:`[u_{min}, u_{max}]`
+(``u_min`` NaN in the float row means :math:`-u_{max}`).  Divergence is data, not an
+exception: a member whose state becomes non-finite or exceeds the threshold stops, with its
+status set to diverged and the time recorded.  Trajectories are stored only when asked
+for, every ``decimation``-th step.
 
 Piecewise-constant inputs (measurement noise, the step disturbance, the plant-parameter
 change and a step reference) are held over each step at their value at its start, so the
@@ -58,9 +62,10 @@ Q_PF = Q_SLOPE + L.RHO_MAX  #: linear prefilter coefficients ω^ρ, C(ρ,i) ω^(
 Q_ITD_BC = Q_PF + L.RHO_MAX  #: b/c of the ITD
 Q_ITD_GAIN = Q_ITD_BC + 1  #: (1 - a)/c of the ITD
 N_Q = Q_ITD_BC + 2
-# Per-member integers: kinds, ρ, m, offsets of the TD and ESO blocks in z, active length.
-IQ_ESO, IQ_TD, IQ_SEF, IQ_LAW, IQ_RHO, IQ_M, IQ_OTD, IQ_OESO, IQ_NZ, IQ_NTD = range(10)
-N_IQ = 10
+# Per-member integers: kinds, ρ, m, offsets of the TD and ESO blocks in z, active length,
+# and how the ESO starts (layout.ESO_INIT_*).
+IQ_ESO, IQ_TD, IQ_SEF, IQ_LAW, IQ_RHO, IQ_M, IQ_OTD, IQ_OESO, IQ_NZ, IQ_NTD, IQ_EINIT = range(11)
+N_IQ = 11
 N_SIG = 6  # t, r, y, y_meas, u, d
 SWITCH_RTOL = 1e-12
 """A switching time t_s (step disturbance, parameter change, step reference) acts from the
@@ -91,6 +96,8 @@ def _tpl_setup(ip, fp, q, iq):  # pragma: no cover - compiled
         q[i] = fp[i]
     for i in range(L.N_FLOAT, N_Q):
         q[i] = 0.0
+    if fp[L.F_UMIN] != fp[L.F_UMIN]:  # NaN: no lower limit given, the range is symmetric
+        q[L.F_UMIN] = -fp[L.F_UMAX]
     w0 = fp[L.F_OMEGA0]
     for i in range(rho + 1):
         q[Q_BETA + i] = _ESO_GAIN(fp[L.F_ALPHA + i], w0, i + 1)
@@ -122,6 +129,7 @@ def _tpl_setup(ip, fp, q, iq):  # pragma: no cover - compiled
     iq[IQ_OESO] = _N + L.N_METRIC + ntd
     iq[IQ_NZ] = _N + L.N_METRIC + ntd + rho + 1
     iq[IQ_NTD] = ntd
+    iq[IQ_EINIT] = ip[L.I_ESO_INIT]
 
 
 def _tpl_reference(t, t_hold, sc, ref_table, ref_row, out, oi, nd):  # pragma: no cover - compiled
@@ -229,7 +237,7 @@ def _tpl_deriv(t, z, dz, iq, q, p, p_nom, sc, rr, ri, noise_val, d, xb, sig):  #
         for i in range(m):
             acc += q[Q_LINK + i] * ((rr[ri, i] if exact else z[o_td + i]) - nfx[i])
         u = _IOFL_LAW(acc, nfx[rho], nfx[rho + 1])
-    u = _SATURATE(u, q[L.F_UMAX])
+    u = _SATURATE(u, q[L.F_UMIN], q[L.F_UMAX])  # actuator range [u_min, u_max]
 
     # observer, eqs. (5)/(16) or (19)
     e = y_meas - z[o_eso]
@@ -331,6 +339,7 @@ def _tpl_member(  # pragma: no cover - compiled
     ntd = iq[IQ_NTD]
     exact = iq[IQ_TD] == L.TD_EXACT
     nd = rho if exact else 0
+    init_output = iq[IQ_EINIT] == L.ESO_INIT_OUTPUT
     for j in range(_N_P):
         pb[j] = p_before[mi, j]
         pa[j] = p_after[mi, j]
@@ -373,6 +382,12 @@ def _tpl_member(  # pragma: no cover - compiled
             for j in range(_N_P):
                 p[j] = pa[j]
             switched = True
+        if k == 0 and init_output:
+            # ξ̂_1(0) = y_meas(0) = h(x(0)) + n(0), the first measurement; ξ̂_2.. stay 0
+            for i in range(_N):
+                xb[i] = z[i]
+            z[o_eso] = _PH(xb, p) + noise_val
+            zt[o_eso] = z[o_eso]
         for s in range(n_stages):
             if s == 0:
                 ts = t

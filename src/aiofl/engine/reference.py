@@ -23,7 +23,10 @@ The loop, with :math:`e_i = r_i - \hat\xi_i` and :math:`y_m = h(x) + n(t)`:
   continuous form), INLSEF (20), or linear :math:`v = (\sum_i k_ie_i + r^{(\rho)})/b_0`
   with :math:`k_i=\binom{\rho}{i-1}\omega_c^{\rho-i+1}`;
 * law: AIOFL :math:`u = v - \hat\xi_{\rho+1}/b_0` (14) or classical IOFL
-  :math:`u = (-\alpha(x) + v)/\beta(x)`, optionally saturated;
+  :math:`u = (-\alpha(x) + v)/\beta(x)`, clipped to the actuator range
+  :math:`[u_{min}, u_{max}]` (``law.u_min`` omitted: :math:`-u_{max}`);
+* initial state: the plant at the scenario's x0, the differentiator and the ESO at 0, or
+  with ``eso_init = "output"`` :math:`\hat\xi_1(0) = y_m(0) = h(x_0) + n(0)`;
 * metrics (22) as extra states: :math:`\int t|y-r|`, :math:`\int|y-r|`, :math:`\int(y-r)^2`,
   :math:`\int u^2`, :math:`\int|u|`.
 
@@ -236,7 +239,11 @@ def closed_loop(
         v = r_feedforward + sum(s.k_lin[i] * (profile[i] - nf[i]) for i in range(s.m))
         u = (-nf[rho] + v) / nf[rho + 1]
     u_max = c.value("law.u_max")
-    u = min(max(u, -u_max), u_max)
+    u_min = c.values.get("law.u_min", -u_max)  # omitted: the symmetric range
+    if u > u_max:
+        u = u_max
+    elif u < u_min:
+        u = u_min
 
     # ---------------------------------------------------------------- ESO
     err = y_meas - xi[0]
@@ -339,6 +346,7 @@ def reference_simulate(
     ReferenceResult
         States and signals at ``t_eval`` and the metrics (22) at ``t_final``.
     """
+    controller.check_plant(plant, scenario.x0 or None)
     s = setup_loop(plant, controller, scenario)
     t_end = float(scenario.t_final if t_final is None else t_final)
     t_out = np.linspace(0.0, t_end, 201) if t_eval is None else np.asarray(t_eval, dtype=float)
@@ -365,6 +373,10 @@ def reference_simulate(
     z = np.zeros(s.size)
     if sc.x0:
         z[: s.n] = sc.x0
+    if controller.eso_init == "output":  # ξ̂_1(0) = the first measurement y(0) + n(0)
+        first = segment_inputs(0.0)
+        y0 = plant.output(z[: s.n], first["plant_params"])  # type: ignore[arg-type]
+        z[s.n + s.n_td] = y0 + float(first["noise"])  # type: ignore[arg-type]
     states: list[NDArray[np.float64]] = []
     times: list[NDArray[np.float64]] = []
     seg_inputs: list[dict[str, object]] = []

@@ -166,6 +166,11 @@ def simulate_batch(
     )
     b = len(batch)
     scens = _as_list(scenarios, b, "scenarios")
+    if not isinstance(controllers, ControllerBatch):  # a packed batch is checked when built
+        ctrls = [controllers] * b if isinstance(controllers, Controller) else list(controllers)
+        pairs = {(id(c), id(s)): (c, s) for c, s in zip(ctrls, scens, strict=True)}
+        for c, s in pairs.values():
+            c.check_plant(plant, s.x0 or None)  # ρ, IOFL's normal form, the sign of b0
     t_final = scens[0].t_final
     if any(abs(s.t_final - t_final) > 1e-12 for s in scens):
         raise ValueError("all scenarios in one batch must share t_final")

@@ -15,7 +15,19 @@ length n) and a parameter vector ``p`` (a float array, named by :attr:`Plant.par
 Returning a tuple of floats is fastest (no allocation in the compiled loop); arrays also
 work.  The engine compiles these with numba into its closed-loop kernel, so user plants run
 as fast as the built-in ones.  :meth:`Plant.check` calls each function once in Python and
-reports a function of the wrong shape by name before anything is compiled.
+reports a function of the wrong shape, or one that returns complex numbers, by name before
+anything is compiled (given the initial state it also requires finite values there);
+:meth:`Plant.typecheck` compiles each function as the kernel calls it and reports one numba
+cannot compile (a Python ``dict``, an unsupported library call) or whose compiled result is
+not real floats, by name.
+
+**Failures at run time.**  The plant functions are compiled with numba's ``numpy`` error
+model, like the kernel: a division by zero, an overflow or a math domain error (``sqrt`` or
+``log`` of a negative number) gives ``inf`` or ``NaN`` as in numpy, the member's state
+becomes non-finite and the engine reports it *diverged* at that time (no NaN in the
+results).  A plant function that raises (``raise ValueError(...)``) stops the run with a
+:class:`PlantError` naming the plant, the function and the state where it failed
+(:func:`aiofl.engine.build.run_members`).
 
 An optional ``normal_form(x, p) -> (ξ_1, ..., ξ_ρ, α, β)`` (see :mod:`aiofl.plants.normal_form`)
 enables the classical IOFL baseline law.
@@ -32,13 +44,37 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Plant", "PlantError"]
+__all__ = ["Plant", "PlantError", "derivative_unit", "unit_from_label", "unit_label"]
 
 PlantFunction = Callable[[NDArray[np.float64], NDArray[np.float64]], Any]
 
 
 class PlantError(ValueError):
     """A plant definition that the engine cannot use (wrong shape, wrong types, bad name)."""
+
+
+def unit_label(name: str, unit: str) -> str:
+    """``"name [unit]"``, or just ``name`` when the unit is not declared (``""`` or ``"-"``)."""
+    return f"{name} [{unit}]" if unit and unit != "-" else name
+
+
+def derivative_unit(unit: str, k: int) -> str:
+    r"""The unit of the k-th time derivative of a signal in ``unit``: ``rad`` -> ``rad/s^2``.
+
+    The ESO's estimates :math:`\hat\xi_{k+1}` of :math:`y^{(k)}` (eq. 5) and the
+    differentiator's :math:`r_{k+1}` carry these units; an undeclared unit stays undeclared.
+    """
+    if not unit or unit == "-" or k == 0:
+        return unit
+    return f"{unit}/s" if k == 1 else f"{unit}/s^{k}"
+
+
+def unit_from_label(label: str) -> str:
+    """The unit in a state label's trailing brackets: ``"hub angle θ [rad]"`` -> ``"rad"``."""
+    text = label.strip()
+    if text.endswith("]") and "[" in text:
+        return text[text.rindex("[") + 1 : -1].strip()
+    return ""
 
 
 def _zero_bd(x: NDArray[np.float64], p: NDArray[np.float64]) -> Any:  # pragma: no cover - jitted
@@ -67,6 +103,11 @@ class Plant:
         Optional ``(x, p) -> (ξ_1..ξ_ρ, α(x), β(x))`` for the classical IOFL law.
     state_names, description
         Documentation.
+    output_unit, input_unit, disturbance_unit
+        Units of y, u and τ_d as plain text (``"rad"``, ``"V"``, ``"N·m"``); ``""`` when not
+        declared.  Figures, CSV headers and report tables label signals with them.
+    state_units
+        One unit per state (``"rad/s"``); empty strings when not declared.
     """
 
     name: str
@@ -80,6 +121,10 @@ class Plant:
     normal_form: PlantFunction | None = None
     state_names: tuple[str, ...] = ()
     description: str = ""
+    output_unit: str = ""
+    input_unit: str = ""
+    state_units: tuple[str, ...] = ()
+    disturbance_unit: str = ""
     _checked: dict[str, bool] = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
@@ -92,6 +137,20 @@ class Plant:
         if not self.state_names:
             names = tuple(f"x{i}" for i in range(1, self.n_states + 1))
             object.__setattr__(self, "state_names", names)
+        units = tuple(self.state_units) or ("",) * self.n_states
+        if len(units) != self.n_states or not all(isinstance(v, str) for v in units):
+            raise PlantError(
+                f"plant {self.name!r}: state_units needs {self.n_states} strings (one per "
+                f"state), got {len(units)}"
+            )
+        object.__setattr__(self, "state_units", units)
+        for key in ("output_unit", "input_unit", "disturbance_unit"):
+            if not isinstance(getattr(self, key), str):
+                raise PlantError(f"plant {self.name!r}: {key} must be a string (e.g. 'rad')")
+
+    def state_label(self, i: int) -> str:
+        """Name and unit of state ``i`` (0-based), e.g. ``"theta [rad]"``."""
+        return unit_label(self.state_names[i], self.state_units[i])
 
     # ------------------------------------------------------------------ parameters
     @property
@@ -118,6 +177,19 @@ class Plant:
         return np.array(list(values.values()), dtype=np.float64)
 
     # ------------------------------------------------------------------ evaluation
+    def _real(self, out: Any, fname: str, x: ArrayLike) -> NDArray[np.float64]:
+        """A function's result as a float array; PlantError if it holds complex numbers."""
+        raw = np.asarray(out)
+        if np.iscomplexobj(raw) or (
+            raw.dtype == object and any(isinstance(v, complex) for v in raw.ravel())
+        ):
+            raise PlantError(
+                f"plant {self.name!r}: {fname}(x, p) returns complex numbers at x = "
+                f"{np.asarray(x, dtype=np.float64).tolist()}: {raw.tolist()}; return real floats "
+                "(the engine's state is real; e.g. use math.sqrt of a nonnegative value)"
+            )
+        return np.asarray(raw, dtype=np.float64)
+
     def _vector(self, fn: PlantFunction, fname: str, x: ArrayLike, p: ArrayLike) -> np.ndarray:
         out = fn(np.asarray(x, dtype=np.float64), np.asarray(p, dtype=np.float64))
         if isinstance(out, tuple) and any(isinstance(v, (int, np.integer)) for v in out):
@@ -125,7 +197,7 @@ class Plant:
                 f"plant {self.name!r}: {fname}(x, p) returns an integer entry; return floats "
                 "(write 0.0, not 0) so the compiled engine sees one element type"
             )
-        arr = np.asarray(out, dtype=np.float64)
+        arr = self._real(out, fname, x)
         if arr.shape != (self.n_states,):
             raise PlantError(
                 f"plant {self.name!r}: {fname}(x, p) must return {self.n_states} floats "
@@ -144,7 +216,7 @@ class Plant:
     def output(self, x: ArrayLike, p: ArrayLike | None = None) -> float:
         """:math:`y = h(x, p)`, evaluated in Python."""
         pv = self.param_vector() if p is None else np.asarray(p, dtype=np.float64)
-        out = np.asarray(self.h(np.asarray(x, dtype=np.float64), pv), dtype=np.float64)
+        out = self._real(self.h(np.asarray(x, dtype=np.float64), pv), "h", x)
         if out.shape not in ((), (1,)):
             raise PlantError(
                 f"plant {self.name!r}: h(x, p) must return one float, got shape {out.shape}"
@@ -152,7 +224,13 @@ class Plant:
         return float(out.reshape(()))
 
     def check(self, x: ArrayLike | None = None) -> None:
-        """Call every function once in Python and raise :class:`PlantError` on a wrong shape."""
+        """Call every function once in Python; raise :class:`PlantError` naming the one at fault.
+
+        Refused: a wrong shape, integer entries, complex numbers, a function that raises.
+        Given ``x`` (the initial state of a run), f, g, h and b_d must also be finite there;
+        without it they are called at x = (0.1, ..., 0.1) for their shapes only.
+        """
+        finite = x is not None
         x = np.full(self.n_states, 0.1) if x is None else np.asarray(x, dtype=np.float64)
         if x.shape != (self.n_states,):
             raise PlantError(f"plant {self.name!r}: x0 must have {self.n_states} entries")
@@ -163,23 +241,54 @@ class Plant:
                 continue
             try:
                 if fname == "h":
-                    self.output(x, p)
+                    val = np.asarray(self.output(x, p))
                 elif fname == "normal_form":
-                    nf = np.asarray(fn(x, p), dtype=np.float64)
+                    nf = self._real(fn(x, p), fname, x)
                     rho = self.relative_degree
                     if rho is None or nf.shape != (rho + 2,):
                         raise PlantError(
                             f"plant {self.name!r}: normal_form(x, p) must return ρ+2 floats "
                             f"(ξ_1..ξ_ρ, α, β) with relative_degree set; got shape {nf.shape}"
                         )
+                    continue  # may be singular at x; only the IOFL law uses it
                 else:
-                    self._vector(fn, fname, x, p)
+                    val = self._vector(fn, fname, x, p)
             except PlantError:
                 raise
             except Exception as exc:  # a user function that raises on a valid state
                 raise PlantError(
-                    f"plant {self.name!r}: {fname}(x, p) failed on x={x.tolist()}: {exc}"
+                    f"plant {self.name!r}: {fname}(x, p) failed at state x = {x.tolist()}: "
+                    f"{type(exc).__name__}: {exc}"
                 ) from exc
+            if finite and not np.all(np.isfinite(val)):
+                raise PlantError(
+                    f"plant {self.name!r}: {fname}(x, p) = {val.tolist()} is not finite at the "
+                    f"initial state x = {x.tolist()}; allowed: finite values"
+                )
+
+    def typecheck(self) -> None:
+        """Compile every function with numba as the kernel calls it; PlantError naming the one
+        numba cannot compile or whose result is not real floats.
+
+        The arguments are C-contiguous float64 vectors (x, p).  f, g and b_d must return a
+        tuple of n floats or a float vector, h one real number, the normal form a tuple or
+        vector of floats.  Compiling here is not extra work when the kernel is then compiled
+        (numba reuses these compilations); :mod:`aiofl.engine.build` calls it for plants
+        defined outside aiofl before compiling their kernel, or when that compilation fails.
+        """
+        from numba import types as nt
+        from numba.core.errors import NumbaError
+
+        sig = (nt.float64[::1], nt.float64[::1])
+        for fname, fn in zip(("f", "g", "h", "bd", "normal_form"), self.compiled, strict=True):
+            try:
+                fn.compile(sig)
+            except NumbaError as exc:
+                raise PlantError(
+                    f"plant {self.name!r}: numba cannot compile {fname}(x, p): {_numba_reason(exc)}"
+                ) from None
+            ret = fn.overloads[sig].signature.return_type
+            _check_return_type(self.name, fname, ret)
 
     # ------------------------------------------------------------------ compilation
     @cached_property
@@ -195,7 +304,10 @@ class Plant:
             def nf(x: NDArray[np.float64], p: NDArray[np.float64]) -> Any:  # placeholder
                 return np.zeros(n + 2)
 
-        jit = njit
+        def jit(fn: PlantFunction) -> Any:
+            # the kernel's error model: x/0, overflow and domain errors give inf/NaN
+            return njit(error_model="numpy")(getattr(fn, "py_func", fn))
+
         return (
             jit(self.f),
             jit(self.g),
@@ -203,3 +315,36 @@ class Plant:
             jit(self.bd or _zero_bd),
             jit(nf),
         )
+
+
+def _check_return_type(plant: str, fname: str, ret: Any) -> None:
+    """PlantError unless numba type ``ret`` is what the kernel can use for ``fname``."""
+    from numba import types as nt
+
+    parts = list(ret.types) if isinstance(ret, nt.BaseTuple) else [getattr(ret, "dtype", ret)]
+    if any(isinstance(t, nt.Complex) for t in parts):
+        raise PlantError(
+            f"plant {plant!r}: {fname}(x, p) returns complex numbers when compiled ({ret}); "
+            "return real floats"
+        )
+    if fname == "h":
+        ok = isinstance(ret, (nt.Float, nt.Integer))
+        want = "one real number"
+    else:
+        ok = (isinstance(ret, nt.UniTuple) and isinstance(ret.dtype, nt.Float)) or (
+            isinstance(ret, nt.Array) and ret.ndim == 1 and isinstance(ret.dtype, nt.Float)
+        )
+        want = "a tuple of floats or a float vector"
+    if not ok:
+        raise PlantError(
+            f"plant {plant!r}: {fname}(x, p) returns {ret} when compiled; allowed: {want}"
+        )
+
+
+def _numba_reason(exc: Exception) -> str:
+    """The informative line of a numba compile error, with its source location."""
+    lines = [ln.strip() for ln in str(exc).splitlines() if ln.strip()]
+    skip = ("Failed in", "During:", "File ", "<source", ">>>", "^")
+    reason = next((ln for ln in lines if not ln.startswith(skip)), type(exc).__name__)
+    where = next((ln.rstrip(":") for ln in lines if ln.startswith("File ")), "")
+    return f"{type(exc).__name__}: {reason[:300]}" + (f" ({where})" if where else "")

@@ -11,16 +11,24 @@ Python source over ``math`` only, each function ``(x, p)`` returning a tuple of 
 functions (:meth:`aiofl.plants.symbolic.SymbolicPlant.to_plant`), and
 :func:`generate_module_source` writes them ahead of time for the shipped plants
 (:mod:`aiofl.plants.library_generated`).
+
+Generated code never holds ``inf``, ``nan``, ``zoo`` or a complex number: an expression
+with one (``1/(x1 - x1)``, a Lie derivative whose constant overflows float64, a constant
+such as ``exp(1000)``) refuses the plant with a
+:class:`~aiofl.plants.expressions.SymbolicPlantError` naming the function and entry, and
+the printed source is checked once more for those words before it is compiled.
 """
 
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
 from typing import Any, Protocol
 
 import sympy as sp
 
+from aiofl.plants.expressions import SymbolicPlantError, check_finite
 from aiofl.plants.normal_form import Analysis, SymbolicModel, drop_delta
 
 __all__ = ["compile_sources", "generate_module_source", "plant_sources"]
@@ -41,12 +49,13 @@ def plant_sources(plant: SymbolicModel, analysis: Analysis) -> dict[str, str]:
     common subexpressions shared.  ``bd`` is present when the plant has one.
     """
     a = analysis
+    nf_names = [f"ξ_{i}" for i in range(1, a.rho + 1)] + ["α", "β"]
     out = {
         "f": _function_source("f", list(plant.f), plant, tuple_=True),
         "g": _function_source("g", list(plant.g), plant, tuple_=True),
         "h": _function_source("h", [plant.h], plant, tuple_=False),
         "normal_form": _function_source(
-            "normal_form", [*a.xi, a.alpha, a.beta], plant, tuple_=True, cse=True
+            "normal_form", [*a.xi, a.alpha, a.beta], plant, tuple_=True, cse=True, names=nf_names
         ),
     }
     if plant.bd is not None:
@@ -66,14 +75,24 @@ def compile_sources(sources: dict[str, str], name: str) -> dict[str, Any]:
 
 
 def _function_source(
-    fname: str, exprs: list[Any], plant: SymbolicModel, *, tuple_: bool, cse: bool = False
+    fname: str,
+    exprs: list[Any],
+    plant: SymbolicModel,
+    *,
+    tuple_: bool,
+    cse: bool = False,
+    names: list[str] | None = None,
 ) -> str:
     from sympy.printing.pycode import PythonCodePrinter
 
     printer = PythonCodePrinter({"fully_qualified_modules": True})
     mapping = {s: sp.Symbol(f"x[{i}]", real=True) for i, s in enumerate(plant.states)}
     mapping.update({s: sp.Symbol(f"p[{i}]", real=True) for i, s in enumerate(plant.param_symbols)})
-    exprs = [drop_delta(sp.sympify(e)).xreplace(mapping) for e in exprs]
+    exprs = [drop_delta(sp.sympify(e)) for e in exprs]
+    for i, e in enumerate(exprs):
+        label = names[i] if names else (f"{fname}[{i + 1}]" if tuple_ else fname)
+        _check_constants(e, f"plant {plant.name!r}: generated {fname}, {label}")
+    exprs = [e.xreplace(mapping) for e in exprs]
     lines = [f"def _fn_{fname}(x, p):"]
     if cse:
         reps, exprs = sp.cse(exprs, symbols=sp.numbered_symbols("_c"), optimizations="basic")
@@ -86,7 +105,40 @@ def _function_source(
         lines.append(f"    return ({body})")
     else:
         lines.append(f"    return {items[0]}")
-    return "\n".join(lines) + "\n"
+    src = "\n".join(lines) + "\n"
+    bad = _NONFINITE_CODE.search(src)
+    if bad:  # the checks above should make this unreachable
+        raise SymbolicPlantError(
+            f"plant {plant.name!r}: the generated {fname} would contain {bad.group()!r}; "
+            "allowed: finite real expressions"
+        )
+    return src
+
+
+_NONFINITE_CODE = re.compile(r"\b(?:inf|nan|zoo|oo|NaN|Infinity)\b|\b\d+(?:\.\d*)?j\b")
+
+
+def _check_constants(expr: Any, where: str) -> None:
+    """Refuse ``expr`` if it holds ``zoo``/``nan``/``oo``/``I``, a number outside float64,
+    or a constant subexpression that is not a finite real float (``exp(1000)``)."""
+    check_finite(expr, where)
+    stack = [expr]
+    while stack:  # the largest constant subexpressions, each evaluated once
+        sub = stack.pop()
+        if sub.is_Atom:
+            continue
+        if sub.free_symbols:
+            stack.extend(sub.args)
+            continue
+        try:
+            val = complex(sub.evalf(17))
+        except (TypeError, ValueError, OverflowError):
+            val = complex(math.nan)
+        if val.imag != 0 or not math.isfinite(val.real):
+            raise SymbolicPlantError(
+                f"{where}: the constant {sp.sstr(sub)[:60]} is not a finite real float64 "
+                f"({val}); allowed: finite real expressions"
+            )
 
 
 def _code(expr: Any, printer: Any) -> str:
@@ -94,9 +146,13 @@ def _code(expr: Any, printer: Any) -> str:
     expr = sp.sympify(expr)
     if expr.is_Number or (not expr.free_symbols and expr.is_real is not False):
         try:
-            return repr(float(expr))
-        except TypeError:
+            val = float(expr)
+        except (TypeError, OverflowError):
             pass
+        else:
+            if not math.isfinite(val):
+                raise SymbolicPlantError(f"generated code: {sp.sstr(expr)[:60]} is not finite")
+            return repr(val)
     return str(printer.doprint(expr))
 
 

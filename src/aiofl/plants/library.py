@@ -30,7 +30,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 import aiofl.plants.library_generated as _generated
-from aiofl.plants.base import Plant
+from aiofl.plants.base import Plant, unit_from_label
 
 if TYPE_CHECKING:
     from aiofl.plants.symbolic import SymbolicPlant
@@ -51,6 +51,9 @@ SPECS: dict[str, dict[str, Any]] = {
     "slfjm": {
         "name": "slfjm",
         "description": "single-link flexible-joint manipulator, eq. (15)",
+        "output_unit": "rad",
+        "input_unit": "V",
+        "disturbance_unit": "N·m",
         "states": {
             "x1": "hub angle θ [rad]",
             "x2": "link deflection α [rad]",
@@ -81,6 +84,9 @@ SPECS: dict[str, dict[str, Any]] = {
     "pendulum": {
         "name": "pendulum",
         "description": "damped pendulum driven by a torque",
+        "output_unit": "rad",
+        "input_unit": "N·m",
+        "disturbance_unit": "N·m",
         "states": {"theta": "angle [rad]", "theta_dot": "angular rate [rad/s]"},
         "f": ["theta_dot", "-g/l*sin(theta) - c/(m*l**2)*theta_dot"],
         "g": ["0", "1/(m*l**2)"],
@@ -91,6 +97,9 @@ SPECS: dict[str, dict[str, Any]] = {
     "tank": {
         "name": "tank",
         "description": "tank with Torricelli outflow filled by a pump (u [V], level [m])",
+        "output_unit": "m",
+        "input_unit": "V",
+        "disturbance_unit": "m^3/s",
         "states": {"level": "liquid level [m]"},
         "f": ["-a/A*sqrt(2*g*abs(level))"],
         "g": ["k_p/A"],
@@ -101,6 +110,9 @@ SPECS: dict[str, dict[str, Any]] = {
     "dcmotor_arm": {
         "name": "dcmotor_arm",
         "description": "single-link arm driven by a DC motor with armature inductance (u [V])",
+        "output_unit": "rad",
+        "input_unit": "V",
+        "disturbance_unit": "N·m",
         "states": {"theta": "arm angle [rad]", "omega": "arm rate [rad/s]", "i": "current [A]"},
         "f": [
             "omega",
@@ -127,6 +139,9 @@ SPECS: dict[str, dict[str, Any]] = {
         "description": (
             "flexible-joint arm with link damping, output = motor angle (collocated, ρ = 2 < n)"
         ),
+        "output_unit": "rad",
+        "input_unit": "N·m",  # motor torque
+        "disturbance_unit": "N·m",
         "states": {
             "q_m": "motor angle [rad]",
             "q_l": "link angle [rad]",
@@ -198,6 +213,10 @@ def _from_generated(name: str) -> Plant:
         normal_form=getattr(_generated, f"{name}_normal_form"),
         state_names=tuple(spec["states"]),
         description=spec["description"],
+        output_unit=spec.get("output_unit", ""),
+        input_unit=spec.get("input_unit", ""),
+        state_units=tuple(unit_from_label(label) for label in spec["states"].values()),
+        disturbance_unit=spec.get("disturbance_unit", ""),
     )
 
 

@@ -18,6 +18,20 @@ For a SISO plant
   (eq. 3), the zero dynamics :math:`\dot\eta = f_0(\eta, 0)` and a numerical check of
   their stability at an equilibrium (linearised eigenvalues; minimum phase or not).
 
+**Bounded work.**  Each Lie derivative can be several times larger than the one before
+(a chain of ``sin`` links grows 16, 70, 386, 2410, 17925 operations), and sympy's
+``simplify`` takes seconds at a hundred operations and minutes at a few hundred.  So an
+expression is simplified only while it is small (at most :data:`SIMPLIFY_OPS` operations,
+:data:`SIMPLIFY_TERMS` expanded terms and :data:`SIMPLIFY_NESTING` nested function calls,
+which covers every shipped plant) and is kept
+as it is otherwise (never expanded); whether a larger one vanishes identically is decided
+numerically, at seeded random points in 40-digit arithmetic
+(:func:`~aiofl.plants.expressions.vanishes_numerically`); and an expression over
+:data:`MAX_ANALYSIS_OPS` operations stops the analysis with a
+:class:`~aiofl.plants.expressions.SymbolicPlantError` naming it (its normal form would be
+too large to compile).  A constant β that is not finite at the nominal parameters, and a
+zero-dynamics linearisation that is not, are refused by name.
+
 The plant is read through :class:`SymbolicModel` (its states, parameters, vector fields and
 a numeric evaluator), so this module does not import :mod:`aiofl.plants.symbolic`, which
 calls it (:meth:`~aiofl.plants.symbolic.SymbolicPlant.analyze`).  The engine plant
@@ -27,6 +41,7 @@ forms of an :class:`Analysis` are :mod:`aiofl.analysis.plant_structure`.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -36,9 +51,18 @@ import numpy as np
 import sympy as sp
 from numpy.typing import NDArray
 
-from aiofl.plants.expressions import SymbolicPlantError
+from aiofl.plants.expressions import (
+    SymbolicPlantError,
+    expanded_terms,
+    function_depth,
+    vanishes_numerically,
+)
 
 __all__ = [
+    "MAX_ANALYSIS_OPS",
+    "SIMPLIFY_NESTING",
+    "SIMPLIFY_OPS",
+    "SIMPLIFY_TERMS",
     "Analysis",
     "RelativeDegreeError",
     "SymbolicModel",
@@ -48,6 +72,22 @@ __all__ = [
     "drop_delta",
     "lie_derivative",
 ]
+
+
+SIMPLIFY_OPS = 100
+"""Largest expression (``sympy.count_ops``) that is simplified; slfjm's α, the largest
+shipped, has 78 and takes ~1.5 s."""
+SIMPLIFY_TERMS = 64
+"""Largest expanded size (:func:`aiofl.plants.expressions.expanded_terms`) that is
+simplified: simplification expands polynomials (``(x1 + 1)**64``, 65 terms, takes ~0.7 s)."""
+SIMPLIFY_NESTING = 8
+"""Deepest nesting of function calls that is simplified: simplification is exponential in
+it (``sin(sin(...(x)))`` 9 deep takes 0.07 s, 12 deep 0.65 s, 15 deep 6 s)."""
+MAX_ANALYSIS_OPS = 5000
+"""Largest Lie derivative (operations) the analysis builds; beyond it the plant is refused."""
+_INVERT_MAX_N = 8
+"""Largest n for which the coordinate change is inverted symbolically (LU of an n x n
+matrix of parameters grows quickly); beyond it f0 is left to ``eta_dot``."""
 
 
 class RelativeDegreeError(SymbolicPlantError):
@@ -122,12 +162,29 @@ def drop_delta(expr: Any) -> Any:
     return expr
 
 
-def _tidy(expr: Any) -> Any:
-    """A compact form of ``expr`` (sympy ``simplify`` unless the expression is large)."""
+def _small(expr: Any, ops: int | None = None) -> bool:
+    """Whether ``expr`` is small enough to simplify (see the module notes)."""
+    return bool(
+        (sp.count_ops(expr) if ops is None else ops) <= SIMPLIFY_OPS
+        and expanded_terms(expr, cap=10**6) <= SIMPLIFY_TERMS
+        and function_depth(expr) <= SIMPLIFY_NESTING
+    )
+
+
+def _tidy(expr: Any, what: str = "an expression") -> Any:
+    """A compact form of ``expr``: sympy ``simplify`` while it is small, else as it is.
+
+    Raises :class:`SymbolicPlantError` naming ``what`` when ``expr`` has more than
+    :data:`MAX_ANALYSIS_OPS` operations.
+    """
     expr = drop_delta(sp.sympify(expr))
-    if sp.count_ops(expr) > 600:
-        return sp.expand(expr)
-    return sp.simplify(expr)
+    ops = sp.count_ops(expr)
+    if ops > MAX_ANALYSIS_OPS:
+        raise SymbolicPlantError(
+            f"{what} has {ops} operations; allowed: at most {MAX_ANALYSIS_OPS} (the Lie "
+            "derivatives of this plant grow too large to analyse and compile)"
+        )
+    return sp.simplify(expr) if _small(expr, ops) else expr
 
 
 @dataclass(frozen=True)
@@ -246,12 +303,19 @@ class Analysis:
         return f"{{x : β(x) ≠ 0}} ({where})"
 
 
-def _is_zero(expr: Any, plant: SymbolicModel) -> bool:
-    """Whether ``expr`` vanishes identically in x at the nominal parameters."""
-    e = _tidy(expr)
+def _is_zero(expr: Any, plant: SymbolicModel, what: str = "an expression") -> bool:
+    """Whether ``expr`` vanishes identically in x at the nominal parameters (symbolically
+    while it is small, else numerically)."""
+    e = _tidy(expr, what)
     if e == 0:
         return True
-    e_nom = sp.simplify(e.subs(plant.nominal))
+    e_nom = e.subs(plant.nominal)
+    if not _small(e_nom):
+        return e_nom == 0 or (
+            not e_nom.has(sp.zoo, sp.nan, sp.oo, -sp.oo)
+            and vanishes_numerically(e_nom, [s for s in plant.states if s in e_nom.free_symbols])
+        )
+    e_nom = sp.simplify(e_nom)
     if e_nom == 0:
         return True
     if e_nom.free_symbols:
@@ -276,11 +340,12 @@ def analyze(plant: SymbolicModel) -> Analysis:
     lf = [plant.h]
     lg: list[Any] = []
     rho = 0
+    where = f"plant {plant.name!r}:"
     for k in range(plant.n):
-        lgk = _tidy(lie_derivative(lf[k], g, states))
-        if _is_zero(lgk, plant):
+        lgk = _tidy(lie_derivative(lf[k], g, states), f"{where} L_g L_f^{k} h")
+        if _is_zero(lgk, plant, f"{where} L_g L_f^{k} h"):
             lg.append(sp.S.Zero)
-            lf.append(_tidy(lie_derivative(lf[k], f, states)))
+            lf.append(_tidy(lie_derivative(lf[k], f, states), f"{where} L_f^{k + 1} h"))
             continue
         lg.append(lgk)
         rho = k + 1
@@ -292,23 +357,22 @@ def analyze(plant: SymbolicModel) -> Analysis:
             "everywhere (eq. 2 has no solution); check g and h"
         )
     if len(lf) == rho:
-        lf.append(_tidy(lie_derivative(lf[rho - 1], f, states)))
+        lf.append(_tidy(lie_derivative(lf[rho - 1], f, states), f"{where} L_f^{rho} h"))
     beta = lg[rho - 1]
     sset = set(states)
     beta_constant = not (beta.free_symbols & sset)
-    beta_nominal = float(beta.subs(plant.nominal)) if beta_constant else None
+    beta_nominal = _beta_nominal(plant, beta) if beta_constant else None
     zeros: tuple[Any, ...] = ()
     undefined: tuple[Any, ...] = ()
-    if not beta_constant:
+    if not beta_constant and _small(beta):
         num, den = sp.fraction(sp.together(beta))
-        zeros = tuple(fc for fc, _ in sp.factor_list(num)[1] if fc.free_symbols & sset)
-        undefined = tuple(fc for fc, _ in sp.factor_list(den)[1] if fc.free_symbols & sset)
+        zeros, undefined = _state_factors(num, sset), _state_factors(den, sset)
     zd: ZeroDynamics | None = None
     if rho == plant.n:
         note = "none: ρ = n, there are no internal dynamics"
     else:
         try:
-            zd = _zero_dynamics(plant, tuple(lf[:rho]), rho)
+            zd = _zero_dynamics(plant, tuple(lf[:rho]), rho, beta)
             note = f"{zd.verdict} (eigenvalues of the linearised zero dynamics at x_e)"
         except ZeroDynamicsError as exc:
             note = str(exc)
@@ -326,6 +390,33 @@ def analyze(plant: SymbolicModel) -> Analysis:
     )
 
 
+def _state_factors(expr: Any, sset: set[Any]) -> tuple[Any, ...]:
+    """The factors of ``expr`` that depend on the state (``expr`` itself when sympy cannot
+    factor it, e.g. ``x**x``, where ``factor_list`` raises)."""
+    try:
+        factors = [fc for fc, _ in sp.factor_list(expr)[1]]
+    except (TypeError, ValueError, sp.PolynomialError):
+        factors = [expr]
+    return tuple(fc for fc in factors if fc.free_symbols & sset)
+
+
+def _beta_nominal(plant: SymbolicModel, beta: Any) -> float:
+    """A constant β at the nominal parameters; refused when it is not a finite real number
+    (e.g. ``1/b`` with ``b = 0``)."""
+    val = beta.subs(plant.nominal)
+    try:
+        out = float(val)
+    except (TypeError, ValueError, OverflowError):
+        out = math.nan
+    if not math.isfinite(out):
+        raise SymbolicPlantError(
+            f"plant {plant.name!r}: β = L_g L_f^(ρ-1) h = {sp.sstr(beta)[:80]} is {sp.sstr(val)} "
+            "at the nominal parameters, not a finite number (a division by zero or an "
+            "overflow in params?); allowed: a finite β"
+        )
+    return out
+
+
 def _internal_coordinates(plant: SymbolicModel, xi: tuple[Any, ...], rho: int) -> tuple[Any, str]:
     """Choose φ(x) with ∂φ/∂x g = 0 (eq. 3)."""
     states, g = plant.states, sp.Matrix(plant.g)
@@ -338,15 +429,17 @@ def _internal_coordinates(plant: SymbolicModel, xi: tuple[Any, ...], rho: int) -
             )
         for i, e in enumerate(eta, 1):
             lgphi = lie_derivative(e, list(g), states)
-            if not _is_zero(lgphi, plant):
+            what = f"plant {plant.name!r}: ∂φ/∂x·g of eta[{i}]"
+            if not _is_zero(lgphi, plant, what):
+                shown = sp.sstr(_tidy(lgphi, what))
                 raise ZeroDynamicsError(
-                    f"plant {plant.name!r}: eta[{i}] = {e} has ∂φ/∂x·g = {sp.simplify(lgphi)} "
-                    "≠ 0; eq. (3) needs it to vanish"
+                    f"plant {plant.name!r}: eta[{i}] = {sp.sstr(e)[:60]} has ∂φ/∂x·g = "
+                    f"{shown[:80]} ≠ 0; eq. (3) needs it to vanish"
                 )
         return eta, "given in the model"
     # g(x) = γ(x)·c with a constant direction c: φ = w·x for w in the left null space of c
     k = next(i for i, gi in enumerate(g) if not _is_zero(gi, plant))
-    direction = sp.Matrix([sp.simplify(gi / g[k]) for gi in g])
+    direction = sp.Matrix([_tidy(gi / g[k], f"plant {plant.name!r}: g/g_{k + 1}") for gi in g])
     if any(d.free_symbols & set(states) for d in direction):
         raise ZeroDynamicsError(
             f"plant {plant.name!r}: cannot construct internal coordinates η automatically: g(x) "
@@ -357,14 +450,13 @@ def _internal_coordinates(plant: SymbolicModel, xi: tuple[Any, ...], rho: int) -
     basis = direction.T.nullspace()
     # choose by the generic rank (at a pseudo-random point); x_e is checked later
     x0 = tuple(np.random.default_rng(0).uniform(0.3, 0.9, plant.n))
-    dxi = np.array(
-        sp.Matrix(xi).jacobian(states).subs(plant.nominal).subs(dict(zip(states, x0, strict=True))),
-        dtype=np.float64,
-    ).reshape(rho, plant.n)
+    point = dict(zip(states, x0, strict=True))
+    at_x0 = sp.Matrix(xi).jacobian(states).subs(plant.nominal).subs(point)
+    dxi = _real_array(at_x0, plant, "the Jacobian of ξ at a generic point").reshape(rho, plant.n)
     rows = list(dxi)
     chosen: list[Any] = []
     for w in basis:
-        wv = np.array(w.subs(plant.nominal), dtype=np.float64).ravel()
+        wv = _real_array(w.subs(plant.nominal), plant, "a left null vector of g").ravel()
         trial = np.vstack([*rows, wv])
         if np.linalg.matrix_rank(trial, tol=1e-9) == len(rows) + 1:
             rows.append(wv)
@@ -380,16 +472,49 @@ def _internal_coordinates(plant: SymbolicModel, xi: tuple[Any, ...], rho: int) -
     return eta, "linear, from the left null space of g's constant direction"
 
 
+def _real_array(values: Any, plant: SymbolicModel, what: str) -> NDArray[np.float64]:
+    """``values`` (sympy numbers) as a float array; ZeroDynamicsError if one is not a finite
+    real number (e.g. ``sqrt(x1 - 1)`` at a point with x1 < 1, or a parameter of 0)."""
+    try:
+        arr = np.array(values, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        arr = np.array([np.nan])
+    if not np.all(np.isfinite(arr)):
+        raise ZeroDynamicsError(
+            f"plant {plant.name!r}: {what} is not finite and real at the nominal parameters; "
+            "give eta = [...] and equilibrium = [...] in the model"
+        )
+    return arr
+
+
 def _equilibrium_guess(plant: SymbolicModel) -> tuple[float, ...]:
     return plant.equilibrium if plant.equilibrium is not None else (0.0,) * plant.n
 
 
-def _zero_dynamics(plant: SymbolicModel, xi: tuple[Any, ...], rho: int) -> ZeroDynamics:
+def _beta_vanishes_at(plant: SymbolicModel, beta: Any, x_e: NDArray[np.float64]) -> float | None:
+    """β(x_e) if it is 0 or undefined there (relative to its size at a generic point), else None."""
+    fn = plant.numeric([beta])
+    x_gen = np.random.default_rng(0).uniform(0.3, 0.9, plant.n)
+    with np.errstate(all="ignore"):
+        b_e = float(np.asarray(fn(x_e), dtype=np.float64).ravel()[0])
+        b_gen = float(np.asarray(fn(x_gen), dtype=np.float64).ravel()[0])
+    size = abs(b_gen) if np.isfinite(b_gen) else 1.0
+    if not np.isfinite(b_e) or abs(b_e) <= 1e-12 * max(size, 1e-300):
+        return b_e
+    return None
+
+
+def _zero_dynamics(
+    plant: SymbolicModel, xi: tuple[Any, ...], rho: int, beta: Any = None
+) -> ZeroDynamics:
     from scipy.optimize import root
 
     states, n, m = plant.states, plant.n, plant.n - rho
     eta, method = _internal_coordinates(plant, xi, rho)
-    eta_dot = tuple(_tidy(lie_derivative(e, list(plant.f), states)) for e in eta)
+    eta_dot = tuple(
+        _tidy(lie_derivative(e, list(plant.f), states), f"plant {plant.name!r}: η̇_{i}")
+        for i, e in enumerate(eta, 1)
+    )
     # equilibrium of the zero dynamics: ξ(x) = 0 and η̇(x) = 0
     resid = plant.numeric([*xi, *eta_dot])
     x_e = np.array(_equilibrium_guess(plant), dtype=np.float64)
@@ -401,8 +526,19 @@ def _zero_dynamics(plant: SymbolicModel, xi: tuple[Any, ...], rho: int) -> ZeroD
                 f"x = {x_e.tolist()} (ξ(x) = 0, η̇(x) = 0); give equilibrium = [...] in the model"
             )
         x_e = sol.x
+    b_e = None if beta is None else _beta_vanishes_at(plant, beta, x_e)
+    if b_e is not None:
+        raise ZeroDynamicsError(
+            f"plant {plant.name!r}: β(x_e) = {b_e:g} at the zero-dynamics equilibrium x_e = "
+            f"{x_e.tolist()}: ρ is not defined at x_e; no verdict"
+        )
     tmap = sp.Matrix([*eta, *xi])
     jt = plant.numeric(list(tmap.jacobian(states)))(x_e).reshape(n, n)
+    if not np.all(np.isfinite(jt)):
+        raise ZeroDynamicsError(
+            f"plant {plant.name!r}: the Jacobian of (η, ξ) is not finite at x_e = "
+            f"{x_e.tolist()} (nominal parameters); no zero-dynamics verdict"
+        )
     if np.linalg.matrix_rank(jt, tol=1e-10) < n:
         raise ZeroDynamicsError(
             f"plant {plant.name!r}: (η, ξ) is not a coordinate change at x_e = {x_e.tolist()} "
@@ -410,6 +546,11 @@ def _zero_dynamics(plant: SymbolicModel, xi: tuple[Any, ...], rho: int) -> ZeroD
         )
     jq = plant.numeric(list(sp.Matrix(eta_dot).jacobian(states)))(x_e).reshape(m, n)
     jac = jq @ np.linalg.inv(jt)[:, :m]
+    if not np.all(np.isfinite(jac)):
+        raise ZeroDynamicsError(
+            f"plant {plant.name!r}: the linearised zero dynamics ∂f0/∂η are not finite at "
+            f"x_e = {x_e.tolist()} (nominal parameters); no zero-dynamics verdict"
+        )
     eig = np.linalg.eigvals(jac)
     scale = max(1.0, float(np.max(np.abs(eig))) if eig.size else 1.0)
     tol = 1e-9 * scale
@@ -441,7 +582,10 @@ def _invert_linear(
     rho: int,
     eta_dot: tuple[Any, ...],
 ) -> tuple[Any, ...] | None:
-    """f0(η, 0) when z = T(x) is linear in x (solve T(x) = (η, 0) for x); else None."""
+    """f0(η, 0) when z = T(x) is linear in x (solve T(x) = (η, 0) for x); else None (also
+    for n > 8 or when an η̇ is too large to simplify: symbolic LU grows quickly)."""
+    if len(states) > _INVERT_MAX_N or not all(_small(e) for e in eta_dot):
+        return None
     jac = tmap.jacobian(states)
     if jac.free_symbols & set(states):
         return None

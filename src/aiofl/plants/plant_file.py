@@ -21,10 +21,12 @@ from aiofl.plants.symbolic import SymbolicPlant, read_plant_toml
 __all__ = ["load_symbolic_plant"]
 
 
-def load_symbolic_plant(target: str | Path) -> SymbolicPlant:
+def load_symbolic_plant(target: str | Path, _seen: frozenset[Path] = frozenset()) -> SymbolicPlant:
     """A symbolic plant by built-in name (``"slfjm"``, ...) or from a TOML file.
 
-    A run config (a TOML with ``plant = "<name>"``) resolves to its plant.
+    A run config (a TOML with ``plant = "<name>"``) resolves to its plant; a relative
+    ``plant = "file.toml"`` is taken relative to the run config's folder, as
+    :func:`aiofl.config.resolve_plant` does when the config is run.
     """
     text = str(target)
     if text in symbolic_plant_names():
@@ -33,7 +35,13 @@ def load_symbolic_plant(target: str | Path) -> SymbolicPlant:
     if path.suffix == ".toml" or path.exists():
         data = read_plant_toml(path)
         if "f" not in data and isinstance(data.get("plant"), str):
-            return load_symbolic_plant(data["plant"])
+            plant = data["plant"]
+            if plant.endswith(".toml") and not Path(plant).is_absolute():
+                plant = str(path.parent / plant)
+            here = path.resolve()
+            if here in _seen:
+                raise SymbolicPlantError(f"config {str(path)!r}: plant files name each other")
+            return load_symbolic_plant(plant, _seen | {here})
         return SymbolicPlant.from_dict(data, str(path))
     if text in available_plants():
         raise SymbolicPlantError(

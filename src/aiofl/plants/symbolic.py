@@ -33,12 +33,30 @@ import sympy as sp
 from numpy.typing import NDArray
 from sympy.core.function import AppliedUndef
 
-from aiofl.plants.base import Plant
+from aiofl.plants.base import Plant, unit_from_label
 from aiofl.plants.codegen import compile_sources, plant_sources
-from aiofl.plants.expressions import CONSTANTS, FUNCTIONS, SymbolicPlantError, parse_expression
+from aiofl.plants.expressions import (
+    CONSTANTS,
+    FUNCTIONS,
+    MAX_EXPANDED_TERMS,
+    MAX_PARAMS,
+    MAX_STATES,
+    SymbolicPlantError,
+    check_finite,
+    expanded_terms,
+    parse_expression,
+)
 from aiofl.plants.normal_form import Analysis, RelativeDegreeError, analyze, drop_delta
 
 __all__ = ["SymbolicPlant", "read_plant_toml"]
+
+_MAX_NAME = 64
+"""Longest state or parameter name."""
+_MAX_FILE_BYTES = 1 << 20
+"""Largest plant file read (1 MiB)."""
+
+_MAX_UNIT = 32
+"""Longest unit text (``output_unit``, ``input_unit``, ``disturbance_unit``, ``state_units``)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,6 +85,10 @@ class SymbolicPlant:
         tried, then a numerical root of :math:`\xi(x) = 0,\ \dot\eta(x) = 0`.
     state_labels, description
         Documentation (one label per state, e.g. ``"hub angle θ [rad]"``).
+    output_unit, input_unit, disturbance_unit, state_units
+        Units of y, u, τ_d and of each state (plain text, ``""`` when not declared); a state
+        without a declared unit takes the one in its label's brackets (``"... [rad]"``).
+        Passed on to :meth:`to_plant` for figures, CSV headers and tables.
     """
 
     name: str
@@ -80,6 +102,10 @@ class SymbolicPlant:
     equilibrium: tuple[float, ...] | None = None
     state_labels: tuple[str, ...] = ()
     description: str = ""
+    output_unit: str = ""
+    input_unit: str = ""
+    disturbance_unit: str = ""
+    state_units: tuple[str, ...] = ()
     _cache: dict[str, Any] = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
@@ -89,10 +115,8 @@ class SymbolicPlant:
             raise SymbolicPlantError(f"plant {name!r}: states must list at least one state")
         if len(set(states)) != len(states):
             raise SymbolicPlantError(f"plant {name!r}: states must be distinct")
-        params = tuple((s, float(v)) for s, v in self.params)
-        for s, v in params:
-            if not math.isfinite(v):
-                raise SymbolicPlantError(f"plant {name!r}: params.{s} = {v}; allowed: finite")
+        _check_counts(name, len(states), len(self.params))
+        params = tuple((s, _finite(v, f"plant {name!r}: params.{s}")) for s, v in self.params)
         psyms = {s for s, _ in params}
         if len(psyms) != len(params):
             raise SymbolicPlantError(f"plant {name!r}: parameter names must be distinct")
@@ -105,6 +129,7 @@ class SymbolicPlant:
         object.__setattr__(self, "states", states)
         object.__setattr__(self, "params", params)
         allowed = set(states) | psyms
+        by_name = {str(s): s for s in allowed}
         vecs: dict[str, Any] = {}
         for fname in ("f", "g", "bd"):
             val = getattr(self, fname)
@@ -118,10 +143,12 @@ class SymbolicPlant:
                     f"plant {name!r}: {fname} has {len(entries)} entries; the plant has n = {n} "
                     f"states ({', '.join(map(str, states))}), so {fname} needs {n}"
                 )
-            vecs[fname] = sp.ImmutableMatrix([sp.sympify(e) for e in entries])
-        h = sp.sympify(self.h)
-        if isinstance(h, sp.MatrixBase) or isinstance(self.h, (list, tuple)):
+            vecs[fname] = sp.ImmutableMatrix(
+                [_expression(e, by_name, f"{fname}[{i}]") for i, e in enumerate(entries, 1)]
+            )
+        if isinstance(self.h, (list, tuple, sp.MatrixBase)):
             raise SymbolicPlantError(f"plant {name!r}: h must be one scalar expression (SISO)")
+        h = _expression(self.h, by_name, "h")
         for fname, expr in (*vecs.items(), ("h", h)):
             free = expr.free_symbols - allowed
             if free:
@@ -146,13 +173,16 @@ class SymbolicPlant:
         object.__setattr__(self, "bd", vecs.get("bd"))
         object.__setattr__(self, "h", h)
         if self.eta is not None:
-            eta = tuple(sp.sympify(e) for e in self.eta)
+            eta = tuple(_expression(e, by_name, f"eta[{i}]") for i, e in enumerate(self.eta, 1))
             for i, e in enumerate(eta, 1):
                 if e.free_symbols - allowed:
                     raise SymbolicPlantError(f"plant {name!r}: eta[{i}] uses unknown symbols")
             object.__setattr__(self, "eta", eta)
         if self.equilibrium is not None:
-            eq = tuple(float(v) for v in self.equilibrium)
+            eq = tuple(
+                _finite(v, f"plant {name!r}: equilibrium[{i}]")
+                for i, v in enumerate(self.equilibrium, 1)
+            )
             if len(eq) != n:
                 raise SymbolicPlantError(
                     f"plant {name!r}: equilibrium has {len(eq)} entries; the plant has {n} states"
@@ -162,6 +192,21 @@ class SymbolicPlant:
         if len(labels) != n:
             raise SymbolicPlantError(f"plant {name!r}: state_labels needs {n} entries")
         object.__setattr__(self, "state_labels", labels)
+        from_labels = tuple(unit_from_label(lab)[:_MAX_UNIT] for lab in labels)
+        units = tuple(self.state_units) or from_labels
+        if len(units) != n or not all(isinstance(u, str) for u in units):
+            raise SymbolicPlantError(
+                f"plant {name!r}: state_units needs {n} strings (one per state)"
+            )
+        object.__setattr__(self, "state_units", units)
+        for key in ("output_unit", "input_unit", "disturbance_unit", "state_units"):
+            val = getattr(self, key)
+            for v in val if key == "state_units" else (val,):
+                if not isinstance(v, str) or len(v) > _MAX_UNIT:
+                    raise SymbolicPlantError(
+                        f"plant {name!r}: {key} = {v!r:.40}; allowed: a string of at most "
+                        f"{_MAX_UNIT} characters (e.g. 'm')"
+                    )
 
     # ------------------------------------------------------------- constructors
     @classmethod
@@ -177,11 +222,15 @@ class SymbolicPlant:
         eta: Sequence[str] | None = None,
         equilibrium: Sequence[float] | None = None,
         description: str = "",
+        output_unit: str = "",
+        input_unit: str = "",
+        disturbance_unit: str = "",
+        state_units: Sequence[str] | Mapping[str, str] | None = None,
     ) -> SymbolicPlant:
         """Build a plant from expression strings (parsed by :mod:`aiofl.plants.expressions`).
 
         ``states`` is a list of names or a mapping name -> label; ``params`` maps names to
-        nominal values.
+        nominal values; ``state_units`` is a list of n units or a mapping state -> unit.
         """
         if isinstance(states, str) or not isinstance(states, (Sequence, Mapping)):
             raise SymbolicPlantError(f"plant {name!r}: states must be a list of names")
@@ -189,12 +238,18 @@ class SymbolicPlant:
         names = list(states)
         if not isinstance(params, Mapping):
             raise SymbolicPlantError(f"plant {name!r}: params must be a table name = value")
+        _check_counts(name, len(names), len(params))
         symbols: dict[str, sp.Symbol] = {}
         for nm in [*names, *params]:
-            if not isinstance(nm, str) or not nm.isidentifier() or nm.startswith("_"):
+            if (
+                not isinstance(nm, str)
+                or not nm.isidentifier()
+                or nm.startswith("_")
+                or len(nm) > _MAX_NAME
+            ):
                 raise SymbolicPlantError(
-                    f"plant {name!r}: {nm!r} is not a valid name (a Python identifier not "
-                    "starting with _)"
+                    f"plant {name!r}: {nm!r:.80} is not a valid name (a Python identifier not "
+                    f"starting with _, at most {_MAX_NAME} characters)"
                 )
             if nm in FUNCTIONS or nm in CONSTANTS:
                 raise SymbolicPlantError(
@@ -214,12 +269,28 @@ class SymbolicPlant:
                 raise SymbolicPlantError(
                     f"plant {name!r}: {key} must be a list of {len(names)} expression strings"
                 )
+            if key != "eta" and len(val) != len(names):  # before parsing any entry
+                raise SymbolicPlantError(
+                    f"plant {name!r}: {key} has {len(val)} entries; the plant has n = "
+                    f"{len(names)} states ({', '.join(names)}), so {key} needs {len(names)}"
+                )
+            if len(val) > len(names):
+                raise SymbolicPlantError(
+                    f"plant {name!r}: {key} has {len(val)} entries; allowed: at most n − ρ < "
+                    f"{len(names)}"
+                )
             return [parse_expression(s, symbols, f"{key}[{i}]") for i, s in enumerate(val, 1)]
 
+        if equilibrium is not None and (
+            isinstance(equilibrium, str) or not isinstance(equilibrium, Sequence)
+        ):
+            raise SymbolicPlantError(
+                f"plant {name!r}: equilibrium must be a list of {len(names)} numbers"
+            )
         return cls(
             name=name,
             states=tuple(symbols[s] for s in names),
-            params=tuple((symbols[p], float(v)) for p, v in params.items()),
+            params=tuple((symbols[p], v) for p, v in params.items()),
             f=vec("f", f),
             g=vec("g", g),
             h=parse_expression(h, symbols, "h") if not isinstance(h, (list, tuple)) else h,
@@ -228,10 +299,15 @@ class SymbolicPlant:
             equilibrium=None if equilibrium is None else tuple(equilibrium),
             state_labels=tuple(str(v) for v in labels),
             description=description,
+            output_unit=output_unit,
+            input_unit=input_unit,
+            disturbance_unit=disturbance_unit,
+            state_units=_state_units(name, names, state_units),
         )
 
     _KEYS = frozenset(
         {"name", "description", "states", "params", "f", "g", "h", "bd", "eta", "equilibrium"}
+        | {"output_unit", "input_unit", "disturbance_unit", "state_units"}
     )
 
     @classmethod
@@ -249,6 +325,10 @@ class SymbolicPlant:
             bd = ["0", "1/(m*l**2)"]             # optional disturbance input
             # eta = ["..."]                      # optional internal coordinates (eq. 3)
             # equilibrium = [0.0, 0.0]           # optional point for the zero dynamics
+            output_unit = "rad"                  # optional units (text), for figures, CSV
+            input_unit = "N·m"                   #   headers and tables; states take the
+            state_units = ["rad", "rad/s"]       #   units in their labels' [brackets]
+            # disturbance_unit = "N·m"
             [params]
             m = 1.0
             l = 0.5
@@ -278,6 +358,10 @@ class SymbolicPlant:
             eta=data.get("eta"),
             equilibrium=data.get("equilibrium"),
             description=str(data.get("description", "")),
+            output_unit=data.get("output_unit", ""),
+            input_unit=data.get("input_unit", ""),
+            disturbance_unit=data.get("disturbance_unit", ""),
+            state_units=data.get("state_units"),
         )
 
     @classmethod
@@ -307,7 +391,11 @@ class SymbolicPlant:
         fn = sp.lambdify([self.states], sub, modules="numpy")
 
         def call(x: Any) -> NDArray[np.float64]:
-            return np.array(fn(np.asarray(x, dtype=np.float64)), dtype=np.float64)
+            with np.errstate(all="ignore"):
+                out = np.asarray(fn(np.asarray(x, dtype=np.float64)))
+            if np.iscomplexobj(out):  # a complex value (sqrt of a negative number) is NaN
+                out = np.where(out.imag == 0, out.real, np.nan)
+            return np.asarray(out, dtype=np.float64)
 
         return call
 
@@ -356,15 +444,104 @@ class SymbolicPlant:
             normal_form=fns["normal_form"],
             state_names=tuple(str(s) for s in self.states),
             description=self.description,
+            output_unit=self.output_unit,
+            input_unit=self.input_unit,
+            state_units=self.state_units,
+            disturbance_unit=self.disturbance_unit,
         )
 
 
+def _state_units(
+    name: str, states: Sequence[str], units: Sequence[str] | Mapping[str, str] | None
+) -> tuple[str, ...]:
+    """The TOML key ``state_units``: a list of n strings or a table state -> unit."""
+    if units is None:
+        return ()  # SymbolicPlant takes them from the labels' brackets
+    if isinstance(units, Mapping):
+        unknown = sorted(set(units) - set(states))
+        if unknown:
+            raise SymbolicPlantError(
+                f"plant {name!r}: state_units names unknown state(s) {', '.join(unknown)}; "
+                f"allowed: {', '.join(states)}"
+            )
+        units = [units.get(s, "") for s in states]
+    if isinstance(units, str) or not isinstance(units, Sequence):
+        raise SymbolicPlantError(
+            f"plant {name!r}: state_units must be a list of {len(states)} strings or a table"
+        )
+    if len(units) != len(states) or not all(isinstance(u, str) for u in units):
+        raise SymbolicPlantError(
+            f"plant {name!r}: state_units = {list(units)!r}; allowed: {len(states)} strings, "
+            "one per state"
+        )
+    return tuple(units)
+
+
+def _check_counts(name: str, n_states: int, n_params: int) -> None:
+    """Refuse more than :data:`~aiofl.plants.expressions.MAX_STATES` states or
+    :data:`~aiofl.plants.expressions.MAX_PARAMS` parameters (before any is parsed)."""
+    if n_states > MAX_STATES:
+        raise SymbolicPlantError(
+            f"plant {name!r}: states lists {n_states} states; allowed: at most {MAX_STATES} "
+            "(the symbolic analysis takes n Lie derivatives over n states)"
+        )
+    if n_params > MAX_PARAMS:
+        raise SymbolicPlantError(
+            f"plant {name!r}: params lists {n_params} parameters; allowed: at most {MAX_PARAMS}"
+        )
+
+
+def _finite(value: Any, where: str) -> float:
+    """``value`` as a finite float, or a SymbolicPlantError naming ``where``."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.floating, np.integer)):
+        try:
+            value = float(sp.sympify(value, strict=True))  # a sympy number from Python
+        except (sp.SympifyError, TypeError, ValueError):
+            raise SymbolicPlantError(f"{where} = {value!r:.40}; allowed: a finite number") from None
+    try:
+        out = float(value)
+    except OverflowError:
+        out = math.inf
+    if not math.isfinite(out):
+        raise SymbolicPlantError(f"{where} = {value!r:.40}; allowed: a finite number")
+    return out
+
+
+def _expression(value: Any, symbols: Mapping[str, Any], where: str) -> Any:
+    """One entry of f, g, h, b_d or η: a string is parsed (:func:`parse_expression`, with
+    its bounds); a sympy expression or number from Python is held to the same bounds on
+    its finite constants and expanded size."""
+    if isinstance(value, str):
+        return parse_expression(value, symbols, where)
+    try:
+        expr = sp.sympify(value, strict=True)
+    except (sp.SympifyError, TypeError, ValueError):
+        raise SymbolicPlantError(f"{where}: {value!r:.60} is not an expression") from None
+    if not isinstance(expr, sp.Expr):
+        raise SymbolicPlantError(f"{where}: {value!r:.60} is not a scalar expression")
+    check_finite(expr, where)
+    terms = expanded_terms(expr)
+    if terms > MAX_EXPANDED_TERMS:
+        raise SymbolicPlantError(
+            f"{where}: the expanded form would have about {terms:.3g} terms; allowed: at most "
+            f"{MAX_EXPANDED_TERMS}"
+        )
+    return expr
+
+
 def read_plant_toml(path: str | Path) -> dict[str, Any]:
-    """The TOML table of a plant file; a missing or malformed file is a SymbolicPlantError."""
+    """The TOML table of a plant file; a missing, oversized or malformed file is a
+    SymbolicPlantError."""
     p = Path(path)
     if not p.is_file():
         raise SymbolicPlantError(f"plant file {str(p)!r} does not exist")
+    size = p.stat().st_size
+    if size > _MAX_FILE_BYTES:
+        raise SymbolicPlantError(
+            f"plant file {str(p)!r} has {size} bytes; allowed: at most {_MAX_FILE_BYTES} "
+            f"({MAX_STATES} states x 4 vectors of expressions fit in a fraction of it)"
+        )
     try:
         return tomllib.loads(p.read_text(encoding="utf-8"))
-    except tomllib.TOMLDecodeError as exc:
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise SymbolicPlantError(f"malformed TOML in {p}: {exc}") from None

@@ -29,6 +29,7 @@ import re
 import time
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -40,6 +41,7 @@ from aiofl.components.metrics import itae
 from aiofl.components.observers import eso_gains
 from aiofl.config import RunConfig, list_presets, load_config
 from aiofl.engine.simulation import SimulationResult, simulate_batch
+from aiofl.reporting.behaviour import TOLERANCE, Behaviour, analysis_numbers, measure_result
 from aiofl.reporting.paper import PAPER_PRESETS, PAPER_TABLES, SCENARIOS
 
 __all__ = [
@@ -51,6 +53,7 @@ __all__ = [
     "Reproduction",
     "compute",
     "computed_record",
+    "controller_access",
     "discover_cases",
     "paper_records",
     "run_cases",
@@ -144,7 +147,7 @@ class CaseRun:
 
     @property
     def record(self) -> dict[str, Any]:
-        """This run's metrics.json record (see :func:`computed_record`)."""
+        """This run's metrics record (see :func:`computed_record`)."""
         return computed_record(
             self.result,
             scenario=self.case.scenario,
@@ -152,6 +155,16 @@ class CaseRun:
             source=self.case.source,
             opi=self.opi,
         )
+
+    @cached_property
+    def behaviour(self) -> Behaviour:
+        """What the run did over its last seconds (:mod:`aiofl.reporting.behaviour`)."""
+        return measure_result(self.result, self.case.config.scenario.t_final)
+
+    @property
+    def unit(self) -> str:
+        """The plant's output unit (``"rad"`` for the SLFJM)."""
+        return self.case.config.plant.output_unit
 
 
 def _batch_key(cfg: RunConfig) -> tuple[Any, ...]:
@@ -272,9 +285,35 @@ def paper_records() -> list[dict[str, Any]]:
     ]
 
 
-def build_records(runs: Sequence[CaseRun]) -> list[dict[str, Any]]:
-    """Paper records and computed records, ordered by scenario, source, structure."""
-    recs = paper_records() + [r.record for r in runs]
+def reproduction_record(run: CaseRun, verdict: dict[str, Any] | None) -> dict[str, Any]:
+    """The metrics.json record of a reproduced case: :func:`computed_record` plus
+
+    * ``"preset"``: the preset that was run;
+    * ``"tracking"``: what the run did over its last seconds, in the plant's output unit
+      (:meth:`aiofl.reporting.behaviour.Behaviour.to_dict`, with the ``tolerance`` within
+      which it counts as tracking, a share of the reference peak);
+    * ``"linearisation"``: the closed-loop verdict and its numbers
+      (:func:`aiofl.reporting.behaviour.analysis_numbers`), null where not provided.
+    """
+    rec = run.record
+    rec["preset"] = run.case.preset
+    rec["tracking"] = {**run.behaviour.to_dict(), "tolerance": TOLERANCE}
+    rec["linearisation"] = analysis_numbers(verdict or {})
+    return rec
+
+
+def build_records(
+    runs: Sequence[CaseRun], verdicts: dict[str, dict[str, Any]] | None = None
+) -> list[dict[str, Any]]:
+    """Paper records and computed records, ordered by scenario, source, structure.
+
+    With ``verdicts`` (by preset) the computed records carry ``tracking`` and
+    ``linearisation`` (:func:`reproduction_record`).
+    """
+    recs = paper_records() + [
+        r.record if verdicts is None else reproduction_record(r, verdicts.get(r.case.preset))
+        for r in runs
+    ]
 
     def key(rec: dict[str, Any]) -> tuple[int, int, int]:
         src = rec["source"]
@@ -333,6 +372,36 @@ def output_ratio(run: CaseRun, window: float = 5.0) -> float | None:
     if r_peak == 0.0:
         return None
     return float(np.max(np.abs(res["y"][sel]))) / r_peak
+
+
+def controller_access(cfg: RunConfig, *, short: bool = False) -> str | None:
+    """What a model-based (IOFL) controller is given that the ESO-based ones are not.
+
+    None for the AIOFL law, which sees only the measured output, ρ and b0.  The classical
+    IOFL law (Section III, u = (−α(x) + v)/β(x)) is given the plant's model with its
+    *nominal* parameters and the plant state x itself, free of measurement noise; the long
+    form names what the scenario changes that IOFL is not told.
+    """
+    c, sc = cfg.controller, cfg.scenario
+    if c.law != "iofl":
+        return None
+    if short:
+        return "given the nominal model and the noise-free state x"
+    changed = ", ".join(
+        [f"{k} × {v:g}" for k, v in sc.plant_scale.items()]
+        + [f"{k} = {v:g}" for k, v in sc.plant_overrides.items()]
+    )
+    unknown = [f"the true plant has {changed}"] if changed else []
+    if sc.disturbance_amplitude != 0.0:
+        unknown.append("the disturbance is not modelled")
+    model = "the nominal model" + (f" ({'; '.join(unknown)})" if unknown else "")
+    state = "the noise-free state x" + (
+        f" (the measured output carries noise of variance {sc.noise_variance:g})"
+        if sc.noise_variance > 0
+        else ""
+    )
+    items = [model, state] + (["the exact reference derivatives"] if c.td == "exact" else [])
+    return "given " + (", ".join(items[:-1]) + " and " + items[-1])
 
 
 def closed_loop_verdict(cfg: RunConfig) -> dict[str, Any]:
@@ -413,7 +482,7 @@ def compute(
     t3 = time.perf_counter()
     return Reproduction(
         runs=runs,
-        records=build_records(runs),
+        records=build_records(runs, verdicts),
         trivial=trivial,
         verdicts=verdicts,
         engine=_engine_settings(cases, n_batches),

@@ -1,10 +1,19 @@
-"""Figures like the paper's Figures 3–5: output vs reference and control signal per run.
+"""Figures like the paper's Figures 3–5, with the tracking error: one row of panels per run.
 
-Each run gets one row of two panels: (left) the output y [rad] against the reference r,
-(right) the control signal u [V].  A run that diverged is drawn up to the divergence time,
-which is marked; its output panel is clipped to a few reference amplitudes (the peak is
-written on the panel) and its control panel uses a symmetric-log scale, so both the early
-behaviour and the blow-up stay visible.
+Each run gets one row of three panels: (left) the output y against the reference r,
+(middle) the tracking error e = y − r, the integrand of ITAE (eq. 22) without its weight t,
+and (right) the control signal u, each axis in the plant's own units
+(:attr:`aiofl.plants.base.Plant.output_unit`, ``input_unit``).  One legend for the whole
+figure, above the panels, says which line is which, so nothing is printed over the curves.
+
+A run that diverged is drawn up to the divergence time, which is marked (a dotted line and
+the time in the panel titles); its output and error panels are clipped to a few reference
+amplitudes (the peak is written in the title) and its control panel uses a symmetric-log
+scale, so both the early behaviour and the blow-up stay visible.
+
+Scenario events (the disturbance step, a plant change) are drawn as dash-dot lines when
+they fall inside the horizon; an event outside it is only listed in the legend, so an
+event time of, say, 10⁷ s neither fails nor stretches the figure.
 
 Matplotlib is used through :class:`matplotlib.figure.Figure` with the Agg canvas (no
 pyplot state, no display needed).
@@ -13,16 +22,19 @@ pyplot state, no display needed).
 from __future__ import annotations
 
 import io
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
+from aiofl.plants.base import unit_label
 from aiofl.reporting.paper import SCENARIOS
 
 if TYPE_CHECKING:
+    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
     from aiofl.engine.simulation import SimulationResult
@@ -40,13 +52,31 @@ __all__ = [
 
 COLORS = {"LESO": "#1f77b4", "INLESO": "#d62728", "LADRC": "#2ca02c", "IOFL": "#9467bd"}
 _FALLBACK = ("#ff7f0e", "#8c564b", "#e377c2", "#17becf")
+EVENT_STYLE = {"color": "0.45", "ls": "-.", "lw": 0.9}
+DIVERGED_STYLE = {"color": "crimson", "ls": ":", "lw": 1.5}
 
 
 @dataclass(frozen=True)
 class Panel:
-    """One row of a figure: a label, the run, a line colour, the horizon [s] and
-    optionally r(t), drawn over the whole horizon even when the run stopped early, and
-    scenario events ``(time, label)`` marked on both panels."""
+    """One row of a figure.
+
+    Attributes
+    ----------
+    label
+        Row title (e.g. ``"LESO [paper-s1-leso]"``).
+    result
+        The run.
+    color
+        Line colour of y, e and u.
+    t_final
+        The horizon [s] (the x axis spans it even when the run stopped early).
+    reference
+        Optional r(t), drawn over the whole horizon.
+    events
+        Scenario events ``(time [s], label)``; drawn when inside the horizon.
+    output_unit, input_unit
+        Units of y (and r, e) and of u; no brackets when empty.
+    """
 
     label: str
     result: SimulationResult
@@ -54,14 +84,113 @@ class Panel:
     t_final: float
     reference: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None
     events: tuple[tuple[float, str], ...] = ()
+    output_unit: str = ""
+    input_unit: str = ""
 
 
 def _color(structure: str, i: int) -> str:
     return COLORS.get(structure, _FALLBACK[i % len(_FALLBACK)])
 
 
+def _inside(t: float, t_final: float) -> bool:
+    return math.isfinite(t) and 0.0 <= t <= t_final
+
+
+def _u(unit: str) -> str:
+    return f" {unit}" if unit and unit != "-" else ""
+
+
+def _symlog_ticks(ax: Axes, peak: float) -> None:
+    """Symmetric-log y axis (linear within ±1) with ticks 0, ±10^k far enough apart that
+    their labels never touch."""
+    ax.set_yscale("symlog", linthresh=1.0, linscale=0.5)
+    top = max(2, math.ceil(math.log10(peak)))
+    step = max(2, math.ceil((top - 1) / 3))
+    exps = list(range(top, 1, -step))[::-1]
+    ticks = [-(10.0**k) for k in exps[::-1]] + [0.0] + [10.0**k for k in exps]
+    ax.set_yticks(ticks)
+    ax.set_yticklabels(
+        [
+            ("−" if v < 0 else "") + f"$10^{{{round(math.log10(abs(v)))}}}$" if v else "0"
+            for v in ticks
+        ]
+    )
+
+
+def _draw_row(axes: Sequence[Axes], p: Panel, letters: str) -> None:
+    ax_y, ax_e, ax_u = axes
+    res = p.result
+    t, r, y, u = res.t, res["r"], res["y"], res["u"]
+    e = y - r
+    if p.reference is not None:
+        t_ref = np.linspace(0.0, p.t_final, 4001)
+        ax_y.plot(t_ref, p.reference(t_ref), color="0.25", lw=1.0, ls="--")
+    else:
+        ax_y.plot(t, r, color="0.25", lw=1.0, ls="--")
+    ax_y.plot(t, y, color=p.color, lw=1.3)
+    ax_e.axhline(0.0, color="0.25", lw=0.8, ls="--")
+    ax_e.plot(t, e, color=p.color, lw=1.0)
+    ax_u.plot(t, u, color=p.color, lw=0.8)
+    ax_y.set_ylabel(unit_label("y, r", p.output_unit))
+    ax_e.set_ylabel(unit_label("e = y − r", p.output_unit))
+    ax_u.set_ylabel(unit_label("u", p.input_unit))
+    ax_y.set_title(f"({letters[0]}) {p.label}", fontsize=9.5, loc="left", fontweight="bold")
+    ax_e.set_title(f"({letters[1]}) tracking error", fontsize=9.5, loc="left")
+    ax_u.set_title(f"({letters[2]}) control signal", fontsize=9.5, loc="left")
+    if res.diverged:
+        r_amp = float(np.max(np.abs(r))) if r.size else 1.0
+        lim = 3.0 * (r_amp if r_amp > 0 else 1.0)
+        y_peak = float(np.max(np.abs(y))) if y.size else 0.0
+        if y_peak > lim:
+            for ax in (ax_y, ax_e):
+                ax.set_ylim(-lim, lim)
+            ax_y.set_title(
+                f"|y| reaches {y_peak:.3g}{_u(p.output_unit)}", fontsize=8.5, loc="right"
+            )
+        u_peak = float(np.max(np.abs(u))) if u.size else 0.0
+        if u_peak > 100.0:
+            _symlog_ticks(ax_u, u_peak)
+            ax_u.set_ylabel(unit_label("u", p.input_unit) + " (symlog)")
+        at = res.diverged_at if res.diverged_at is not None else float(t[-1]) if t.size else 0.0
+        for ax in (ax_y, ax_e, ax_u):
+            ax.axvline(at, **DIVERGED_STYLE)
+        for ax in (ax_e, ax_u):
+            ax.set_title(f"diverged at t = {at:.2f} s", fontsize=8.5, loc="right", color="crimson")
+    for t_ev, _text in p.events:
+        if _inside(t_ev, p.t_final):
+            for ax in (ax_y, ax_e, ax_u):
+                ax.axvline(t_ev, **EVENT_STYLE)
+    for ax in (ax_y, ax_e, ax_u):
+        ax.grid(True, alpha=0.3)
+        ax.set_xlim(0.0, p.t_final)  # a diverged run keeps the full axis: the cut shows
+
+
+def _legend_entries(panels: Sequence[Panel]) -> tuple[list[Any], list[str]]:
+    """One figure legend: line styles, scenario events (drawn or not) and divergence."""
+    from matplotlib.lines import Line2D
+
+    handles: list[Any] = [
+        Line2D([], [], color="0.25", ls="--", lw=1.0),
+        Line2D([], [], color="0.1", lw=1.3),
+    ]
+    labels = ["reference r (and e = 0)", "output y, error e, control u (colour per design)"]
+    horizon = max((p.t_final for p in panels), default=0.0)
+    seen: dict[str, bool] = {}
+    for p in panels:
+        for t_ev, text in p.events:
+            key = f"{text} at t = {t_ev:g} s"
+            seen[key] = seen.get(key, False) or _inside(t_ev, p.t_final)
+    for key, drawn in seen.items():
+        handles.append(Line2D([], [], **EVENT_STYLE) if drawn else Line2D([], [], lw=0))
+        labels.append(key if drawn else f"{key} (outside 0–{horizon:g} s, not drawn)")
+    if any(p.result.diverged for p in panels):
+        handles.append(Line2D([], [], **DIVERGED_STYLE))
+        labels.append("divergence (run stops)")
+    return handles, labels
+
+
 def runs_figure(panels: Sequence[Panel], title: str) -> Figure:
-    """A figure with one row per run: output vs reference, and control signal.
+    """A figure with one row per run: output vs reference, tracking error, control signal.
 
     Parameters
     ----------
@@ -77,106 +206,55 @@ def runs_figure(panels: Sequence[Panel], title: str) -> Figure:
     from matplotlib.figure import Figure
 
     n = max(len(panels), 1)
+    handles, labels = _legend_entries(panels)
+    ncols = 3
+    legend_rows = math.ceil(len(labels) / ncols)
     # fixed margins in inches (much faster than constrained layout, same look)
-    row, top, bottom, gap = 2.35, 0.62, 0.55, 0.55
+    row, bottom, gap = 2.3, 0.55, 0.55
+    top = 0.45 + 0.22 * legend_rows + 0.35
     height = top + bottom + n * row
-    fig = Figure(figsize=(11.0, height), dpi=100)
+    fig = Figure(figsize=(13.0, height), dpi=100)
     axes = fig.subplots(
         n,
-        2,
+        3,
         squeeze=False,
         sharex=True,
         gridspec_kw={
-            "left": 0.075,
-            "right": 0.985,
+            "left": 0.06,
+            "right": 0.99,
             "top": 1.0 - top / height,
             "bottom": bottom / height,
-            "wspace": 0.2,
+            "wspace": 0.26,
             "hspace": gap / (row - gap),
         },
     )
-    fig.suptitle(title, fontsize=12, fontweight="bold", y=1.0 - 0.12 / height, va="top")
+    fig.suptitle(title, fontsize=12, fontweight="bold", y=1.0 - 0.1 / height, va="top")
+    fig.legend(
+        handles,
+        labels,
+        loc="upper center",
+        bbox_to_anchor=(0.5, 1.0 - 0.42 / height),
+        ncols=ncols,
+        fontsize=8.5,
+        frameon=False,
+    )
     letters = "abcdefghijklmnopqrstuvwxyz"
     for i, p in enumerate(panels):
-        ax_y, ax_u = axes[i]
-        res = p.result
-        t = res.t
-        r, y, u = res["r"], res["y"], res["u"]
-        if p.reference is not None:
-            t_ref = np.linspace(0.0, p.t_final, 4001)
-            ax_y.plot(t_ref, p.reference(t_ref), color="0.25", lw=1.0, ls="--", label="reference r")
-        else:
-            ax_y.plot(t, r, color="0.25", lw=1.0, ls="--", label="reference r")
-        ax_y.plot(t, y, color=p.color, lw=1.3, label="output y")
-        ax_u.plot(t, u, color=p.color, lw=0.8, label="control u")
-        ax_y.set_ylabel("angle [rad]")
-        ax_u.set_ylabel("u [V]")
-        ax_y.set_title(f"({letters[2 * i % 26]}) output: {p.label}", fontsize=10, loc="left")
-        ax_u.set_title(
-            f"({letters[(2 * i + 1) % 26]}) control signal: {p.label}", fontsize=10, loc="left"
-        )
-        if res.diverged:
-            r_amp = float(np.max(np.abs(r))) if r.size else 1.0
-            lim = 3.0 * (r_amp if r_amp > 0 else 1.0)
-            y_peak = float(np.max(np.abs(y))) if y.size else 0.0
-            if y_peak > lim:
-                ax_y.set_ylim(-lim, lim)
-                ax_y.text(
-                    0.01,
-                    0.96,
-                    f"off scale: |y| reaches {y_peak:.3g} rad",
-                    transform=ax_y.transAxes,
-                    va="top",
-                    fontsize=8,
-                    color="0.3",
-                )
-            if u.size and float(np.max(np.abs(u))) > 100.0:
-                from matplotlib.ticker import SymmetricalLogLocator
-
-                ax_u.set_yscale("symlog", linthresh=1.0)  # linear within ±1 V, log beyond
-                ax_u.yaxis.set_major_locator(SymmetricalLogLocator(linthresh=1.0, base=100.0))
-                ax_u.set_ylabel("u [V] (symlog)")
-            for ax in (ax_y, ax_u):
-                ax.axvline(res.diverged_at, color="crimson", ls=":", lw=1.5)
-                ax.text(
-                    0.99,
-                    0.93,
-                    f"diverged at t = {res.diverged_at:.2f} s",
-                    transform=ax.transAxes,
-                    ha="right",
-                    va="top",
-                    fontsize=9,
-                    color="crimson",
-                    bbox={"facecolor": "white", "edgecolor": "crimson", "alpha": 0.85},
-                )
-        for t_ev, text in p.events:
-            for ax in (ax_y, ax_u):
-                ax.axvline(t_ev, color="0.45", ls="-.", lw=0.9)
-            ax_u.annotate(
-                text,
-                (t_ev, 0.02),
-                xycoords=("data", "axes fraction"),
-                xytext=(3, 0),
-                textcoords="offset points",
-                fontsize=8,
-                color="0.35",
-            )
-        for ax in (ax_y, ax_u):
-            ax.grid(True, alpha=0.3)
-            ax.set_xlim(0.0, p.t_final)  # a diverged run keeps the full axis: the cut shows
-        ax_y.legend(loc="lower left", fontsize=8, ncols=2, framealpha=0.85)
+        tags = "".join(letters[(3 * i + k) % 26] for k in range(3))
+        _draw_row(axes[i], p, tags)
     for ax in axes[-1]:
         ax.set_xlabel("time t [s]")
     return fig
 
 
-def scenario_events(scenario: Scenario) -> tuple[tuple[float, str], ...]:
+def scenario_events(
+    scenario: Scenario, disturbance_unit: str = ""
+) -> tuple[tuple[float, str], ...]:
     """Events worth marking on a time axis: the disturbance step, a late parameter change."""
     events = []
     if scenario.disturbance_amplitude != 0.0:
-        events.append(
-            (scenario.disturbance_time, f"$\\tau_d$ = {scenario.disturbance_amplitude:g} step")
-        )
+        amp = f"{scenario.disturbance_amplitude:g}{_u(disturbance_unit)}"
+        events.append((scenario.disturbance_time, f"$\\tau_d$ = {amp} step"))
     if (scenario.plant_scale or scenario.plant_overrides) and scenario.parameter_change_time > 0:
         events.append((scenario.parameter_change_time, "plant change"))
     return tuple(events)
@@ -194,17 +272,21 @@ def scenario_figure(rep: Reproduction, scenario: int) -> Figure:
     """
     info = SCENARIOS[scenario]
     runs = rep.scenario_runs(scenario)
-    panels = [
-        Panel(
-            f"{r.case.label} [{r.case.preset}]",
-            r.result,
-            _color(r.case.structure, i),
-            r.case.config.scenario.t_final,
-            r.case.config.scenario.reference.evaluate,
-            scenario_events(r.case.config.scenario),
+    panels = []
+    for i, r in enumerate(runs):
+        cfg = r.case.config
+        panels.append(
+            Panel(
+                f"{r.case.label} [{r.case.preset}]",
+                r.result,
+                _color(r.case.structure, i),
+                cfg.scenario.t_final,
+                cfg.scenario.reference.evaluate,
+                scenario_events(cfg.scenario, cfg.plant.disturbance_unit),
+                cfg.plant.output_unit,
+                cfg.plant.input_unit,
+            )
         )
-        for i, r in enumerate(runs)
-    ]
     return runs_figure(
         panels, f"Figure {info.figure} (reproduced): scenario {scenario}, {info.title}"
     )
@@ -217,9 +299,22 @@ def result_figure(
     structure: str = "",
     reference: Callable[[NDArray[np.float64]], NDArray[np.float64]] | None = None,
     events: tuple[tuple[float, str], ...] = (),
+    *,
+    output_unit: str = "",
+    input_unit: str = "",
 ) -> Figure:
-    """The figure of one simulation (``aiofl simulate``): output vs reference and control."""
-    panel = Panel(structure or "run", result, _color(structure, 0), t_final, reference, events)
+    """The figure of one simulation (``aiofl simulate``): output vs reference, tracking
+    error and control, in the plant's units."""
+    panel = Panel(
+        structure or "run",
+        result,
+        _color(structure, 0),
+        t_final,
+        reference,
+        events,
+        output_unit,
+        input_unit,
+    )
     return runs_figure([panel], title)
 
 

@@ -16,8 +16,9 @@ from pathlib import Path
 from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 from aiofl.reporting.cases import Reproduction, compute
 from aiofl.reporting.figures import figure_png, scenario_figure
+from aiofl.reporting.html import html_report
 from aiofl.reporting.paper import SCENARIOS
-from aiofl.reporting.report import html_report, tables_markdown
+from aiofl.reporting.tables import tables_markdown
 
 __all__ = ["reproduce"]
 

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import io
 import json
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -40,12 +41,13 @@ CHECKPOINT_FORMAT = 1
 
 
 def save_checkpoint(path: Path, fingerprint: str, gens: list[dict[str, Any]]) -> None:
-    """Write the generations so far to ``path`` (atomically, creating its directory).
+    """Write the generations so far to ``path`` (atomically, creating its directory as an
+    aiofl output directory, :func:`aiofl.outputs.ensure_output_dir`).
 
     Each generation is a dict with arrays ``s`` (unit-cube members), ``metrics``,
     ``diverged``, ``diverged_at`` and the float ``seconds``; other keys are not stored.
     """
-    from aiofl.outputs import atomic_write_bytes
+    from aiofl.outputs import atomic_write_bytes, ensure_output_dir
 
     arrays: dict[str, Any] = {
         "meta": np.array(
@@ -60,18 +62,21 @@ def save_checkpoint(path: Path, fingerprint: str, gens: list[dict[str, Any]]) ->
         arrays[f"g{i}_seconds"] = np.array(g["seconds"])
     buf = io.BytesIO()
     np.savez(buf, **arrays)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    ensure_output_dir(path.parent)
     atomic_write_bytes(path, buf.getvalue())
 
 
 def load_checkpoint(path: Path, fingerprint: str) -> list[dict[str, Any]]:
     """Read the generations stored in ``path`` (as :func:`save_checkpoint` wrote them).
 
-    Raises :class:`aiofl.config.ConfigError` if the file is unreadable, of another format,
-    or belongs to another run (its fingerprint differs from ``fingerprint``).
+    Raises :class:`aiofl.config.ConfigError`, naming the file, if it is empty, corrupt or
+    unreadable, of another format, holds arrays of the wrong shape, or belongs to another
+    run (its fingerprint differs from ``fingerprint``).
     """
     from aiofl.config import ConfigError
 
+    if path.is_file() and path.stat().st_size == 0:
+        raise ConfigError(f"checkpoint {path} is empty; delete it or drop --resume to start over")
     try:
         with np.load(path, allow_pickle=False) as data:
             meta = json.loads(str(data["meta"]))
@@ -87,12 +92,32 @@ def load_checkpoint(path: Path, fingerprint: str) -> list[dict[str, Any]]:
             for i in range(int(meta["generations"])):
                 g = {k: data[f"g{i}_{k}"] for k in ("s", "metrics", "diverged", "diverged_at")}
                 g["seconds"] = float(data[f"g{i}_seconds"])
+                _check_shapes(g, i + 1)
                 gens.append(g)
             return gens
-    except (OSError, ValueError, KeyError) as exc:
-        if isinstance(exc, ConfigError):
-            raise
-        raise ConfigError(f"checkpoint {path} is unreadable: {exc}") from None
+    except ConfigError:
+        raise
+    except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as exc:
+        raise ConfigError(
+            f"checkpoint {path} is corrupt or unreadable ({type(exc).__name__}: {exc}); "
+            "delete it or drop --resume to start over"
+        ) from None
+
+
+def _check_shapes(g: dict[str, Any], generation: int) -> None:
+    """Refuse a stored generation whose arrays do not fit together (a damaged file)."""
+    s, m = g["s"], g["metrics"]
+    n = s.shape[0] if s.ndim == 2 else -1
+    ok = (
+        n >= 0
+        and m.shape == (n, 5)
+        and g["diverged"].shape == (n,)
+        and g["diverged_at"].shape == (n,)
+        and g["diverged"].dtype == np.bool_
+        and all(np.issubdtype(a.dtype, np.floating) for a in (s, m, g["diverged_at"]))
+    )
+    if not ok:
+        raise ValueError(f"generation {generation} has arrays of the wrong shape or type")
 
 
 def check_replay(stored: dict[str, Any], s: NDArray[np.float64], generation: int) -> None:

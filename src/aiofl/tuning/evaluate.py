@@ -25,7 +25,17 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["DaskEvaluator", "EvalSpec", "LocalEvaluator", "PopulationResult", "evaluate_chunk"]
+__all__ = [
+    "CONNECT_TIMEOUT",
+    "DaskEvaluator",
+    "EvalSpec",
+    "LocalEvaluator",
+    "PopulationResult",
+    "evaluate_chunk",
+]
+
+#: seconds to wait for a Dask scheduler before giving up (``--scheduler``)
+CONNECT_TIMEOUT = 5.0
 
 
 @dataclass(frozen=True)
@@ -172,10 +182,12 @@ class DaskEvaluator:
             self.description = f"dask {scheduler.scheduler.address}"
         elif scheduler is not None:
             try:
-                self.client = Client(str(scheduler), timeout="10s")
-            except (OSError, TimeoutError) as exc:
-                raise ValueError(
-                    f"cannot connect to the Dask scheduler {scheduler!r}: {exc}"
+                self.client = Client(str(scheduler), timeout=f"{CONNECT_TIMEOUT}s")
+            except (OSError, TimeoutError, ValueError) as exc:
+                # ConnectionError (an OSError): the CLI reports it as bad input, exit 2
+                raise ConnectionError(
+                    f"cannot connect to the Dask scheduler {scheduler!r} within "
+                    f"{CONNECT_TIMEOUT:g} s: {exc}"
                 ) from None
             self._own_client = True
             self.description = f"dask {scheduler}"

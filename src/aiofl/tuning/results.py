@@ -3,10 +3,14 @@
 :func:`write_outputs` writes, all or nothing (:func:`aiofl.outputs.atomic_output_dir`),
 
 ``best.toml``
-    The input config with the best parameters, loadable by ``aiofl simulate``; its
-    ``[tune]`` table is kept so re-tuning from it is a warm start.
+    The input config with the best parameters, loadable by ``aiofl simulate`` from any
+    working folder; its comments, layout and ``[tune]`` table are kept (so re-tuning from
+    it is a warm start), and a plant file is referred to relative to the output folder
+    (:func:`best_toml`).
 ``history.csv``
     Per generation: evaluations, best, mean, median, best so far, diverged count, time.
+    ``mean`` and ``median`` are over the members that did not diverge; the field is
+    empty when every member of the generation diverged (never ``nan``).
 ``evaluations.csv``
     Every evaluated member: generation, member, parameter values, objective, diverged.
 ``convergence.png``
@@ -31,7 +35,7 @@ from aiofl import layout as L
 if TYPE_CHECKING:  # pragma: no cover
     from aiofl.tuning.search import TuneResult
 
-__all__ = ["convergence_png", "full_horizon_record", "write_outputs"]
+__all__ = ["best_toml", "convergence_png", "full_horizon_record", "write_outputs"]
 
 
 def _history_csv(result: TuneResult) -> str:
@@ -40,8 +44,13 @@ def _history_csv(result: TuneResult) -> str:
     w = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n")
     w.writeheader()
     for row in result.history:
-        w.writerow({k: (repr(v) if isinstance(v, float) else v) for k, v in row.items()})
+        # a statistic of no members (every member diverged) is an empty field, not nan
+        w.writerow({k: _csv_float(v) if isinstance(v, float) else v for k, v in row.items()})
     return buf.getvalue()
+
+
+def _csv_float(v: float) -> str:
+    return repr(v) if np.isfinite(v) else ""
 
 
 def _evaluations_csv(result: TuneResult) -> str:
@@ -58,8 +67,8 @@ def _evaluations_csv(result: TuneResult) -> str:
             [
                 g,
                 member,
-                *(repr(float(v)) for v in result.values[i]),
-                repr(float(result.objective[i])),
+                *(_csv_float(float(v)) for v in result.values[i]),
+                _csv_float(float(result.objective[i])),
                 int(result.diverged[i]),
             ]
         )
@@ -120,11 +129,63 @@ def full_horizon_record(result: TuneResult) -> dict[str, Any]:
     return rec
 
 
+def _source_text(source: str) -> str | None:
+    """The TOML text a tuning run started from: its config file, or a shipped preset."""
+    from aiofl.config import ConfigError, preset_text
+
+    path = Path(source)
+    if source.endswith(".toml") or path.exists():
+        try:
+            return path.read_text(encoding="utf-8") if path.is_file() else None
+        except (OSError, UnicodeDecodeError):
+            return None
+    try:
+        return preset_text(source)
+    except ConfigError:
+        return None
+
+
+def best_toml(result: TuneResult, out: str | Path, header: str = "") -> str:
+    """``best.toml``'s text: the input config with the tuned values, to be written in ``out``.
+
+    The user's file (or preset) is edited with tomlkit (:func:`aiofl.tuning.space.update_toml`),
+    so its comments and layout stay and only the tuned values change.  A plant file is
+    referred to relative to ``out`` (``aiofl simulate out/best.toml`` resolves it against
+    the config's folder, from any working folder).  If the source cannot be read again, or
+    no longer matches the tuned config (edited during the run), the config is written
+    afresh (:func:`aiofl.tuning.space.to_toml`).  ``header`` (default: the run's
+    provenance) is prepended as comments.
+    """
+    import os
+    import tomllib
+
+    from aiofl.tuning.space import to_toml, update_toml
+
+    config = dict(result.config)
+    plant = config.get("plant")
+    if isinstance(plant, str) and plant.endswith(".toml") and Path(plant).is_absolute():
+        try:
+            rel = os.path.relpath(plant, Path(out).resolve())
+            config["plant"] = Path(rel).as_posix()
+        except ValueError:  # pragma: no cover - another drive (Windows): keep it absolute
+            pass
+    header = header or result.describe()
+    source = _source_text(result.source) if result.source else None
+    if source is not None:
+        try:
+            text = update_toml(source, config, result.names, header)
+            if tomllib.loads(text) == config:
+                return text
+        except (ValueError, KeyError, TypeError):  # tomlkit/tomllib on a changed file
+            pass
+    return to_toml(config, header)
+
+
 def write_outputs(result: TuneResult, out: str | Path, *, header: str = "") -> dict[str, Any]:
     """Write best.toml, history.csv, evaluations.csv, convergence.png, summary.json to ``out``.
 
-    Files are staged and moved in together (:func:`aiofl.outputs.atomic_output_dir`); other
-    files in ``out`` (the checkpoint) are kept.  Returns the summary dict.
+    ``out`` is replaced as a whole (:func:`aiofl.outputs.atomic_output_dir`); the
+    checkpoint written there during the run is carried over.  Returns the summary dict.
     """
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 
@@ -143,8 +204,10 @@ def write_outputs(result: TuneResult, out: str | Path, *, header: str = "") -> d
         "evals_per_second": result.evals_per_second,
         "evaluator": result.evaluator,
     }
-    text = result.toml(header)
-    with atomic_output_dir(out) as stage:
+    text = best_toml(result, out, header)
+    from aiofl.tuning.checkpoint import CHECKPOINT
+
+    with atomic_output_dir(out, keep=(CHECKPOINT,)) as stage:
         atomic_write_text(stage / "best.toml", text)
         atomic_write_text(stage / "history.csv", _history_csv(result))
         atomic_write_text(stage / "evaluations.csv", _evaluations_csv(result))

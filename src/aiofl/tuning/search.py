@@ -219,7 +219,8 @@ def prepare(
     ``settings`` defaults to the config's ``[tune]`` table; ``overrides`` (e.g.
     ``seed=3``) replace settings fields.  Raises :class:`aiofl.config.ConfigError`.
     """
-    from aiofl.config import load_config
+    from aiofl.config import ConfigError, load_config
+    from aiofl.limits import check_run_size
     from aiofl.tuning.evaluate import EvalSpec
 
     source = ""
@@ -233,6 +234,15 @@ def prepare(
     if overrides:
         st = parse_tune_settings({**st.model_dump(exclude_none=True), **overrides})
     _check_parameters(cfg, st)
+    try:  # the tuning horizon's size, before any member is allocated
+        check_run_size(
+            st.t_final, st.dt or cfg.dt, noise_hold=cfg.scenario.noise_hold, what="[tune]"
+        )
+    except ValueError as exc:
+        msg = str(exc).replace("scenario.t_final", "tune.t_final")
+        if st.dt is not None:
+            msg = msg.replace("simulation.dt", "tune.dt")
+        raise ConfigError(f"invalid [tune] of {source or cfg.name}: {msg}") from None
     space = SearchSpace(st.parameters)
     raw = {k: v for k, v in cfg.raw.items() if k != "tune"}
     spec = EvalSpec(

@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import copy
 import math
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import numpy as np
@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from aiofl import layout as L
+from aiofl.limits import DT_MAX, MAX_EVALUATIONS, MAX_POPULATION, T_FINAL_MAX
 
 if TYPE_CHECKING:  # pragma: no cover
     from aiofl.config import RunConfig
@@ -59,6 +60,7 @@ __all__ = [
     "objective_values",
     "parse_tune_settings",
     "to_toml",
+    "update_toml",
     "used_parameters",
 ]
 
@@ -66,7 +68,8 @@ ALGORITHMS = ("ga", "de", "cmaes")
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # strict, as the rest of the config: no bool or string coercion into numbers
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
 
 class ParameterBounds(_Model):
@@ -90,16 +93,27 @@ class TuneSettings(_Model):
 
     algorithm: Literal["ga", "de", "cmaes"] = "ga"
     objective: str | dict[str, Annotated[float, Field(ge=0, allow_inf_nan=False)]] = "opi"
-    t_final: Annotated[float, Field(gt=0, le=1e4)] = 6.0
-    population: Annotated[int, Field(ge=2, le=1_000_000)] = 64
-    generations: Annotated[int, Field(ge=1, le=1_000_000)] = 50
+    t_final: Annotated[float, Field(gt=0, le=T_FINAL_MAX, allow_inf_nan=False)] = 6.0
+    population: Annotated[int, Field(ge=2, le=MAX_POPULATION)] = 64
+    generations: Annotated[int, Field(ge=1, le=MAX_EVALUATIONS // 2)] = 50
     seed: Annotated[int, Field(ge=0, lt=2**32)] = 1
     divergence_penalty: Annotated[float, Field(gt=0, le=1e300, allow_inf_nan=False)] = 1e6
     include_initial: bool = True
-    dt: Annotated[float, Field(gt=0, le=0.1)] | None = None
+    dt: Annotated[float, Field(gt=0, le=DT_MAX, allow_inf_nan=False)] | None = None
     method: Literal["rk4", "euler"] | None = None
     chunks: Annotated[int, Field(ge=1, le=100_000)] | None = None
     parameters: dict[str, ParameterBounds]
+
+    @model_validator(mode="after")
+    def _budget(self) -> TuneSettings:
+        total = self.population * self.generations
+        if total > MAX_EVALUATIONS:
+            raise ValueError(
+                f"population x generations = {self.population} x {self.generations} = "
+                f"{total} evaluations; allowed: at most {MAX_EVALUATIONS} (every member is "
+                "kept and written to evaluations.csv)"
+            )
+        return self
 
     @field_validator("objective")
     @classmethod
@@ -161,6 +175,9 @@ def parse_tune_settings(data: Mapping[str, Any] | TuneSettings | None) -> TuneSe
                 msg = "unknown key"
             msg = msg.removeprefix("Value error, ")
             where = f"tune.{loc}" if loc else "tune"
+            if isinstance(err.get("input"), dict) and err["type"] == "value_error":
+                lines.append(f"  {where}: {msg}")  # a table's own check names its fields
+                continue
             got = repr(err.get("input"))
             got = got if len(got) <= 100 else got[:97] + "..."
             lines.append(f"  {where}: {msg} (got {got})")
@@ -245,7 +262,7 @@ class SearchSpace:
 def used_parameters(controller: Controller) -> set[str]:
     """Engine columns that influence ``controller``'s closed loop (for its kinds and orders)."""
     rho, m = controller.rho, controller.n_feedback
-    used = {"law.u_max"}
+    used = {"law.u_max", "law.u_min"}
     if controller.law == "aiofl":
         used.add("law.b0")
     used |= {"eso.omega0", *(f"eso.alpha{i}" for i in range(1, rho + 2))}
@@ -361,3 +378,51 @@ def to_toml(data: Mapping[str, Any], header: str = "") -> str:
 
     emit(data, [])
     return "\n".join(lines).lstrip("\n") + "\n"
+
+
+def update_toml(
+    source: str, config: Mapping[str, Any], names: Iterable[str], header: str = ""
+) -> str:
+    """``source`` (a config's TOML text) with the tuned parameters set, comments and layout kept.
+
+    Edited with tomlkit: only the entries of the tuned engine columns ``names`` (e.g.
+    ``eso.omega0``, ``sef.k2``: the whole ``[controller.sef] k`` list, element by element
+    where it has the same length) and the top-level ``plant`` are set, to their values in
+    ``config`` (the tuned config dict, see :func:`config_with_values`); a missing table is
+    added.  ``header`` lines are prepended as comments.  Parsing the result gives ``config``
+    wherever ``source`` and ``config`` agree outside those entries.
+    """
+    import tomlkit
+    from tomlkit.items import Array
+
+    doc = tomlkit.parse(source)
+    ctrl_new = config.get("controller", {})
+    done: set[tuple[str, str]] = set()
+    for name in names:
+        table, key, _ = _config_path(name)
+        if (table, key) in done:
+            continue
+        done.add((table, key))
+        value = ctrl_new[table][key]
+        if "controller" not in doc:
+            doc["controller"] = tomlkit.table()
+        ctrl = doc["controller"]
+        if table not in ctrl:
+            new = tomlkit.table()
+            new.add(tomlkit.nl())
+            ctrl[table] = new  # type: ignore[index]
+        sub = ctrl[table]  # type: ignore[index]
+        cur = sub.get(key)  # type: ignore[union-attr]
+        if isinstance(value, list) and isinstance(cur, Array) and len(cur) == len(value):
+            for i, v in enumerate(value):
+                if cur[i] != v or type(cur[i]) is not type(v):
+                    cur[i] = v
+        else:
+            sub[key] = value  # type: ignore[index]
+    if "plant" in config and doc.get("plant") != config["plant"]:
+        doc["plant"] = config["plant"]
+    text = tomlkit.dumps(doc)
+    if header:
+        lines = [f"# {h}" if h else "#" for h in header.splitlines()]
+        text = "\n".join(lines) + "\n\n" + text
+    return text
