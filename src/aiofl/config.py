@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -162,6 +162,23 @@ class LawModel(_Model):
     u_max: Annotated[float, Field(gt=0)] = math.inf
 
 
+class DiscreteModel(_Model):
+    """``[controller.discrete]``: run the controller sampled (:mod:`aiofl.engine.discrete`)."""
+
+    ts: Annotated[float, Field(gt=0, le=1.0, allow_inf_nan=False)]
+    delay: Literal[0, 1] = 0
+    y_quantum: NonNegFloat = 0.0
+    u_quantum: NonNegFloat = 0.0
+    eso: Literal["zoh", "euler"] | None = None
+    td: Literal["fhan", "euler"] = "fhan"
+    h0: PosFloat | None = None
+
+    def build(self) -> Any:
+        from aiofl.engine.discrete import Sampling
+
+        return Sampling(**self.model_dump())
+
+
 class ControllerModel(_Model):
     structure: Literal["LESO", "INLESO", "LADRC", "IOFL"] | None = None
     eso_kind: Literal["linear", "improved"] | None = None
@@ -174,6 +191,7 @@ class ControllerModel(_Model):
     td: TDModel = Field(default_factory=TDModel)
     sef: SEFModel = Field(default_factory=SEFModel)
     law: LawModel = Field(default_factory=LawModel)
+    discrete: DiscreteModel | None = None
 
     def build(self, default_rho: int) -> Controller:
         kinds = dict(
@@ -278,6 +296,7 @@ class RunConfig:
     divergence_threshold: float
     weights: OPIWeights
     raw: dict[str, Any]
+    sampling: Any = None  # aiofl.engine.discrete.Sampling: [controller.discrete], or None
 
     def simulate(self, *, store: bool = True) -> Any:
         """Run this config once (see :func:`aiofl.engine.simulation.simulate`)."""
@@ -292,7 +311,40 @@ class RunConfig:
             store=store,
             decimation=self.decimation,
             divergence_threshold=self.divergence_threshold,
+            sampling=self.sampling,
         )
+
+    def with_sample_time(self, ts: float) -> RunConfig:
+        """This config with the controller sampled at ``ts`` (the other
+        ``[controller.discrete]`` settings kept, or their defaults); raises
+        :class:`ConfigError` if ``ts`` is not a positive integer multiple of ``dt``."""
+        from dataclasses import replace
+
+        raw = {**self.raw, "controller": dict(self.raw.get("controller", {}))}
+        raw["controller"]["discrete"] = {**raw["controller"].get("discrete", {}), "ts": ts}
+        try:
+            table = DiscreteModel.model_validate(raw["controller"]["discrete"])
+        except ValidationError as exc:
+            msg = _format_error(exc, "--ts").replace("  ts:", "  controller.discrete.ts:")
+            raise ConfigError(msg) from None
+        cfg = replace(self, sampling=table.build(), raw=raw)
+        cfg.check_sampling()
+        return cfg
+
+    def check_sampling(self) -> None:
+        """Raise :class:`ConfigError` unless the sampled controller (if any) can run with this
+        config's step ``dt``: Ts an integer multiple of dt, a discretisation that fits the
+        controller, finite coefficients."""
+        if self.sampling is None:
+            return
+        from aiofl.controller import controller_batch
+        from aiofl.engine.discrete import sampling_rows
+
+        try:
+            self.sampling.check(self.controller)
+            sampling_rows(controller_batch(self.controller), [self.sampling], self.dt)
+        except ValueError as exc:
+            raise ConfigError(f"invalid config {self.name!r}: {exc}") from None
 
 
 def _allowed_keys(loc: tuple[Any, ...]) -> list[str]:
@@ -386,7 +438,7 @@ def parse_config(
     except (ValueError, PlantError) as exc:
         raise ConfigError(f"invalid config {source}: {exc}") from None
     sim = model.simulation
-    return RunConfig(
+    cfg = RunConfig(
         name=model.name,
         description=model.description,
         plant=plant,
@@ -399,6 +451,14 @@ def parse_config(
         weights=model.metrics.build(),
         raw=data,
     )
+    if model.controller.discrete is not None:  # [controller.discrete]: a sampled controller
+        try:
+            sampling = model.controller.discrete.build()
+        except ValueError as exc:
+            raise ConfigError(f"invalid config {source}: {exc}") from None
+        cfg = replace(cfg, sampling=sampling)
+        cfg.check_sampling()
+    return cfg
 
 
 def _presets_dir() -> Any:

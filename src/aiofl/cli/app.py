@@ -130,6 +130,7 @@ def simulation_record(cfg: Any, result: Any, source_name: str) -> dict[str, Any]
     )
     rec["scenario_name"] = cfg.scenario.name
     rec["config"] = cfg.name
+    rec["sample_time"] = cfg.sampling.ts if cfg.sampling is not None else None
     return rec
 
 
@@ -143,11 +144,19 @@ def simulate_command(
     method: Annotated[
         str | None, typer.Option(help="Override the integrator: rk4 or euler.")
     ] = None,
+    ts: Annotated[
+        float | None,
+        typer.Option(
+            "--ts",
+            help="Run the controller sampled at Ts [s] (an integer multiple of dt; the "
+            "other [controller.discrete] settings are kept).",
+        ),
+    ] = None,
 ) -> None:
     """Simulate one config: metrics.json, trajectory.csv and figure.png in OUT.
 
     A run that diverges is reported as diverged with the time (metrics null); it is not
-    an error.
+    an error.  With --ts (or a [controller.discrete] table) the controller runs sampled.
     """
     import json
     from dataclasses import replace
@@ -167,6 +176,8 @@ def simulate_command(
             if method not in ("rk4", "euler"):
                 raise ConfigError(f"--method = {method!r}; allowed: rk4, euler")
             cfg = replace(cfg, method=method)
+        cfg = cfg.with_sample_time(ts) if ts is not None else cfg
+        cfg.check_sampling()  # Ts must stay a multiple of an overridden dt
     with bad_input_exits(run=True), atomic_output_dir(out) as stage:
         with console.status(f"simulating {cfg.name} (first run compiles the kernel)"):
             result = cfg.simulate(store=True)
