@@ -225,3 +225,22 @@ def test_simulate_ts_runs_sampled_and_bad_ts_exits_2_writing_nothing(tmp_path: P
         assert res.exit_code == 2, (args, res.output)
         assert "controller.discrete.ts" in res.output
         assert not bad.exists()
+
+
+def test_tune_ts_tunes_the_sampled_controller_and_writes_it(tmp_path: Path):
+    out = tmp_path / "tune"
+    args = ["tune", "retuned-s1-leso", "--ts", "1e-3", "--population", "4"]
+    res = CliRunner().invoke(app, [*args, "--generations", "1", "--quiet", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    best = load_config(out / "best.toml")
+    assert best.sampling == Sampling(1e-3)
+    full = json.loads((out / "summary.json").read_text())["full_horizon"]
+    again = best.simulate(store=False)  # sampled, from the written table
+    assert again.diverged == full["diverged"]
+    if again.diverged:
+        assert again.diverged_at == pytest.approx(full["diverged_at"], rel=1e-12)
+    else:
+        assert again.metrics["itae"] == pytest.approx(full["itae"], rel=1e-12)
+    bad = CliRunner().invoke(app, [*args, "--ts", "1.5e-4", "--out", str(tmp_path / "b")])
+    assert bad.exit_code == 2 and "controller.discrete.ts" in bad.output
+    assert not (tmp_path / "b").exists()

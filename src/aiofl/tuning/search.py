@@ -24,7 +24,7 @@ import hashlib
 import json
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -233,6 +233,8 @@ def prepare(
     if overrides:
         st = parse_tune_settings({**st.model_dump(exclude_none=True), **overrides})
     _check_parameters(cfg, st)
+    if st.dt:  # a sampled controller's Ts must be a multiple of the tuning step too
+        replace(cfg, dt=st.dt).check_sampling()
     space = SearchSpace(st.parameters)
     raw = {k: v for k, v in cfg.raw.items() if k != "tune"}
     spec = EvalSpec(
