@@ -76,6 +76,7 @@ __all__ = [
     "linear_prefilter_zoh",
     "observer_correct",
     "observer_predict",
+    "zoh",
 ]
 
 
@@ -111,17 +112,40 @@ def eso_chain(rho: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     return np.eye(n, k=1), b
 
 
-def eso_zoh(rho: int, b0: float, ts: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    r"""Exact zero-order-hold discretisation of the ESO's model (6):
-    :math:`\Phi = e^{AT}` (entries :math:`T^{j-i}/(j-i)!`), :math:`\Gamma = \int_0^T e^{As}
-    ds\,B b_0` (:math:`b_0 T^{\rho-i+1}/(\rho-i+1)!` for i ≤ ρ, 0 for the extended state),
-    computed with :func:`scipy.signal.cont2discrete`."""
-    from scipy.signal import cont2discrete
+def zoh(a: ArrayLike, b: ArrayLike, ts: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    r"""Exact zero-order-hold discretisation of :math:`\dot x = Ax + bw` (w held over a
+    sample): :math:`\Phi = e^{AT}`, :math:`\Gamma = \int_0^T e^{As}\,ds\,b`, from the
+    exponential of the augmented matrix :math:`\begin{bmatrix}AT & bT\\ 0 & 0\end{bmatrix}`
+    (:func:`scipy.linalg.expm`).
 
+    The exponential is taken in the scaled coordinates :math:`\tilde x_i = T^{i-1}x_i`
+    (and a scaled input), where a chain of integrators has entries of order 1 whatever T
+    is; unscaling multiplies by powers of T exactly.  Unscaled (as
+    :func:`scipy.signal.cont2discrete` does it) the entries :math:`T^j/j!` of a long chain
+    lose their relative precision: at ρ = 8, T = 3 ms, :math:`T^8/8!` came out 40 % off.
+    """
+    from scipy.linalg import expm
+
+    a = np.asarray(a, dtype=np.float64)
+    bv = np.asarray(b, dtype=np.float64).reshape(-1)
+    n = a.shape[0]
+    d = ts ** np.arange(n, dtype=np.float64)
+    bt = bv * ts * d
+    d_in = float(np.max(np.abs(bt))) or 1.0
+    m = np.zeros((n + 1, n + 1))
+    m[:n, :n] = a * ts * d[:, None] / d[None, :]
+    m[:n, n] = bt / d_in
+    e = expm(m)
+    return e[:n, :n] * d[None, :] / d[:, None], e[:n, n] * d_in / d
+
+
+def eso_zoh(rho: int, b0: float, ts: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    r"""Exact zero-order-hold discretisation of the ESO's model (6) (:func:`zoh`):
+    :math:`\Phi = e^{AT}` (entries :math:`T^{j-i}/(j-i)!`), :math:`\Gamma = \int_0^T e^{As}
+    ds\,B b_0` (:math:`b_0 T^{\rho-i+1}/(\rho-i+1)!` for i ≤ ρ, 0 for the extended state)."""
     a, b = eso_chain(rho)
-    n = rho + 1
-    phi, gam, *_ = cont2discrete((a, b[:, None] * b0, np.eye(1, n), np.zeros((1, 1))), ts, "zoh")
-    return np.triu(phi), gam[:, 0].copy()
+    phi, gam = zoh(a, b * b0, ts)
+    return np.triu(phi), gam
 
 
 def eso_continuous_poles(alphas: ArrayLike, omega0: float) -> NDArray[np.complex128]:
@@ -209,19 +233,16 @@ def linear_prefilter_zoh(
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     r"""The linear prefilter :math:`\omega^\rho/(s+\omega)^\rho` in the controllable form of
     :func:`aiofl.components.differentiators.linear_prefilter_update`, discretised exactly
-    under a zero-order hold of r (:func:`scipy.signal.cont2discrete`): returns
-    :math:`(\Phi, \Gamma)` with :math:`r_{k+1} = \Phi r_k + \Gamma r(t_k)`."""
-    from scipy.signal import cont2discrete
-
+    under a zero-order hold of r (:func:`zoh`): returns :math:`(\Phi, \Gamma)` with
+    :math:`r_{k+1} = \Phi r_k + \Gamma r(t_k)`."""
     from aiofl.components.differentiators import linear_prefilter_coefficients
 
     c = linear_prefilter_coefficients(rho, omega)
     a = np.eye(rho, k=1)
     a[rho - 1, :] = -c
-    b = np.zeros((rho, 1))
-    b[rho - 1, 0] = c[0]
-    phi, gam, *_ = cont2discrete((a, b, np.eye(1, rho), np.zeros((1, 1))), ts, "zoh")
-    return phi, gam[:, 0].copy()
+    b = np.zeros(rho)
+    b[rho - 1] = c[0]
+    return zoh(a, b, ts)
 
 
 # ------------------------------------------------------------------ updates (compiled)
