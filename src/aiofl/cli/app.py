@@ -296,3 +296,4 @@ def register_feature(name: str, target: str) -> None:
 # --- feature commands ---
 register_feature("tune", "aiofl.cli.tune:tune_command")
 register_feature("analyze", "aiofl.cli.analyze:analyze_command")
+register_feature("export", "aiofl.cli.export:export_command")

@@ -38,7 +38,14 @@ applied over :math:`[t_k, t_{k+1})`,
   (:math:`1 - \omega_0 T`, ρ+1 times, with Gao's gains): unstable once
   :math:`\omega_0 T > 2`.
 
-Both Φ are upper triangular (A is strictly upper triangular), which the update uses.
+Both Φ are upper triangular (A is strictly upper triangular), which the update uses.  The
+update is written in *delta form*, :math:`p^+ = \hat\xi + \big((\Phi - I)\hat\xi + \Gamma u +
+K\phi\big)`, with the coefficients :math:`\Phi - I` computed without cancellation
+(:func:`zoh`): the small increments are summed before they meet the large state, which in
+single precision keeps the command about ten times closer to the double-precision one
+(the same form serves the prefilter).  The first state is kept as its change since the
+last measurement (:func:`observer_predict`), so the innovation :math:`y_k - p_{1,k}` is
+formed from small numbers.
 
 **Differentiators.**  Han's discrete time-optimal TD (Han, "From PID to active disturbance
 rejection control", IEEE Trans. Ind. Electron. 56(3), 2009, Sec. III-A):
@@ -75,6 +82,7 @@ __all__ = [
     "linear_discrete_update",
     "linear_prefilter_zoh",
     "observer_correct",
+    "observer_innovation",
     "observer_predict",
     "zoh",
 ]
@@ -86,11 +94,13 @@ class DiscreteESO:
     r"""Coefficients of the discrete ESO update (see the module notes):
     :math:`\hat\xi = p + L\phi`, :math:`p^+ = \Phi\hat\xi + \Gamma u + K\phi`.
 
-    ``phi`` is (ρ+1, ρ+1) upper triangular, ``gamma``, ``k`` and ``l`` have ρ+1 entries;
-    ``method`` is ``"zoh"`` or ``"euler"``.
+    ``phi`` is (ρ+1, ρ+1) upper triangular and ``dphi`` is :math:`\Phi - I` (computed
+    without cancellation, for the delta-form update); ``gamma``, ``k`` and ``l`` have ρ+1
+    entries; ``method`` is ``"zoh"`` or ``"euler"``.
     """
 
     phi: NDArray[np.float64]
+    dphi: NDArray[np.float64]
     gamma: NDArray[np.float64]
     k: NDArray[np.float64]
     l: NDArray[np.float64]
@@ -112,11 +122,18 @@ def eso_chain(rho: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     return np.eye(n, k=1), b
 
 
-def zoh(a: ArrayLike, b: ArrayLike, ts: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+def zoh(
+    a: ArrayLike, b: ArrayLike, ts: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     r"""Exact zero-order-hold discretisation of :math:`\dot x = Ax + bw` (w held over a
-    sample): :math:`\Phi = e^{AT}`, :math:`\Gamma = \int_0^T e^{As}\,ds\,b`, from the
-    exponential of the augmented matrix :math:`\begin{bmatrix}AT & bT\\ 0 & 0\end{bmatrix}`
-    (:func:`scipy.linalg.expm`).
+    sample): returns :math:`\Phi = e^{AT}`, :math:`\Phi - I` and
+    :math:`\Gamma = \int_0^T e^{As}\,ds\,b`.
+
+    One exponential (:func:`scipy.linalg.expm`) of the augmented matrix
+    :math:`\begin{bmatrix}AT & I & bT\\ 0 & 0 & 0\\ 0 & 0 & 0\end{bmatrix}`, whose top
+    blocks are :math:`e^{AT}`, :math:`\Psi = \int_0^1 e^{ATs}ds` and :math:`\Psi bT = \Gamma`;
+    :math:`\Phi - I = AT\,\Psi` then has no cancellation (:math:`e^{AT} - I` computed by
+    subtraction loses the relative precision of entries near 0).
 
     The exponential is taken in the scaled coordinates :math:`\tilde x_i = T^{i-1}x_i`
     (and a scaled input), where a chain of integrators has entries of order 1 whatever T
@@ -132,11 +149,16 @@ def zoh(a: ArrayLike, b: ArrayLike, ts: float) -> tuple[NDArray[np.float64], NDA
     d = ts ** np.arange(n, dtype=np.float64)
     bt = bv * ts * d
     d_in = float(np.max(np.abs(bt))) or 1.0
-    m = np.zeros((n + 1, n + 1))
-    m[:n, :n] = a * ts * d[:, None] / d[None, :]
-    m[:n, n] = bt / d_in
-    e = expm(m)
-    return e[:n, :n] * d[None, :] / d[:, None], e[:n, n] * d_in / d
+    m_s = a * ts * d[:, None] / d[None, :]
+    big = np.zeros((2 * n + 1, 2 * n + 1))
+    big[:n, :n] = m_s
+    big[:n, n : 2 * n] = np.eye(n)
+    big[:n, 2 * n] = bt / d_in
+    e = expm(big)
+    unscale = d[None, :] / d[:, None]
+    phi = e[:n, :n] * unscale
+    dphi = (m_s @ e[:n, n : 2 * n]) * unscale
+    return phi, dphi, e[:n, 2 * n] * d_in / d
 
 
 def eso_zoh(rho: int, b0: float, ts: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -144,7 +166,7 @@ def eso_zoh(rho: int, b0: float, ts: float) -> tuple[NDArray[np.float64], NDArra
     :math:`\Phi = e^{AT}` (entries :math:`T^{j-i}/(j-i)!`), :math:`\Gamma = \int_0^T e^{As}
     ds\,B b_0` (:math:`b_0 T^{\rho-i+1}/(\rho-i+1)!` for i ≤ ρ, 0 for the extended state)."""
     a, b = eso_chain(rho)
-    phi, gam = zoh(a, b * b0, ts)
+    phi, _, gam = zoh(a, b * b0, ts)
     return np.triu(phi), gam
 
 
@@ -204,9 +226,10 @@ def eso_current_observer(
     """The linear ESO discretised exactly (ZOH) in current-observer form (Miklosovic et al.
     2006): Φ, Γ of :func:`eso_zoh`, K = 0, L of :func:`current_observer_gain` at the
     continuous poles :func:`eso_continuous_poles`."""
-    phi, gam = eso_zoh(rho, b0, ts)
+    a, b = eso_chain(rho)
+    phi, dphi, gam = zoh(a, b * b0, ts)
     l = current_observer_gain(rho, ts, eso_continuous_poles(alphas, omega0))
-    return DiscreteESO(phi, gam, np.zeros(rho + 1), l, "zoh")
+    return DiscreteESO(np.triu(phi), np.triu(dphi), gam, np.zeros(rho + 1), l, "zoh")
 
 
 def eso_forward_euler(rho: int, betas: ArrayLike, b0: float, ts: float) -> DiscreteESO:
@@ -216,7 +239,8 @@ def eso_forward_euler(rho: int, betas: ArrayLike, b0: float, ts: float) -> Discr
     beta = np.asarray(betas, dtype=np.float64)
     if beta.size != rho + 1:
         raise ValueError(f"{beta.size} observer gains for an observer of order {rho + 1}")
-    return DiscreteESO(np.eye(rho + 1) + ts * a, ts * b0 * b, ts * beta, np.zeros(rho + 1), "euler")
+    n = rho + 1
+    return DiscreteESO(np.eye(n) + ts * a, ts * a, ts * b0 * b, ts * beta, np.zeros(n), "euler")
 
 
 def error_map(eso: DiscreteESO) -> NDArray[np.float64]:
@@ -229,12 +253,13 @@ def error_map(eso: DiscreteESO) -> NDArray[np.float64]:
 
 
 def linear_prefilter_zoh(
-    rho: int, omega: float, ts: float
+    rho: int, omega: float, ts: float, *, delta: bool = False
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     r"""The linear prefilter :math:`\omega^\rho/(s+\omega)^\rho` in the controllable form of
     :func:`aiofl.components.differentiators.linear_prefilter_update`, discretised exactly
     under a zero-order hold of r (:func:`zoh`): returns :math:`(\Phi, \Gamma)` with
-    :math:`r_{k+1} = \Phi r_k + \Gamma r(t_k)`."""
+    :math:`r_{k+1} = \Phi r_k + \Gamma r(t_k)`, or :math:`(\Phi - I, \Gamma)` with
+    ``delta``."""
     from aiofl.components.differentiators import linear_prefilter_coefficients
 
     c = linear_prefilter_coefficients(rho, omega)
@@ -242,7 +267,8 @@ def linear_prefilter_zoh(
     a[rho - 1, :] = -c
     b = np.zeros(rho)
     b[rho - 1] = c[0]
-    return zoh(a, b, ts)
+    phi, dphi, gam = zoh(a, b, ts)
+    return (dphi if delta else phi), gam
 
 
 # ------------------------------------------------------------------ updates (compiled)
@@ -290,6 +316,14 @@ def fhan_td_step(
 
 
 @njit(inline="always", **JIT_OPTIONS)  # inlined where called: no array arguments
+def observer_innovation(state: NDArray[np.float64], o_p: int, o_y: int, y: float) -> float:
+    r"""The innovation :math:`e_k = y_k - p_{1,k}` in increment form,
+    :math:`e_k = (y_k - y_{k-1}) - q_k` with :math:`q_k = p_{1,k} - y_{k-1}` at
+    ``state[o_p]`` and :math:`y_{k-1}` at ``state[o_y]`` (see :func:`observer_predict`)."""
+    return (y - state[o_y]) - state[o_p]
+
+
+@njit(inline="always", **JIT_OPTIONS)  # inlined where called: no array arguments
 def observer_correct(
     state: NDArray[np.float64],
     o_p: int,
@@ -297,12 +331,19 @@ def observer_correct(
     n: int,
     coef: NDArray[np.float64],
     o_l: int,
+    y: float,
+    e: float,
     phi: float,
-) -> None:
-    r"""Correction :math:`\hat\xi = p + L\phi`: :math:`p_i` at ``state[o_p + i]``,
-    :math:`\hat\xi_i` to ``state[o_x + i]``, :math:`L_i` at ``coef[o_l + i]``, i < n."""
-    for i in range(n):
+) -> float:
+    r"""Correction :math:`\hat\xi = p + L\phi`, with :math:`\hat\xi_1 = y_k + d_k`,
+    :math:`d_k = L_1\phi_k - e_k` (:math:`= \hat\xi_1 - y_k`, returned): :math:`p_i` at
+    ``state[o_p + i]`` (i ≥ 1), :math:`\hat\xi_i` to ``state[o_x + i]``, :math:`L_i` at
+    ``coef[o_l + i]``, i < n."""
+    d = coef[o_l] * phi - e
+    state[o_x] = y + d
+    for i in range(1, n):
         state[o_x + i] = state[o_p + i] + coef[o_l + i] * phi
+    return d
 
 
 @njit(inline="always", **JIT_OPTIONS)  # inlined where called: no array arguments
@@ -310,6 +351,7 @@ def observer_predict(
     state: NDArray[np.float64],
     o_p: int,
     o_x: int,
+    o_y: int,
     n: int,
     coef: NDArray[np.float64],
     o_phi: int,
@@ -318,16 +360,28 @@ def observer_predict(
     o_k: int,
     u: float,
     phi: float,
+    y: float,
+    d: float,
 ) -> None:
-    r"""Prediction :math:`p^+ = \Phi\hat\xi + \Gamma u + K\phi` with Φ upper triangular:
-    :math:`\Phi_{ij}` at ``coef[o_phi + i*stride + j]``, :math:`\Gamma_i`, :math:`K_i` at
-    ``coef[o_g + i]``, ``coef[o_k + i]``; reads :math:`\hat\xi` at ``state[o_x:]``, writes
-    p at ``state[o_p:]``."""
+    r"""Prediction in delta and increment form: with
+    :math:`\Delta_i = ((\Phi - I)\hat\xi + \Gamma u + K\phi)_i` (Φ upper triangular),
+    :math:`p^+_i = \hat\xi_i + \Delta_i` for i ≥ 2 and, for the first state, its change
+    since the measurement, :math:`q^+ = p^+_1 - y_k = d_k + \Delta_1`
+    (:func:`observer_correct`); then :math:`y_k` is kept for the next innovation.
+
+    :math:`(\Phi - I)_{ij}` at ``coef[o_phi + i*stride + j]``, :math:`\Gamma_i`,
+    :math:`K_i` at ``coef[o_g + i]``, ``coef[o_k + i]``; reads :math:`\hat\xi` at
+    ``state[o_x:]``, writes q, p_2.. at ``state[o_p:]`` and :math:`y_k` at ``state[o_y]``.
+    Only small quantities meet in the innovation, so the observer does not lose the
+    precision of :math:`\hat\xi_1 \approx y` (one unit in the last place of y, amplified
+    by the gains :math:`L_i \sim T^{1-i}`, was the largest error of single-precision code).
+    """
     for i in range(n):
         acc = coef[o_g + i] * u + coef[o_k + i] * phi
         for j in range(i, n):
             acc += coef[o_phi + i * stride + j] * state[o_x + j]
-        state[o_p + i] = acc
+        state[o_p + i] = (d if i == 0 else state[o_x + i]) + acc
+    state[o_y] = y
 
 
 @njit(inline="always", **JIT_OPTIONS)  # inlined where called: no array arguments
@@ -343,14 +397,14 @@ def linear_discrete_update(
     scratch: NDArray[np.float64],
     o_s: int,
 ) -> None:
-    r"""A linear discrete state update :math:`s^+ = \Phi s + \Gamma w` (full Φ) in place:
-    s at ``state[o:o+n]``, :math:`\Phi_{ij}` at ``coef[o_phi + i*stride + j]``,
-    :math:`\Gamma_i` at ``coef[o_g + i]``; ``scratch[o_s:o_s+n]`` holds the new state
-    until all of it is computed."""
+    r"""A linear discrete state update in delta form, :math:`s^+ = s + ((\Phi - I)s +
+    \Gamma w)` (full Φ), in place: s at ``state[o:o+n]``, :math:`(\Phi - I)_{ij}` at
+    ``coef[o_phi + i*stride + j]``, :math:`\Gamma_i` at ``coef[o_g + i]``;
+    ``scratch[o_s:o_s+n]`` holds the new state until all of it is computed."""
     for i in range(n):
         acc = coef[o_g + i] * w
         for j in range(n):
             acc += coef[o_phi + i * stride + j] * state[o + j]
-        scratch[o_s + i] = acc
+        scratch[o_s + i] = state[o + i] + acc
     for i in range(n):
         state[o + i] = scratch[o_s + i]

@@ -64,12 +64,12 @@ D_ESO = 5  #: 0 = ZOH current observer, 1 = forward Euler
 D_TDM = 6  #: Han TD: 0 = fhan, 1 = forward Euler on eq. (18)
 D_H0 = 7  #: fhan's filter factor h0
 STRIDE = L.RHO_MAX + 1  #: row stride of the ESO's Φ
-D_PHI = 8  #: ESO Φ, (ρ+1)×(ρ+1) with row stride STRIDE
+D_PHI = 8  #: ESO Φ - I (delta form), (ρ+1)×(ρ+1) with row stride STRIDE
 D_GAM = D_PHI + STRIDE * STRIDE  #: ESO Γ
 D_K = D_GAM + STRIDE  #: ESO K
 D_L = D_K + STRIDE  #: ESO L
 PF_STRIDE = L.RHO_MAX  #: row stride of the prefilter's Φ
-D_PF_PHI = D_L + STRIDE  #: linear prefilter Φ, ρ×ρ with row stride PF_STRIDE
+D_PF_PHI = D_L + STRIDE  #: linear prefilter Φ - I, ρ×ρ with row stride PF_STRIDE
 D_PF_GAM = D_PF_PHI + PF_STRIDE * PF_STRIDE  #: linear prefilter Γ
 N_DISC = D_PF_GAM + PF_STRIDE
 ESO_ZOH, ESO_EULER = 0, 1
@@ -222,12 +222,12 @@ def _row(
         eso = D.eso_forward_euler(rho, betas, b0, s.ts)
         row[D_ESO] = ESO_EULER
     for i in range(n):
-        row[D_PHI + i * STRIDE : D_PHI + i * STRIDE + n] = eso.phi[i]
+        row[D_PHI + i * STRIDE : D_PHI + i * STRIDE + n] = eso.dphi[i]
     row[D_GAM : D_GAM + n] = eso.gamma
     row[D_K : D_K + n] = eso.k
     row[D_L : D_L + n] = eso.l
     if int(ints[L.I_TD]) == L.TD_LINEAR:
-        pf_phi, pf_gam = D.linear_prefilter_zoh(rho, floats[L.F_TD_OMEGA], s.ts)
+        pf_phi, pf_gam = D.linear_prefilter_zoh(rho, floats[L.F_TD_OMEGA], s.ts, delta=True)
         for i in range(rho):
             row[D_PF_PHI + i * PF_STRIDE : D_PF_PHI + i * PF_STRIDE + rho] = pf_phi[i]
         row[D_PF_GAM : D_PF_GAM + rho] = pf_gam

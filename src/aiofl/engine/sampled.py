@@ -20,8 +20,9 @@ checked against it).
 
 Controller state of one member (``cs``)::
 
-    [ TD / prefilter r_1..r_ρ (RHO_MAX) | ESO prediction p (RHO_MAX+1)
-      | ESO estimate ξ̂ (RHO_MAX+1) | previous command | scratch (RHO_MAX) ]
+    [ TD / prefilter r_1..r_ρ (RHO_MAX) | ESO prediction p_1 - y, p_2, ... (RHO_MAX+1)
+      | ESO estimate ξ̂ (RHO_MAX+1) | previous command | previous measurement
+      | previous reference | profile r_1.. used (RHO_MAX) | scratch (RHO_MAX) ]
 
 The classical IOFL law (no ESO, needs the plant state) runs sampled in the engine, from the
 true state at :math:`t_k` and the nominal model, but has no :class:`DiscreteController`.
@@ -90,7 +91,10 @@ C_TD = 0  #: differentiator / prefilter state
 C_P = C_TD + L.RHO_MAX  #: ESO prediction p_k
 C_X = C_P + L.RHO_MAX + 1  #: ESO estimate ξ̂_k (after the correction at the last sample)
 C_UPREV = C_X + L.RHO_MAX + 1  #: the previous sample's command
-C_SCR = C_UPREV + 1  #: scratch for the prefilter update
+C_Y = C_UPREV + 1  #: the previous sample's measurement (the ESO's first state is p_1 - y)
+C_RPREV = C_Y + 1  #: the previous sample's reference (Han's TD keeps r_1 - r_prev)
+C_PROF = C_RPREV + 1  #: the differentiator's profile r_1.. used at the last sample
+C_SCR = C_PROF + L.RHO_MAX  #: scratch for the prefilter update
 N_CS = C_SCR + L.RHO_MAX
 
 # placeholders bound per instance (see _bind and aiofl.engine.kernel)
@@ -100,7 +104,7 @@ _SETUP = _REFERENCE = _UNMANAGED = _KEEP_ALIVE = None
 _CTRL_INIT = _CTRL_STEP = _PLANT_DERIV = None
 _FAL = _INLSEF_TERM = _INLSEF_LIMIT = _LINEAR_SEF = _AIOFL_LAW = _IOFL_LAW = _SATURATE = None
 _INLESO = _HAN_TD = _ITD = _PREFILTER = None
-_FHAN_TD = _OBS_CORRECT = _OBS_PREDICT = _LIN_UPDATE = None
+_FHAN_TD = _OBS_INNOVATION = _OBS_CORRECT = _OBS_PREDICT = _LIN_UPDATE = None
 
 
 # ---------------------------------------------------------------------------- templates
@@ -108,7 +112,7 @@ def _tpl_ctrl_init(iq, cs, y0):  # pragma: no cover - compiled
     """Controller state at the first sample: ESO at (y0, 0, ..., 0), TD at rest at 0."""
     for i in range(N_CS):
         cs[i] = 0.0
-    cs[C_P] = y0
+    cs[C_Y] = y0  # p_1 = y0: its change since the measurement, cs[C_P], is 0
     cs[C_X] = y0
 
 
@@ -130,29 +134,40 @@ def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri):  # pragma: no cover - compil
     ts = dsc[D_TS]
     b0 = q[L.F_B0]
 
-    phi = y - cs[C_P]
+    e = _OBS_INNOVATION(cs, C_P, C_Y, y)  # y - p_1
+    phi = e
     if iq[IQ_ESO] == L.ESO_IMPROVED:  # eq. (19)
-        phi = _INLESO(phi, q[L.F_KA], q[L.F_KB], q[L.F_EA], q[L.F_EB])
-    _OBS_CORRECT(cs, C_P, C_X, n1, dsc, D_L, phi)
+        phi = _INLESO(e, q[L.F_KA], q[L.F_KB], q[L.F_EA], q[L.F_EB])
+    dx1 = _OBS_CORRECT(cs, C_P, C_X, n1, dsc, D_L, y, e, phi)
 
+    # the profile r_1.. at t_k (Han's TD keeps r_1 as its change since the last reference,
+    # so fhan's argument r_1 - r is formed from small numbers)
     r = rr[ri, 0]
     rff = 0.0
-    if td_kind == L.TD_LINEAR:
-        rff = _PREFILTER(cs, scr, C_TD, rho, r, q, Q_PF)
-    elif exact:
+    if exact:
+        for i in range(rho):
+            cs[C_PROF + i] = rr[ri, i]
         rff = rr[ri, rho]
+    elif td_kind == L.TD_HAN:
+        cs[C_PROF] = cs[C_RPREV] + cs[C_TD]
+        cs[C_PROF + 1] = cs[C_TD + 1]
+    else:
+        for i in range(iq[IQ_NTD]):
+            cs[C_PROF + i] = cs[C_TD + i]
+        if td_kind == L.TD_LINEAR:
+            rff = _PREFILTER(cs, scr, C_TD, rho, r, q, Q_PF)
 
     sef_kind = iq[IQ_SEF]
     if sef_kind == L.SEF_NONLINEAR:  # eq. (17)
         v = 0.0
         for i in range(m):
-            ei = (rr[ri, i] if exact else cs[C_TD + i]) - cs[C_X + i]
+            ei = cs[C_PROF + i] - cs[C_X + i]
             fe = _FAL(ei, q[L.F_SEF_ALPHA + i], q[L.F_SEF_DELTA + i], q[Q_SLOPE + i])
             v += q[L.F_SEF_K + i] * fe
     elif sef_kind == L.SEF_IMPROVED:  # eq. (20)
         s = 0.0
         for i in range(m):
-            ei = (rr[ri, i] if exact else cs[C_TD + i]) - cs[C_X + i]
+            ei = cs[C_PROF + i] - cs[C_X + i]
             s += _INLSEF_TERM(
                 ei, q[L.F_SEF_K + i], q[L.F_SEF_KB + i], q[L.F_SEF_MU + i], q[L.F_SEF_ALPHA + i]
             )
@@ -160,22 +175,25 @@ def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri):  # pragma: no cover - compil
     else:  # linear full-state feedback of the chain (14)
         s = 0.0
         for i in range(m):
-            s += q[Q_LINK + i] * ((rr[ri, i] if exact else cs[C_TD + i]) - cs[C_X + i])
+            s += q[Q_LINK + i] * (cs[C_PROF + i] - cs[C_X + i])
         v = _LINEAR_SEF(s, rff, b0)
     u = _SATURATE(_AIOFL_LAW(v, cs[C_X + rho], b0), q[L.F_UMAX])  # eq. (14)
 
     um = cs[C_UPREV] if dsc[D_DELAY] > 0.0 else u
-    _OBS_PREDICT(cs, C_P, C_X, n1, dsc, D_PHI, STRIDE, D_GAM, D_K, um, phi)
+    _OBS_PREDICT(cs, C_P, C_X, C_Y, n1, dsc, D_PHI, STRIDE, D_GAM, D_K, um, phi, y, dx1)
 
-    if td_kind == L.TD_HAN:
+    if td_kind == L.TD_HAN:  # both forms depend on r_1 - r only; keep r_1(k+1) - r_k
+        x1 = cs[C_TD] - (r - cs[C_RPREV])
+        r2 = cs[C_TD + 1]
         if dsc[D_TDM] == TDM_FHAN:
-            a, b = _FHAN_TD(cs[C_TD], cs[C_TD + 1], r, q[L.F_TD_R], ts, dsc[D_H0])
+            a, b = _FHAN_TD(x1, r2, 0.0, q[L.F_TD_R], ts, dsc[D_H0])
         else:  # forward Euler on eq. (18)
-            d1, d2 = _HAN_TD(cs[C_TD], cs[C_TD + 1], r, q[L.F_TD_R])
-            a = cs[C_TD] + ts * d1
-            b = cs[C_TD + 1] + ts * d2
+            d1, d2 = _HAN_TD(x1, r2, 0.0, q[L.F_TD_R])
+            a = x1 + ts * d1
+            b = r2 + ts * d2
         cs[C_TD] = a
         cs[C_TD + 1] = b
+        cs[C_RPREV] = r
     elif td_kind == L.TD_IMPROVED:  # forward Euler on eq. (21)
         d1, d2 = _ITD(cs[C_TD], cs[C_TD + 1], r, q[Q_ITD_BC], q[Q_ITD_GAIN], q[L.F_TD_RHO])
         a = cs[C_TD] + ts * d1
@@ -371,7 +389,7 @@ def _tpl_member_sampled(  # pragma: no cover - compiled
                 if exact and j < rho:
                     val = rrs[3, j]
                 elif j < ntd:
-                    val = cs[C_TD + j]
+                    val = cs[C_PROF + j]  # the profile the last sample used
                 tr[mi, row, c0 + j] = val
             row += 1
             save_in = decimation
@@ -402,7 +420,7 @@ def _tpl_member_sampled(  # pragma: no cover - compiled
         for j in range(nza):
             if not abs(z[j]) < threshold:  # also catches NaN
                 bad = True
-        for j in range(C_P, C_P + rho + 1):
+        for j in range(C_P, C_P + rho + 1):  # (the first is p_1 - y)
             if not abs(cs[j]) < threshold:
                 bad = True
         for j in range(ntd):
@@ -430,6 +448,7 @@ def _bind(ns: dict[str, Any]) -> None:
     ns.update({k: v for k, v in globals().items() if k.startswith("C_") or k == "N_CS"})
     ns.update(
         _FHAN_TD=cd.fhan_td_step,
+        _OBS_INNOVATION=cd.observer_innovation,
         _OBS_CORRECT=cd.observer_correct,
         _OBS_PREDICT=cd.observer_predict,
         _LIN_UPDATE=cd.linear_discrete_update,
@@ -583,4 +602,7 @@ class DiscreteController:
     @property
     def differentiator(self) -> NDArray[np.float64]:
         """The differentiator's (or prefilter's) state, already advanced to the next sample."""
-        return self._cs[C_TD : C_TD + L.RHO_MAX].copy()
+        out = self._cs[C_TD : C_TD + L.RHO_MAX].copy()
+        if self.controller.td == "han":  # kept as r_1 - r_prev
+            out[0] += self._cs[C_RPREV]
+        return out
