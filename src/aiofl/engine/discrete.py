@@ -159,7 +159,8 @@ class Sampling:
         td = {
             "exact": "reference derivatives: supplied by the caller (r, r', ..., r^(rho))",
             "han": (
-                f"TD: Han's discrete TD with fhan (Han 2009), h0 = {self.h0 or self.ts:g} s"
+                "TD: Han's discrete TD with fhan (Han 2009), h0 = "
+                + ("Ts" if self.h0 is None else f"{self.h0:g} s")
                 if self.td == "fhan"
                 else "TD: forward Euler on eq. (18)"
             ),
