@@ -119,7 +119,8 @@ def closed_loop(
     n_sub: int = 5,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Drive the plant (RK4 at Ts/n_sub, the command held) with the C controller; step the
-    engine's discrete controller on the same measurements.  Returns (u_C, u_engine, y)."""
+    engine's discrete controller on the same inputs (the measurement and reference as the C
+    code received them: rounded to float in a float build).  Returns (u_C, u_engine, y)."""
     lib = ctypes.CDLL(str(lib_path))
     real = ctypes.c_double if precision == "double" else ctypes.c_float
     lib.aiofl_init.argtypes = [ctypes.c_void_p, real]
@@ -132,6 +133,8 @@ def closed_loop(
     f, g, h = plant.compiled[:3]
     p = plant.param_vector()
     x = np.zeros(plant.n_states)
+    if plant.name == "tank":  # start at the reference's level, not empty (saturated pump)
+        x[0] = ref.offset
     dt = sampling.ts / n_sub
 
     def rhs(xv: np.ndarray, u: float) -> np.ndarray:
@@ -148,7 +151,9 @@ def closed_loop(
         for i, v in enumerate(rv):
             rbuf[i] = v
         uc = float(lib.aiofl_step(state, rbuf, y))
-        u_e.append(engine.step(rv, y))
+        # the engine gets the measurement and reference the C code got (a float build's
+        # inputs are floats: 24 bits of y, which a high-order ESO amplifies by ~1/Ts^rho)
+        u_e.append(engine.step([float(rbuf[i]) for i in range(len(rv))], float(real(y).value)))
         applied = (u_c[-1] if u_c else 0.0) if sampling.delay else uc
         u_c.append(uc)
         ys.append(y)
