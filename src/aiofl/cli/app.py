@@ -233,6 +233,10 @@ def _print_records(records: list[dict[str, Any]], title: str) -> None:
 @app.command("reproduce")
 def reproduce_command(
     out: Annotated[Path, typer.Option("--out", "-o", help="Output directory.")] = Path("results"),
+    ts: Annotated[
+        float | None,
+        typer.Option("--ts", help="Run every design sampled at Ts [s] (a multiple of dt)."),
+    ] = None,
 ) -> None:
     """Reproduce the paper: Tables I–III, Figures 3–5 and report.html in OUT.
 
@@ -266,12 +270,13 @@ def reproduce_command(
             last.append(msg)
             progress.update(task, description=msg)
 
-        rep = reproduce(out, on_stage=on_stage)
+        rep = reproduce(out, on_stage=on_stage, ts=ts)
         on_stage("done")
         progress.remove_task(task)
     _print_records(rep.records, title="aiofl reproduce: paper vs computed")
     typer.echo(
-        f"wrote {out}/metrics.json, tables.md, fig3.png, fig4.png, fig5.png, report.html "
+        f"wrote {out}/metrics.json, sampling.json, tables.md, fig3.png, fig4.png, fig5.png, "
+        "report.html "
         f"in {time.perf_counter() - t0:.1f} s"
     )
 

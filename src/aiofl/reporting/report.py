@@ -26,6 +26,7 @@ from aiofl.reporting.cases import (
     output_ratio,
 )
 from aiofl.reporting.paper import PAPER_TABLES, SCENARIOS
+from aiofl.reporting.sampling_note import sampling_paragraph, ts_max_cell
 
 __all__ = [
     "findings",
@@ -101,6 +102,7 @@ TABLE_HEADER = (
     "ISU computed",
     "IAU computed",
     "OPI computed",
+    "ts_max [ms]",
 )
 
 CONTEXT_ROWS = (
@@ -133,6 +135,7 @@ def table_rows(rep: Reproduction, scenario: int) -> list[list[str]]:
                 fmt(rec["isu"]),
                 fmt(rec["iau"]),
                 fmt(rec["opi"]),
+                ts_max_cell(rep.sampling.get(run.case.preset)),
             ]
         )
     triv = rep.trivial[scenario]
@@ -147,6 +150,7 @@ def table_rows(rep: Reproduction, scenario: int) -> list[list[str]]:
             "0",
             "0",
             fmt(opi(triv, 0.0, 0.0, w)),
+            DASH,
         ]
     )
     # the least ISU any controller needs to keep y = r (helper C, aiofl.analysis.exact_tracking)
@@ -163,6 +167,7 @@ def table_rows(rep: Reproduction, scenario: int) -> list[list[str]]:
             fmt(ex["isu"]),
             fmt(ex["iau"]),
             fmt(opi(0.0, ex["isu"], ex["iau"], w)),
+            DASH,
         ]
     )
     return rows
@@ -251,7 +256,15 @@ def tables_markdown(rep: Reproduction) -> str:
         out += [_md_table(TABLE_HEADER, table_rows(rep, s)), ""]
         out += [f"- {n}" for n in scenario_notes(rep, s)]
         out += [""]
+    para = _sampling_paragraph(rep)
+    if para:
+        out += ["## What the sample-time limits mean", "", " ".join(para), ""]
     return "\n".join(out)
+
+
+def _sampling_paragraph(rep: Reproduction) -> list[str]:
+    rows = [(r.case.label, r.case.preset, r.case.source, r.case.scenario) for r in rep.runs]
+    return sampling_paragraph(rows, rep.sampling)
 
 
 # -------------------------------------------------------------------------- settings
@@ -580,6 +593,10 @@ def html_report(rep: Reproduction, figures: Mapping[str, bytes]) -> str:
             body.append(
                 f'<img alt="Figure {info.figure}: scenario {s}" src="data:image/png;base64,{data}">'
             )
+    para = _sampling_paragraph(rep)
+    if para:
+        body.append("<h2>What the sample-time limits mean</h2>")
+        body.append("<p>" + _e(" ".join(para)) + "</p>")
     body.append("<h2>Closed-loop linearisation per case</h2>")
     body.append(_verdict_table(rep))
     body.append("<h2>Settings the paper leaves open and the choice made</h2>")
