@@ -35,6 +35,9 @@ rejects unknown keys; every number is range-checked; a bad file raises
     delta = [16.6108, 14.6238]
     [controller.law]
     b0 = 22.771
+    [controller.discrete]            # optional: run the controller sampled (engine.discrete)
+    ts = 1e-3                        # an integer multiple of dt; delay, y_quantum, u_quantum,
+                                     # eso = "zoh" | "euler", td = "fhan" | "euler", h0
 
     [simulation]
     dt = 1e-4
