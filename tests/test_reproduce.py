@@ -18,7 +18,15 @@ from aiofl.reporting.paper import PAPER_TABLES
 
 pytestmark = pytest.mark.slow
 
-FILES = ("metrics.json", "tables.md", "fig3.png", "fig4.png", "fig5.png", "report.html")
+FILES = (
+    "metrics.json",
+    "sampling.json",
+    "tables.md",
+    "fig3.png",
+    "fig4.png",
+    "fig5.png",
+    "report.html",
+)
 KEYS = {"scenario", "structure", "source", "itae", "isu", "iau", "opi", "diverged", "diverged_at"}
 COMPUTED_KEYS = KEYS | {"preset", "tracking", "linearisation"}  # what the report measured
 

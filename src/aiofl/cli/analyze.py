@@ -4,6 +4,8 @@
   run config whose plant is analysed): Lie derivatives, relative degree and where it is
   defined, α, β, the normal-form coordinates ξ and, where ρ < n, the zero dynamics with a
   stability verdict (Section III).  ``--latex`` prints LaTeX, ``--json`` JSON.
+* ``aiofl analyze CONFIG.toml|PRESET --sampling``: the largest sample time at which the
+  design is stable and within 10 % of its continuous ITAE (:mod:`aiofl.cli.sampling`).
 * ``aiofl analyze CONFIG.toml|PRESET --closed-loop``: eigenvalues of the closed loop
   linearised at its operating point (exact Jacobian; repeated ones with their
   multiplicity), slowest / fastest modes and a verdict (:mod:`aiofl.analysis.linearize`);
@@ -58,14 +60,44 @@ def analyze_command(
             "to this file (.png, .pdf or .svg; --closed-loop)."
         ),
     ] = None,
+    sampling: Annotated[
+        bool,
+        typer.Option(
+            "--sampling",
+            help="Largest sample time Ts at which a config's design is stable and within "
+            "--tolerance of its continuous ITAE (batched runs; see aiofl.analysis.sampling).",
+        ),
+    ] = False,
+    tolerance: Annotated[
+        float, typer.Option(help="ITAE allowance over the continuous design (--sampling).")
+    ] = 0.1,
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", "-o", help="With --sampling: write sampling.json, sampling.png."),
+    ] = None,
 ) -> None:
-    """Analyse a plant symbolically (Section III) or a closed loop by linearisation."""
+    """Analyse a plant symbolically (Section III), a closed loop by linearisation, or the
+    sample times a design tolerates (--sampling)."""
     import json
     import math
 
     from rich.console import Console
 
     from aiofl.cli.errors import bad_input_exits
+
+    if sampling:
+        from aiofl.cli.sampling import run_sampling
+
+        with bad_input_exits():
+            if closed_loop or latex or r_op is not None or figure is not None:
+                raise ValueError(
+                    "--sampling is not combined with --closed-loop, --latex, --r-op, --figure"
+                )
+        run_sampling(target, as_json=as_json, out=out, tolerance=tolerance)
+        return
+    with bad_input_exits():
+        if out is not None:
+            raise ValueError("--out applies only with --sampling")
 
     console = Console(highlight=False, markup=False, soft_wrap=True)
     with bad_input_exits():

@@ -86,6 +86,11 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
     "analyze": (
         "aiofl analyze slfjm --latex",
         "aiofl analyze retuned-s1-ladrc --closed-loop --json",
+        "aiofl analyze retuned-s1-leso --sampling --out sampling",
+    ),
+    "export": (
+        "aiofl export retuned-s1-leso --ts 1e-3 --out firmware",
+        "aiofl export my-run.toml --ts 5e-4 --precision float -o firmware",
     ),
 }
 """Example invocations shown at the end of each command's ``--help``."""
@@ -244,6 +249,7 @@ def simulation_record(cfg: Any, result: Any, source_name: str) -> dict[str, Any]
     )
     rec["scenario_name"] = cfg.scenario.name
     rec["config"] = cfg.name
+    rec["sample_time"] = cfg.sampling.ts if cfg.sampling is not None else None
     return rec
 
 
@@ -268,12 +274,21 @@ def simulate_command(
         bool,
         typer.Option("--check", help="Only validate CONFIG and OUT; run and write nothing."),
     ] = False,
+    ts: Annotated[
+        float | None,
+        typer.Option(
+            "--ts",
+            help="Run the controller sampled at Ts [s] (an integer multiple of dt; the "
+            "other [controller.discrete] settings are kept).",
+        ),
+    ] = None,
 ) -> None:
     """Simulate one config: metrics.json, trajectory.csv and figure.png in OUT.
 
     A run that diverges is reported as diverged with the time (metrics null); it is not
     an error.  An existing non-empty OUT is refused unless --force (then it is replaced
     as a whole).  --dt, --t-final and --method pass the same checks as the config's values.
+    With --ts (or a [controller.discrete] table) the controller runs sampled.
     """
     import json
 
@@ -292,6 +307,8 @@ def simulate_command(
             cfg = cfg.with_overrides(
                 t_final=t_final, dt=dt, method=method, source=f"{config} with {flags}"
             )
+        cfg = cfg.with_sample_time(ts) if ts is not None else cfg
+        cfg.check_sampling()  # Ts must stay a multiple of an overridden dt
     if check:
         steps = round(cfg.scenario.t_final / cfg.dt)
         typer.echo(
@@ -358,6 +375,10 @@ def _print_records(records: list[dict[str, Any]], title: str) -> None:
 @app.command("reproduce")
 def reproduce_command(
     out: Annotated[Path, typer.Option("--out", "-o", help="Output directory.")] = Path("results"),
+    ts: Annotated[
+        float | None,
+        typer.Option("--ts", help="Run every design sampled at Ts [s] (a multiple of dt)."),
+    ] = None,
 ) -> None:
     """Reproduce the paper: Tables I–III, Figures 3–5 and report.html in OUT.
 
@@ -391,12 +412,13 @@ def reproduce_command(
             last.append(msg)
             progress.update(task, description=msg)
 
-        rep = reproduce(out, on_stage=on_stage)
+        rep = reproduce(out, on_stage=on_stage, ts=ts)
         on_stage("done")
         progress.remove_task(task)
     _print_records(rep.records, title="aiofl reproduce: paper vs computed")
     typer.echo(
-        f"wrote {out}/metrics.json, tables.md, fig3.png, fig4.png, fig5.png, report.html "
+        f"wrote {out}/metrics.json, sampling.json, tables.md, fig3.png, fig4.png, fig5.png, "
+        "report.html "
         f"in {time.perf_counter() - t0:.1f} s"
     )
 
@@ -421,6 +443,7 @@ def register_feature(name: str, target: str) -> None:
 # --- feature commands ---
 register_feature("tune", "aiofl.cli.tune:tune_command")
 register_feature("analyze", "aiofl.cli.analyze:analyze_command")
+register_feature("export", "aiofl.cli.export:export_command")
 
 
 def _finish_commands() -> None:

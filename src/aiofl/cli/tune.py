@@ -45,6 +45,12 @@ def tune_command(
         int | None, typer.Option("--population", help="Override tune.population.")
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
+    ts: Annotated[
+        float | None,
+        typer.Option(
+            "--ts", help="Tune the controller sampled at Ts [s] (an integer multiple of dt)."
+        ),
+    ] = None,
 ) -> None:
     """Tune a controller with a GA (pymoo) on the OPI of eq. (22), per the config's tune table.
 
@@ -62,7 +68,12 @@ def tune_command(
         if dask_workers is not None and dask_workers < 1:
             raise ValueError(f"--dask-workers = {dask_workers}; allowed: >= 1")
         _check_out(out)
-        prep = prepare(config, None, seed=seed, generations=generations, population=population)
+        target = config
+        if ts is not None:  # the sampled controller is tuned (and written to best.toml)
+            from aiofl.config import load_config
+
+            target = load_config(config).with_sample_time(ts)
+        prep = prepare(target, None, seed=seed, generations=generations, population=population)
         if resume and (out / CHECKPOINT).exists():
             load_checkpoint(out / CHECKPOINT, prep.fingerprint)  # a damaged one: exit 2 now
         elif resume:
@@ -70,7 +81,7 @@ def tune_command(
     with bad_input_exits(run=True):
         try:
             result = tune(
-                config,
+                target,
                 progress=not quiet,
                 checkpoint_dir=out,
                 resume=resume,

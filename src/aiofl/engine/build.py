@@ -180,18 +180,46 @@ def _instantiate(tpl: Any, ns: dict[str, Any], suffix: str, **jit_options: Any) 
 def _build_kernel(plant: Plant, *, cache: bool | None = None, guarded: bool = False) -> Kernel:
     """Compile the closed-loop functions for one plant (see the module notes).
 
-    The templates read their globals from ``ns``: a copy of :mod:`aiofl.engine.kernel`'s
-    globals (layout constants, ``L``, ``np``) with the placeholders bound for this plant.
-    ``guarded`` builds the diagnostic kernel of :func:`run_members` (never cached).
+    The templates read their globals from :func:`plant_namespace`. ``guarded`` builds the
+    diagnostic kernel of :func:`run_members` (never cached).
     """
-
-    f, g, h, bd, nf = plant.compiled
-    fingerprint = None if guarded else _kernel_fingerprint(plant)
+    ns, plant_key, fingerprint = plant_namespace(plant, guarded=guarded)
     use_cache = _cache_enabled() if cache is None else cache
     use_cache = use_cache and fingerprint is not None
     n = plant.n_states
     if not use_cache and _user_functions(plant):
         plant.typecheck()  # numba compiles them now rather than inside the kernel
+    suffix = f"{plant_key}_{fingerprint}" if fingerprint else f"nocache{id(plant):x}"
+    from aiofl.components.fastmath import FASTMATH
+
+    # the time loop is compiled with the components' fast-math flags and error model
+    opts = {"fastmath": FASTMATH, "error_model": "numpy"}
+    ns["_UNMANAGED"] = _unmanaged_intrinsic()
+    ns["_KEEP_ALIVE"] = _instantiate(kernel._tpl_keep_alive, ns, suffix)
+    ns["_SETUP"] = _instantiate(kernel._tpl_setup, ns, suffix, **opts)
+    ns["_REFERENCE"] = _instantiate(kernel._tpl_reference, ns, suffix, **opts)
+    # one call site in the stage loop: inlined, so the compiler sees the whole step
+    ns["_DERIV"] = _instantiate(kernel._tpl_deriv, ns, suffix, inline="always", **opts)
+    member = _instantiate(kernel._tpl_member, ns, suffix, nogil=True, cache=use_cache, **opts)
+    if use_cache:
+        _prune_stale_cache(member, plant_key, suffix)
+    evaluate = _instantiate(kernel._tpl_eval, ns, suffix, **opts)
+    n_cols = kernel.N_SIG + n + (L.RHO_MAX + 1) + L.RHO_MAX
+    _PLANT_OF_MEMBER[id(member)] = plant
+    return Kernel(member=member, evaluate=evaluate, n_cols=n_cols, cached=use_cache)
+
+
+def plant_namespace(
+    plant: Plant, *, guarded: bool = False
+) -> tuple[dict[str, Any], str, str | None]:
+    """The globals the kernel templates are compiled with for ``plant``: a copy of
+    :mod:`aiofl.engine.kernel`'s globals (layout constants, ``L``, ``np``) with the plant's
+    compiled functions (wrapped by :func:`_guarded` when ``guarded``), its sizes and the
+    controller's component functions bound; also the plant's key (a digest of its identity)
+    and the kernel fingerprint (None if the kernel cannot be cached)."""
+    f, g, h, bd, nf = plant.compiled
+    fingerprint = None if guarded else _kernel_fingerprint(plant)
+    n = plant.n_states
     if guarded:
         f, g, h, bd, nf = (_guarded(fn, k, n) for k, fn in enumerate((f, g, h, bd, nf)))
     ns = dict(vars(kernel))
@@ -212,24 +240,7 @@ def _build_kernel(plant: Plant, *, cache: bool | None = None, guarded: bool = Fa
         + [getattr(getattr(plant, k), "__qualname__", "-") for k in ("f", "g", "h", "bd")]
     )
     plant_key = hashlib.sha256(ident.encode()).hexdigest()[:8]
-    suffix = f"{plant_key}_{fingerprint}" if fingerprint else f"nocache{id(plant):x}"
-    from aiofl.components.fastmath import FASTMATH
-
-    # the time loop is compiled with the components' fast-math flags and error model
-    opts = {"fastmath": FASTMATH, "error_model": "numpy"}
-    ns["_UNMANAGED"] = _unmanaged_intrinsic()
-    ns["_KEEP_ALIVE"] = _instantiate(kernel._tpl_keep_alive, ns, suffix)
-    ns["_SETUP"] = _instantiate(kernel._tpl_setup, ns, suffix, **opts)
-    ns["_REFERENCE"] = _instantiate(kernel._tpl_reference, ns, suffix, **opts)
-    # one call site in the stage loop: inlined, so the compiler sees the whole step
-    ns["_DERIV"] = _instantiate(kernel._tpl_deriv, ns, suffix, inline="always", **opts)
-    member = _instantiate(kernel._tpl_member, ns, suffix, nogil=True, cache=use_cache, **opts)
-    if use_cache:
-        _prune_stale_cache(member, plant_key, suffix)
-    evaluate = _instantiate(kernel._tpl_eval, ns, suffix, **opts)
-    n_cols = kernel.N_SIG + n + (L.RHO_MAX + 1) + L.RHO_MAX
-    _PLANT_OF_MEMBER[id(member)] = plant
-    return Kernel(member=member, evaluate=evaluate, n_cols=n_cols, cached=use_cache)
+    return ns, plant_key, fingerprint
 
 
 def _guarded(fn: Any, index: int, n: int) -> Any:
@@ -285,15 +296,17 @@ def _unmanaged_intrinsic() -> Any:
     return unmanaged
 
 
-def _prune_stale_cache(member: Any, plant_key: str, suffix: str) -> None:
+def _prune_stale_cache(member: Any, plant_key: str, suffix: str, template: Any = None) -> None:
     """Delete this plant's cached kernels from older versions of its code or the engine's
-    (same plant key, other fingerprint), so the cache does not grow with every edit."""
+    (same plant key, other fingerprint), so the cache does not grow with every edit.
+    ``template`` is the template ``member`` was compiled from (default: the time loop)."""
     cache_dir = getattr(getattr(member, "_cache", None), "_cache_path", None)
     if not cache_dir or not os.path.isdir(cache_dir):
         return
+    tpl = template if template is not None else kernel._tpl_member
     # numba names a cache entry "<source file stem>.<qualified name>"
-    stem = os.path.splitext(os.path.basename(kernel.__file__))[0]
-    prefix = f"{stem}.{kernel._tpl_member.__name__}_{plant_key}_"
+    stem = os.path.splitext(os.path.basename(tpl.__code__.co_filename))[0]
+    prefix = f"{stem}.{tpl.__name__}_{plant_key}_"
     keep = f"{prefix}{suffix.split('_', 1)[1]}"
     for entry in os.scandir(cache_dir):
         if entry.name.startswith(prefix) and not entry.name.startswith(keep):

@@ -25,6 +25,7 @@ from aiofl import layout as L
 from aiofl.components.metrics import OPIWeights, opi
 from aiofl.controller import Controller, ControllerBatch, controller_batch
 from aiofl.engine.build import kernel_for, run_members
+from aiofl.engine.discrete import Sampling, sampling_rows
 from aiofl.plants.base import Plant
 from aiofl.scenario import Scenario, noise_sequence
 
@@ -126,6 +127,7 @@ def simulate_batch(
     store: bool = False,
     decimation: int = 10,
     divergence_threshold: float = 1e10,
+    sampling: Sampling | Sequence[Sampling | None] | None = None,
 ) -> BatchResult:
     """Simulate a batch of closed loops in one compiled, parallel call.
 
@@ -146,6 +148,11 @@ def simulate_batch(
     divergence_threshold
         A member whose state leaves ``|z| < threshold`` (or becomes NaN) is stopped and
         reported as diverged.
+    sampling
+        Run controllers sampled (:class:`aiofl.engine.discrete.Sampling`): one setting for
+        all members or one per member (None = continuous); sample times must be integer
+        multiples of ``dt`` (:mod:`aiofl.engine.sampled`).  Continuous members are
+        unaffected.
 
     Returns
     -------
@@ -171,6 +178,8 @@ def simulate_batch(
         pairs = {(id(c), id(s)): (c, s) for c, s in zip(ctrls, scens, strict=True)}
         for c, s in pairs.values():
             c.check_plant(plant, s.x0 or None)  # ρ, IOFL's normal form, the sign of b0
+    samplings = _as_list(sampling, b, "sampling settings")
+    disc = sampling_rows(batch, samplings, dt) if any(samplings) else None
     t_final = scens[0].t_final
     if any(abs(s.t_final - t_final) > 1e-12 for s in scens):
         raise ValueError("all scenarios in one batch must share t_final")
@@ -215,8 +224,13 @@ def simulate_batch(
     metrics = np.zeros((b, L.N_METRIC))
     status = np.zeros(b, dtype=np.int64)
     t_div = np.zeros(b)
+    member = kernel.member
+    if disc is not None:
+        from aiofl.engine.sampled import member_dispatch
+
+        member = member_dispatch(plant, kernel.member, disc)
     run_members(
-        kernel.member,
+        member,
         b,
         batch.ints,
         batch.floats,
@@ -260,6 +274,7 @@ def simulate(
     store: bool = True,
     decimation: int = 10,
     divergence_threshold: float = 1e10,
+    sampling: Sampling | None = None,
 ) -> SimulationResult:
     """Simulate one closed loop (a batch of one). See :func:`simulate_batch`."""
     res = simulate_batch(
@@ -271,6 +286,7 @@ def simulate(
         store=store,
         decimation=decimation,
         divergence_threshold=divergence_threshold,
+        sampling=sampling,
     )
     return res.member(0)
 

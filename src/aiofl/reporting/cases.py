@@ -28,7 +28,7 @@ import platform
 import re
 import time
 from collections.abc import Callable, Iterable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
@@ -216,6 +216,7 @@ def run_cases(
             [cases[i].config.scenario for i in idx],
             dt=first.dt,
             method=first.method,
+            sampling=[cases[i].config.sampling for i in idx],  # None: continuous
             store=store,
             decimation=first.decimation,
             divergence_threshold=first.divergence_threshold,
@@ -427,6 +428,7 @@ class Reproduction:
     verdicts: dict[str, dict[str, Any]]
     engine: dict[str, str]
     timings: dict[str, float]
+    sampling: dict[str, dict[str, Any]] = field(default_factory=dict)  # limits by preset
 
     def scenario_runs(self, scenario: int) -> list[CaseRun]:
         """The runs of one scenario, in table order."""
@@ -446,6 +448,10 @@ def _engine_settings(cases: Sequence[Case], n_batches: int) -> dict[str, str]:
     cfgs = [c.config for c in cases]
     return {
         "integrator": distinct(c.method.upper() for c in cfgs) + " (fixed step)",
+        "controller": distinct(
+            "continuous" if c.sampling is None else f"sampled, Ts = {c.sampling.ts:g} s"
+            for c in cfgs
+        ),
         "step dt [s]": distinct(c.dt for c in cfgs),
         "horizon [s]": distinct(c.scenario.t_final for c in cfgs),
         "trajectory decimation": distinct(c.decimation for c in cfgs)
@@ -465,12 +471,15 @@ def compute(
     *,
     available: Iterable[str] | None = None,
     on_stage: Callable[[str], None] | None = None,
+    ts: float | None = None,
 ) -> Reproduction:
     """Discover and simulate all cases and derive the facts the report needs."""
     stage = on_stage or (lambda _msg: None)
     t0 = time.perf_counter()
     stage("loading presets")
     cases = discover_cases(available)
+    if ts is not None:  # every design sampled at ts (raises ConfigError for a bad ts)
+        cases = [replace(c, config=c.config.with_sample_time(ts)) for c in cases]
     n_batches = len({_batch_key(c.config) for c in cases})
     stage(f"simulating {len(cases)} cases in {n_batches} batched call(s) (first call compiles)")
     t1 = time.perf_counter()
@@ -480,11 +489,17 @@ def compute(
     stage("closed-loop analysis")
     verdicts = {r.case.preset: closed_loop_verdict(r.case.config) for r in runs}
     t3 = time.perf_counter()
+    stage("sampling limits (largest Ts per design, batched)")
+    from aiofl.reporting.sampling_note import case_limits
+
+    sampling = case_limits({c.preset: c.config for c in cases})
+    t4 = time.perf_counter()
     return Reproduction(
         runs=runs,
         records=build_records(runs, verdicts),
         trivial=trivial,
         verdicts=verdicts,
         engine=_engine_settings(cases, n_batches),
-        timings={"load": t1 - t0, "simulate": t2 - t1, "analysis": t3 - t2},
+        timings={"load": t1 - t0, "simulate": t2 - t1, "analysis": t3 - t2, "sampling": t4 - t3},
+        sampling=sampling,
     )

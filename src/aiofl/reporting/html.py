@@ -21,6 +21,7 @@ from aiofl.reporting.tables import (
     VERDICT_HEADER,
     VERDICT_INTRO,
     open_settings,
+    sampling_text,
     scenario_notes,
     table_header,
     table_rows,
@@ -112,6 +113,10 @@ def html_report(rep: Reproduction, figures: Mapping[str, bytes]) -> str:
             body.append(
                 f'<img alt="Figure {info.figure}: scenario {s}" src="data:image/png;base64,{data}">'
             )
+    para = sampling_text(rep)
+    if para:
+        body.append("<h2>What the sample-time limits mean</h2>")
+        body.append(f"<p>{_e(para)}</p>")
     body.append("<h2>Closed-loop linearisation beside the simulation</h2>")
     body.append(f"<p>{_e(VERDICT_INTRO)}</p>")
     body.append(_html_table(VERDICT_HEADER, verdict_rows(rep), cls="verdicts"))

@@ -26,6 +26,7 @@ from aiofl.reporting.cases import (
     output_ratio,
 )
 from aiofl.reporting.paper import PAPER_TABLES, SCENARIOS
+from aiofl.reporting.sampling_note import sampling_paragraph, ts_max_cell
 
 __all__ = [
     "CONTEXT_ROWS",
@@ -154,6 +155,7 @@ def table_header(rep: Reproduction, scenario: int) -> list[str]:
         _with_unit("ISU computed", units["isu"]),
         _with_unit("IAU computed", units["iau"]),
         "OPI computed",
+        "ts_max [ms]",
     ]
 
 
@@ -180,11 +182,14 @@ def table_rows(rep: Reproduction, scenario: int) -> list[list[str]]:
                 fmt(rec["isu"]),
                 fmt(rec["iau"]),
                 fmt(rec["opi"]),
+                ts_max_cell(rep.sampling.get(run.case.preset)),
             ]
         )
     triv = rep.trivial[scenario]
     w = rep.scenario_runs(scenario)[0].case.config.weights
-    rows.append([CONTEXT_ROWS[0], DASH, DASH, fmt(triv), DASH, "0", "0", fmt(opi(triv, 0, 0, w))])
+    rows.append(
+        [CONTEXT_ROWS[0], DASH, DASH, fmt(triv), DASH, "0", "0", fmt(opi(triv, 0, 0, w)), DASH]
+    )
     # the least ISU any controller needs to keep y = r (aiofl.analysis.exact_tracking)
     from aiofl.analysis.exact_tracking import exact_tracking_cost
 
@@ -199,6 +204,7 @@ def table_rows(rep: Reproduction, scenario: int) -> list[list[str]]:
             fmt(ex["isu"]),
             fmt(ex["iau"]),
             fmt(opi(0.0, ex["isu"], ex["iau"], w)),
+            DASH,
         ]
     )
     return rows
@@ -381,9 +387,18 @@ def tables_markdown(rep: Reproduction) -> str:
         out += [_md_table(table_header(rep, s), table_rows(rep, s)), ""]
         out += [f"- {n}" for n in scenario_notes(rep, s)]
         out += [""]
+    para = sampling_text(rep)
+    if para:
+        out += ["## What the sample-time limits mean", "", para, ""]
     out += ["## Closed-loop linearisation beside the simulation", "", VERDICT_INTRO, ""]
     out += [_md_table(VERDICT_HEADER, verdict_rows(rep)), ""]
     return "\n".join(out)
+
+
+def sampling_text(rep: Reproduction) -> str:
+    """The paragraph on the designs' sample-time limits (empty when none were computed)."""
+    rows = [(r.case.label, r.case.preset, r.case.source, r.case.scenario) for r in rep.runs]
+    return " ".join(sampling_paragraph(rows, rep.sampling))
 
 
 VERDICT_INTRO = (

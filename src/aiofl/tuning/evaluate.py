@@ -107,7 +107,8 @@ def _build(spec: EvalSpec) -> Any:
 
         cfg = parse_config(dict(spec.config), "tuning spec")
         _BUILT.clear()  # keep only the current spec's objects
-        _BUILT[key] = (cfg.plant, cfg.controller, replace(cfg.scenario, t_final=spec.t_final))
+        scenario = replace(cfg.scenario, t_final=spec.t_final)
+        _BUILT[key] = (cfg.plant, cfg.controller, scenario, cfg.sampling)
     return _BUILT[key]
 
 
@@ -120,7 +121,7 @@ def evaluate_chunk(spec: EvalSpec, values: NDArray[np.float64]) -> PopulationRes
     if values.shape[0] == 0:
         return PopulationResult(np.zeros((0, 5)), np.zeros(0, dtype=bool), np.zeros(0))
     with _LOCK:
-        plant, controller, scenario = _build(spec)
+        plant, controller, scenario, sampling = _build(spec)
         batch = controller_batch(
             controller, {name: values[:, j] for j, name in enumerate(spec.names)}
         )
@@ -132,6 +133,7 @@ def evaluate_chunk(spec: EvalSpec, values: NDArray[np.float64]) -> PopulationRes
             method=spec.method,
             store=False,
             divergence_threshold=spec.divergence_threshold,
+            sampling=sampling,  # a [controller.discrete] table tunes the sampled controller
         )
     return PopulationResult(res.metrics.copy(), res.diverged.copy(), res.diverged_at.copy())
 

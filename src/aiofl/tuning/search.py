@@ -24,7 +24,7 @@ import hashlib
 import json
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -243,6 +243,8 @@ def prepare(
         if st.dt is not None:
             msg = msg.replace("simulation.dt", "tune.dt")
         raise ConfigError(f"invalid [tune] of {source or cfg.name}: {msg}") from None
+    if st.dt:  # a sampled controller's Ts must be a multiple of the tuning step too
+        replace(cfg, dt=st.dt).check_sampling()
     space = SearchSpace(st.parameters)
     raw = {k: v for k, v in cfg.raw.items() if k != "tune"}
     spec = EvalSpec(

@@ -43,6 +43,9 @@ is bounded before anything is allocated (:mod:`aiofl.limits`).  A bad file raise
     [controller.law]
     b0 = 22.771                      # finite, non-zero, with the sign of the plant's beta
     u_max = inf                      # actuator range [u_min, u_max]; u_min omitted: -u_max
+    [controller.discrete]            # optional: run the controller sampled (engine.discrete)
+    ts = 1e-3                        # an integer multiple of dt; delay, y_quantum, u_quantum,
+                                     # eso = "zoh" | "euler", td = "fhan" | "euler", h0
 
     [simulation]
     dt = 1e-4
@@ -60,28 +63,26 @@ paper; each maps onto the engine columns of :data:`aiofl.layout.FLOAT_COLUMNS`
 from __future__ import annotations
 
 import copy
-import math
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, ValidationError
 
 from aiofl import layout as L
 from aiofl.components.metrics import OPIWeights
-from aiofl.controller import STRUCTURES, Controller
+from aiofl.config.schema import REQUIRED_KEYS, ConfigError, ConfigModel, DiscreteModel
+from aiofl.controller import Controller
 from aiofl.limits import (
-    DT_MAX,
     MAX_NOISE_SAMPLES,
     MAX_STEPS,
     MAX_TRAJECTORY_BYTES,
-    T_FINAL_MAX,
     check_run_size,
 )
 from aiofl.plants.base import Plant, PlantError
-from aiofl.scenario import Reference, Scenario
+from aiofl.scenario import Scenario
 
 __all__ = [
     "MAX_NOISE_SAMPLES",
@@ -97,259 +98,6 @@ __all__ = [
     "preset_text",
     "resolve_plant",
 ]
-
-#: keys every config must set (an empty or cut-off file is refused, not run with defaults)
-REQUIRED_KEYS = ("plant", "scenario.t_final", "controller.structure", "simulation.dt")
-
-PosFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-NonNegFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
-Finite = Annotated[float, Field(allow_inf_nan=False)]
-
-
-class ConfigError(ValueError):
-    """A config that cannot be used; the message names the field and the allowed range."""
-
-
-class _Model(BaseModel):
-    # strict: no bool or string coercion into numbers (``true``, ``"50 "`` are refused); a
-    # float field takes a TOML integer or float, an int field only an integer
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
-
-
-# ---------------------------------------------------------------------- scenario
-class ReferenceModel(_Model):
-    kind: Literal["sine", "step", "samples"] = "sine"
-    amplitude: Finite = math.pi / 4
-    omega: NonNegFloat = 2.0
-    phase: Finite = 0.0
-    offset: Finite = 0.0
-    t_step: NonNegFloat = 0.0
-    samples: list[Finite] = Field(default_factory=list)
-    sample_dt: NonNegFloat = 0.0
-
-    @model_validator(mode="after")
-    def _samples(self) -> ReferenceModel:
-        if self.kind == "samples" and (len(self.samples) < 2 or self.sample_dt <= 0):
-            raise ValueError("kind = 'samples' needs >= 2 samples and sample_dt > 0")
-        return self
-
-
-class ScenarioModel(_Model):
-    name: str = "custom"
-    reference: ReferenceModel = Field(default_factory=ReferenceModel)
-    t_final: Annotated[float, Field(gt=0, le=T_FINAL_MAX, allow_inf_nan=False)] = 20.0
-    disturbance_amplitude: Finite = 0.0
-    disturbance_time: NonNegFloat = 0.0
-    plant_scale: dict[str, PosFloat] = Field(default_factory=dict)
-    plant_overrides: dict[str, Finite] = Field(default_factory=dict)
-    parameter_change_time: NonNegFloat = 0.0
-    noise_variance: NonNegFloat = 0.0
-    noise_hold: PosFloat = 1e-3
-    noise_seed: Annotated[int, Field(ge=0, lt=2**63)] = 0
-    x0: list[Finite] = Field(default_factory=list)
-
-    @model_validator(mode="after")
-    def _events_within_horizon(self) -> ScenarioModel:
-        # an event after the horizon never happens: refused, so a typo (10 for 1.0, or a
-        # 10-s event in a 5-s run) is not silently ignored
-        events = {
-            "disturbance_time": self.disturbance_time,
-            "parameter_change_time": self.parameter_change_time,
-            "reference.t_step": self.reference.t_step,
-        }
-        for key, t in events.items():
-            if t > self.t_final:
-                raise ValueError(
-                    f"scenario.{key} = {t:g} s is after the horizon t_final = "
-                    f"{self.t_final:g} s; allowed: 0 <= {key} <= t_final"
-                )
-        return self
-
-    def build(self) -> Scenario:
-        ref = Reference(**{**self.reference.model_dump(), "samples": tuple(self.reference.samples)})
-        data = self.model_dump(exclude={"reference"})
-        data["x0"] = tuple(self.x0)
-        return Scenario(reference=ref, **data)
-
-
-# -------------------------------------------------------------------- controller
-class ESOModel(_Model):
-    omega0: PosFloat = 10.0
-    alpha: list[NonNegFloat] | Literal["binomial"] = "binomial"
-    k_alpha: NonNegFloat = 1.0
-    k_beta: NonNegFloat = 0.0
-    g_alpha: Annotated[float, Field(gt=0, le=2)] = 1.0
-    g_beta: Annotated[float, Field(ge=0, le=2)] = 0.0
-    # "zero": xi_hat(0) = 0; "output": xi_hat_1(0) = y_meas(0), the first measurement
-    init: Literal["zero", "output"] = "zero"
-
-
-class TDModel(_Model):
-    R: PosFloat = 100.0
-    a: Annotated[float, Field(ge=0, lt=1)] = 0.0
-    b: PosFloat = 1.0
-    c: PosFloat = 1.0
-    rho: PosFloat = 10.0
-    omega: PosFloat = 10.0
-
-
-class SEFModel(_Model):
-    k: list[Finite] | None = None
-    kb: list[Finite] | None = None
-    alpha: list[Annotated[float, Field(gt=0, le=3)]] | None = None
-    delta: list[PosFloat] | None = None
-    mu: list[NonNegFloat] | None = None
-    v_limit: PosFloat = 1.0
-    omega_c: PosFloat = 1.0
-
-
-class LawModel(_Model):
-    b0: Finite = 1.0  # non-zero; negative for a plant whose high-frequency gain is negative
-    u_max: float = math.inf  # actuator range [u_min, u_max]; u_min omitted: [-u_max, u_max]
-    u_min: float | None = None
-
-    @field_validator("b0")
-    @classmethod
-    def _b0(cls, v: float) -> float:
-        if v == 0.0:
-            raise ValueError(
-                "b0 = 0; allowed: finite and non-zero (negative for a plant "
-                "whose high-frequency gain is negative)"
-            )
-        return v
-
-    @model_validator(mode="after")
-    def _range(self) -> LawModel:
-        lo, hi = self.u_min, self.u_max
-        if math.isnan(hi) or (lo is not None and math.isnan(lo)):
-            raise ValueError("u_min / u_max must be numbers (inf for no limit), not nan")
-        if lo is None and not hi > 0:
-            raise ValueError(
-                f"u_max = {hi}; allowed: > 0 (the range is [-u_max, u_max] unless u_min is given)"
-            )
-        if lo is not None and not lo < hi:
-            raise ValueError(f"u_min = {lo} must be < u_max = {hi}")
-        return self
-
-
-class ControllerModel(_Model):
-    structure: Literal["LESO", "INLESO", "LADRC", "IOFL"] | None = None
-    eso_kind: Literal["linear", "improved"] | None = None
-    td_kind: Literal["exact", "han", "improved", "linear"] | None = None
-    sef_kind: Literal["nonlinear", "improved", "linear"] | None = None
-    law_kind: Literal["aiofl", "iofl"] | None = None
-    rho: Annotated[int, Field(ge=1, le=L.RHO_MAX)] | None = None
-    # default: rho, or the paper's 2 behind the Han TD / ITD (controller.default_n_feedback)
-    n_feedback: Annotated[int, Field(ge=1, le=L.RHO_MAX)] | None = None
-    allow_rho_mismatch: bool = False  # run a rho other than the plant's relative degree
-    allow_b0_sign_mismatch: bool = False  # run a b0 whose sign differs from the plant's beta
-    eso: ESOModel = Field(default_factory=ESOModel)
-    td: TDModel = Field(default_factory=TDModel)
-    sef: SEFModel = Field(default_factory=SEFModel)
-    law: LawModel = Field(default_factory=LawModel)
-
-    def build(self, default_rho: int) -> Controller:
-        kinds = dict(
-            zip(("eso", "td", "sef", "law"), STRUCTURES[self.structure or "LESO"], strict=True)
-        )
-        for key in kinds:
-            chosen = getattr(self, f"{key}_kind")
-            if chosen is not None:
-                kinds[key] = chosen
-        rho = self.rho or default_rho
-        values: dict[str, float] = {}
-        eso = self.eso.model_dump()
-        alphas = eso.pop("alpha")
-        eso_init = eso.pop("init")
-        for key, val in eso.items():
-            values[f"eso.{key}"] = val
-        if alphas == "binomial":
-            from aiofl.components.observers import binomial_alphas
-
-            alphas = list(binomial_alphas(rho))
-        if len(alphas) != rho + 1:
-            raise ValueError(
-                f"controller.eso.alpha has {len(alphas)} entries; the ESO of order rho+1 "
-                f"needs rho+1 = {rho + 1}"
-            )
-        values.update({f"eso.alpha{i}": a for i, a in enumerate(alphas, 1)})
-        for key, val in self.td.model_dump().items():
-            values[f"td.{key}"] = val
-        vectors = {k: v for k, v in self.sef.model_dump().items() if isinstance(v, list)}
-        for key, val in self.sef.model_dump().items():
-            if isinstance(val, list):
-                if len(val) > L.RHO_MAX:
-                    raise ValueError(f"controller.sef.{key} has more than {L.RHO_MAX} entries")
-                values.update({f"sef.{key}{i}": v for i, v in enumerate(val, 1)})
-            elif val is not None:
-                values[f"sef.{key}"] = val
-        for key, val in self.law.model_dump().items():
-            if val is not None:  # u_min omitted: the symmetric range [-u_max, u_max]
-                values[f"law.{key}"] = val
-        controller = Controller(
-            eso=kinds["eso"],
-            td=kinds["td"],
-            sef=kinds["sef"],
-            law=kinds["law"],
-            rho=rho,
-            n_feedback=self.n_feedback,  # None: rho, or 2 behind the Han TD / ITD
-            values=values,
-            structure=self.structure or "custom",
-            eso_init=eso_init,
-            allow_rho_mismatch=self.allow_rho_mismatch,
-            allow_b0_sign_mismatch=self.allow_b0_sign_mismatch,
-        )
-        m = controller.n_feedback
-        for key, val in vectors.items():  # a short vector is refused, never padded
-            if len(val) < m:  # type: ignore[operator]
-                raise ValueError(
-                    f"controller.sef.{key} has {len(val)} entries; allowed: one per fed-back "
-                    f"state, {m}..{L.RHO_MAX} (n_feedback = {m}; missing entries are not "
-                    "filled in)"
-                )
-        return controller
-
-
-# -------------------------------------------------------------------- the rest
-class SimulationModel(_Model):
-    dt: Annotated[float, Field(gt=0, le=DT_MAX, allow_inf_nan=False)] = 1e-4
-    method: Literal["rk4", "euler"] = "rk4"
-    decimation: Annotated[int, Field(ge=1, le=MAX_STEPS)] = 10
-    # finite: an infinite threshold would switch divergence detection off
-    divergence_threshold: Annotated[float, Field(gt=0, le=1e300, allow_inf_nan=False)] = 1e10
-
-
-class MetricsModel(_Model):
-    weights: Annotated[list[NonNegFloat], Field(min_length=3, max_length=3)] = [0.6, 0.2, 0.6]
-    normalisers: Annotated[list[PosFloat], Field(min_length=3, max_length=3)] = [10.0, 2.0, 2.7]
-
-    def build(self) -> OPIWeights:
-        (w1, w2, w3), (n1, n2, n3) = self.weights, self.normalisers
-        return OPIWeights(w1, w2, w3, n1, n2, n3)
-
-
-class ConfigModel(_Model):
-    name: str = "custom"
-    description: str = ""
-    plant: str = "slfjm"
-    scenario: ScenarioModel = Field(default_factory=ScenarioModel)
-    controller: ControllerModel = Field(default_factory=ControllerModel)
-    simulation: SimulationModel = Field(default_factory=SimulationModel)
-    metrics: MetricsModel = Field(default_factory=MetricsModel)
-    # Tables owned by other features (e.g. [tune]) are validated by those features.
-    tune: dict[str, Any] | None = None
-
-    @field_validator("plant")
-    @classmethod
-    def _plant_name(cls, v: str) -> str:
-        from aiofl.plants.registry import available_plants
-
-        if v not in available_plants() and not v.endswith(".toml"):
-            raise ValueError(
-                f"unknown plant {v!r}; allowed: a symbolic-plant .toml file or one of "
-                f"{', '.join(available_plants())}"
-            )
-        return v
 
 
 @dataclass(frozen=True)
@@ -367,6 +115,7 @@ class RunConfig:
     divergence_threshold: float
     weights: OPIWeights
     raw: dict[str, Any]
+    sampling: Any = None  # aiofl.engine.discrete.Sampling: [controller.discrete], or None
 
     def simulate(self, *, store: bool = True) -> Any:
         """Run this config once (see :func:`aiofl.engine.simulation.simulate`)."""
@@ -381,6 +130,7 @@ class RunConfig:
             store=store,
             decimation=self.decimation,
             divergence_threshold=self.divergence_threshold,
+            sampling=self.sampling,
         )
 
     def with_overrides(
@@ -404,6 +154,38 @@ class RunConfig:
             if value is not None:
                 data.setdefault(table, {})[key] = value
         return parse_config(data, source or f"{self.name} (overridden)")
+
+    def with_sample_time(self, ts: float) -> RunConfig:
+        """This config with the controller sampled at ``ts`` (the other
+        ``[controller.discrete]`` settings kept, or their defaults); raises
+        :class:`ConfigError` if ``ts`` is not a positive integer multiple of ``dt``."""
+        from dataclasses import replace
+
+        raw = {**self.raw, "controller": dict(self.raw.get("controller", {}))}
+        raw["controller"]["discrete"] = {**raw["controller"].get("discrete", {}), "ts": ts}
+        try:
+            table = DiscreteModel.model_validate(raw["controller"]["discrete"])
+        except ValidationError as exc:
+            msg = _format_error(exc, "--ts").replace("  ts:", "  controller.discrete.ts:")
+            raise ConfigError(msg) from None
+        cfg = replace(self, sampling=table.build(), raw=raw)
+        cfg.check_sampling()
+        return cfg
+
+    def check_sampling(self) -> None:
+        """Raise :class:`ConfigError` unless the sampled controller (if any) can run with this
+        config's step ``dt``: Ts an integer multiple of dt, a discretisation that fits the
+        controller, finite coefficients."""
+        if self.sampling is None:
+            return
+        from aiofl.controller import controller_batch
+        from aiofl.engine.discrete import sampling_rows
+
+        try:
+            self.sampling.check(self.controller)
+            sampling_rows(controller_batch(self.controller), [self.sampling], self.dt)
+        except ValueError as exc:
+            raise ConfigError(f"invalid config {self.name!r}: {exc}") from None
 
 
 def _allowed_keys(loc: tuple[Any, ...]) -> list[str]:
@@ -585,7 +367,7 @@ def parse_config(
         raise ConfigError(f"invalid config {source}: {exc}{note}") from None
     if missing:
         raise ConfigError(f"invalid config {source}:{note}")
-    return RunConfig(
+    cfg = RunConfig(
         name=model.name,
         description=model.description,
         plant=plant,
@@ -598,6 +380,14 @@ def parse_config(
         weights=model.metrics.build(),
         raw=data,
     )
+    if model.controller.discrete is not None:  # [controller.discrete]: a sampled controller
+        try:
+            sampling = model.controller.discrete.build()
+        except ValueError as exc:
+            raise ConfigError(f"invalid config {source}: {exc}") from None
+        cfg = replace(cfg, sampling=sampling)
+        cfg.check_sampling()
+    return cfg
 
 
 def _presets_dir() -> Any:

@@ -1,0 +1,170 @@
+"""Cost of one ``aiofl_step`` of the exported C controller, and its agreement with the engine.
+
+Run ``python benchmarks/bench_export.py``.  For the shipped ρ = 4 designs (re-tuned LESO,
+INLESO and LADRC of scenario 1) it exports the controller sampled at ``--ts`` in double and
+single precision, compiles it with the system C compiler (``cc -std=c99 -O2``, plus
+``--march`` if given) together with a small timing driver, and prints the nanoseconds per
+``aiofl_step`` call: the best of ``--repeat`` runs of ``--steps`` calls each on a
+precomputed measurement/reference sequence, timed with ``clock_gettime(CLOCK_MONOTONIC)``
+inside C (no Python in the loop).  The driver sums the commands into a volatile, so the
+calls cannot be optimised away.
+
+With ``--agreement`` it also drives each exported controller in closed loop on the SLFJM
+(as ``tests/test_export.py`` does) for ``--agreement-time`` seconds and prints the largest
+difference between its commands and the engine's discrete controller's, relative to the
+largest command.
+
+Timings depend on the machine and its load (printed with the results); no assertion is
+made on any figure.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import shutil
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+DRIVER = r"""
+#define _POSIX_C_SOURCE 199309L
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <time.h>
+#include "aiofl_controller.h"
+
+int main(int argc, char **argv)
+{
+    long n = argc > 1 ? atol(argv[1]) : 1000000L;
+    int repeat = argc > 2 ? atoi(argv[2]) : 5;
+    static aiofl_real ys[4096], rs[4096][AIOFL_RHO + 1];
+    volatile double sink = 0.0;
+    double best = 1e300;
+    aiofl_state s;
+    int i, k, rep;
+    for (i = 0; i < 4096; ++i) {
+        double t = i * AIOFL_TS, w = 2.0, a = 0.785398;
+        ys[i] = (aiofl_real)(0.95 * a * sin(w * t - 0.05) + 1e-4 * cos(37.0 * t));
+        for (k = 0; k <= AIOFL_RHO; ++k)
+            rs[i][k] = (aiofl_real)(a * pow(w, k) * sin(w * t + k * 1.5707963267948966));
+    }
+    for (rep = 0; rep < repeat; ++rep) {
+        struct timespec t0, t1;
+        long j;
+        double acc = 0.0;
+        aiofl_init(&s, ys[0]);
+        clock_gettime(CLOCK_MONOTONIC, &t0);
+        for (j = 0; j < n; ++j) acc += aiofl_step(&s, rs[j & 4095], ys[j & 4095]);
+        clock_gettime(CLOCK_MONOTONIC, &t1);
+        sink += acc;
+        double ns = ((t1.tv_sec - t0.tv_sec) * 1e9 + (t1.tv_nsec - t0.tv_nsec)) / (double)n;
+        if (ns < best) best = ns;
+    }
+    printf("%.3f %g\n", best, (double)sink);
+    return 0;
+}
+"""
+
+DESIGNS = ("retuned-s1-leso", "retuned-s1-inleso", "retuned-s1-ladrc")
+
+
+def _table(title: str, header: list[str], rows: list[list[str]]) -> None:
+    widths = [max(len(str(c)) for c in col) for col in zip(header, *rows, strict=True)]
+    print(f"\n{title}")
+    print("  " + "  ".join(h.ljust(w) for h, w in zip(header, widths, strict=True)))
+    print("  " + "  ".join("-" * w for w in widths))
+    for row in rows:
+        print("  " + "  ".join(str(c).ljust(w) for c, w in zip(row, widths, strict=True)))
+
+
+def ns_per_step(preset: str, ts: float, precision: str, args: argparse.Namespace) -> float:
+    from aiofl.config import load_config
+    from aiofl.engine.discrete import Sampling
+    from aiofl.export import SOURCE, export_c
+
+    cfg = load_config(preset)
+    files = export_c(cfg.controller, Sampling(ts), precision=precision)
+    with tempfile.TemporaryDirectory() as tmp:
+        d = Path(tmp)
+        for name, text in files.items():
+            (d / name).write_text(text)
+        (d / "driver.c").write_text(DRIVER)
+        exe = d / "bench"
+        flags = ["-std=c99", "-O2", *([f"-march={args.march}"] if args.march else [])]
+        cmd = [args.cc, *flags, "-o", str(exe), str(d / "driver.c"), str(d / SOURCE), "-lm"]
+        subprocess.run(cmd, check=True)
+        out = subprocess.run(
+            [str(exe), str(args.steps), str(args.repeat)],
+            check=True,
+            capture_output=True,
+            text=True,
+        )
+    return float(out.stdout.split()[0])
+
+
+def agreement(preset: str, ts: float, precision: str, t_final: float) -> float:
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from aiofl.config import load_config
+    from aiofl.engine.discrete import Sampling
+    from aiofl.export import export_c
+    from test_export import closed_loop, compile_library  # type: ignore[import-not-found]
+
+    cfg = load_config(preset)
+    samp = Sampling(ts)
+    with tempfile.TemporaryDirectory() as tmp:
+        lib = compile_library(Path(tmp), export_c(cfg.controller, samp, precision=precision))
+        u_c, u_e, _ = closed_loop(
+            lib, precision, cfg.plant, cfg.scenario.reference, cfg.controller, samp, t_final
+        )
+    return float(abs(u_c - u_e).max() / abs(u_e).max())
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--ts", type=float, default=1e-3)
+    ap.add_argument("--steps", type=int, default=2_000_000)
+    ap.add_argument("--repeat", type=int, default=7)
+    ap.add_argument("--cc", default=shutil.which("cc") or "cc")
+    ap.add_argument("--march", default="", help="e.g. native (default: the compiler's)")
+    ap.add_argument("--agreement", action="store_true")
+    ap.add_argument("--agreement-time", type=float, default=2.0)
+    args = ap.parse_args()
+    print(f"machine: {platform.machine()} {platform.processor()}, load {os.getloadavg()}")
+    cc_version = subprocess.run([args.cc, "--version"], capture_output=True, text=True)
+    print(f"compiler: {cc_version.stdout.splitlines()[0]}, -std=c99 -O2 {args.march}")
+    rows = []
+    for preset in DESIGNS:
+        row = [preset]
+        for precision in ("double", "float"):
+            row.append(f"{ns_per_step(preset, args.ts, precision, args):.1f}")
+        rows.append(row)
+    _table(
+        f"ns per aiofl_step (rho = 4, Ts = {args.ts:g} s, best of {args.repeat} x {args.steps})",
+        ["design", "double", "float"],
+        rows,
+    )
+    if args.agreement:
+        rows = []
+        for preset in DESIGNS:
+            rows.append(
+                [
+                    preset,
+                    *(
+                        f"{agreement(preset, args.ts, p, args.agreement_time):.2e}"
+                        for p in ("double", "float")
+                    ),
+                ]
+            )
+        _table(
+            "max |u_C - u_engine| / max |u_engine| in closed loop on the SLFJM",
+            ["design", "double", "float"],
+            rows,
+        )
+
+
+if __name__ == "__main__":
+    main()

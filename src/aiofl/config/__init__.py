@@ -1,0 +1,29 @@
+"""Run configs: TOML files and shipped presets, validated into engine objects.
+
+:func:`load_config` reads a file or a preset and returns a :class:`RunConfig` (plant,
+scenario, controller, simulation settings, OPI weights); a bad file raises
+:class:`ConfigError` whose message names the field and the allowed range.  The schema of
+every table is :mod:`aiofl.config.schema`; reading and checking is
+:mod:`aiofl.config.run_config`.
+"""
+
+from aiofl.config.run_config import (
+    RunConfig,
+    list_presets,
+    load_config,
+    parse_config,
+    preset_text,
+    resolve_plant,
+)
+from aiofl.config.schema import REQUIRED_KEYS, ConfigError
+
+__all__ = [
+    "REQUIRED_KEYS",
+    "ConfigError",
+    "RunConfig",
+    "list_presets",
+    "load_config",
+    "parse_config",
+    "preset_text",
+    "resolve_plant",
+]

@@ -1,0 +1,262 @@
+r"""Sampled-data controllers as data: the settings, and the per-member coefficient row.
+
+:class:`Sampling` says how a controller runs on a processor: sample time ``ts`` (an integer
+multiple of the engine's step), an optional one-sample computation delay, the quanta of
+the converters and the discretisation of its dynamic parts.  :func:`sampling_rows` turns a
+batch of controllers and their settings into one float row per member holding every
+coefficient of the discrete update (:mod:`aiofl.components.discrete`): the ESO's Φ, Γ, K,
+L, the prefilter's Φ, Γ, the TD's step and filter factor.  The engine's sampled loop
+(:mod:`aiofl.engine.sampled`) and the C export (:mod:`aiofl.export`) both run the update
+from exactly these numbers; a member whose row has ``D_STEPS = 0`` is continuous.
+
+What the engine simulates at :math:`t_k = kT_s` (:mod:`aiofl.engine.sampled`):
+
+1. the ADC: :math:`y_k = Q_y(h(x(t_k)) + n(t_k))`, :math:`Q_q(v) = q\lfloor v/q + 1/2\rfloor`
+   (``y_quantum``; none if 0), the scenario's noise as in the continuous loop;
+2. the controller, once: ESO correction, SEF and law from the estimate and the
+   differentiator's profile at :math:`t_k`, saturation, ESO prediction, differentiator
+   update; it returns :math:`u_k`;
+3. the DAC: the plant gets :math:`Q_u(u_k)` (``u_quantum``) held over
+   :math:`[t_k, t_{k+1})`, or with ``delay = 1`` the previous sample's
+   :math:`Q_u(u_{k-1})` (:math:`u_{-1} = 0`).  The ESO's prediction uses the command that
+   is applied over the interval (:math:`u_k`, or :math:`u_{k-1}` with the delay), unquantised:
+   the controller knows what it commanded, not what the converter made of it.
+
+The ESO starts at :math:`\hat\xi = (y_0, 0, \dots, 0)` with :math:`y_0` the first
+measurement, the differentiator at rest at 0.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from aiofl import layout as L
+from aiofl.components import discrete as D
+from aiofl.components.observers import eso_gain
+from aiofl.controller import Controller, ControllerBatch
+
+__all__ = [
+    "ESO_METHODS",
+    "N_DISC",
+    "TD_METHODS",
+    "Sampling",
+    "sample_steps",
+    "sampling_rows",
+]
+
+ESO_METHODS = ("zoh", "euler")
+"""ESO discretisations: exact ZOH current observer (linear ESO only), forward Euler."""
+TD_METHODS = ("fhan", "euler")
+"""Discretisations of Han's TD (18): Han's discrete fhan TD, forward Euler."""
+
+# ----------------------------------------------------------------------------- the row
+D_STEPS = 0  #: engine steps per sample N = Ts/dt (0: a continuous member)
+D_TS = 1  #: sample time Ts [s]
+D_DELAY = 2  #: computation delay in samples (0 or 1)
+D_YQ = 3  #: measurement quantum (0: none)
+D_UQ = 4  #: command quantum (0: none)
+D_ESO = 5  #: 0 = ZOH current observer, 1 = forward Euler
+D_TDM = 6  #: Han TD: 0 = fhan, 1 = forward Euler on eq. (18)
+D_H0 = 7  #: fhan's filter factor h0
+STRIDE = L.RHO_MAX + 1  #: row stride of the ESO's Φ
+D_PHI = 8  #: ESO Φ - I (delta form), (ρ+1)×(ρ+1) with row stride STRIDE
+D_GAM = D_PHI + STRIDE * STRIDE  #: ESO Γ
+D_K = D_GAM + STRIDE  #: ESO K
+D_L = D_K + STRIDE  #: ESO L
+PF_STRIDE = L.RHO_MAX  #: row stride of the prefilter's Φ
+D_PF_PHI = D_L + STRIDE  #: linear prefilter Φ - I, ρ×ρ with row stride PF_STRIDE
+D_PF_GAM = D_PF_PHI + PF_STRIDE * PF_STRIDE  #: linear prefilter Γ
+N_DISC = D_PF_GAM + PF_STRIDE
+ESO_ZOH, ESO_EULER = 0, 1
+TDM_FHAN, TDM_EULER = 0, 1
+
+
+@dataclass(frozen=True)
+class Sampling:
+    """How a controller runs on a processor (the ``[controller.discrete]`` table).
+
+    Parameters
+    ----------
+    ts
+        Sample time [s]; must be an integer multiple of the engine's step ``dt``.
+    delay
+        Computation delay in samples, 0 or 1 (u computed at t_k is applied at t_{k+1}).
+    y_quantum, u_quantum
+        Quanta of the measurement (ADC) and the command (DAC); 0 = not quantised.
+    eso
+        ``"zoh"`` (exact ZOH current observer, linear ESO only) or ``"euler"``; None picks
+        ZOH for the linear ESO and Euler for the INLESO.
+    td
+        Han's TD (``td = "han"``): ``"fhan"`` (Han's discrete TD) or ``"euler"`` (forward
+        Euler on eq. 18).  The ITD is always discretised by Euler, the linear prefilter by
+        ZOH.
+    h0
+        fhan's filter factor h0 [s] (default ``ts``).
+    """
+
+    ts: float
+    delay: int = 0
+    y_quantum: float = 0.0
+    u_quantum: float = 0.0
+    eso: str | None = None
+    td: str = "fhan"
+    h0: float | None = None
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.ts) and self.ts > 0):
+            raise ValueError(f"controller.discrete.ts = {self.ts}; allowed: > 0 [s]")
+        if self.delay not in (0, 1):
+            raise ValueError(f"controller.discrete.delay = {self.delay}; allowed: 0, 1")
+        for name in ("y_quantum", "u_quantum"):
+            val = getattr(self, name)
+            if not (math.isfinite(val) and val >= 0):
+                raise ValueError(f"controller.discrete.{name} = {val}; allowed: >= 0")
+        if self.eso is not None and self.eso not in ESO_METHODS:
+            raise ValueError(
+                f"controller.discrete.eso = {self.eso!r}; allowed: {', '.join(ESO_METHODS)}"
+            )
+        if self.td not in TD_METHODS:
+            raise ValueError(
+                f"controller.discrete.td = {self.td!r}; allowed: {', '.join(TD_METHODS)}"
+            )
+        if self.h0 is not None and not (math.isfinite(self.h0) and self.h0 > 0):
+            raise ValueError(f"controller.discrete.h0 = {self.h0}; allowed: > 0 [s]")
+
+    def eso_method(self, controller: Controller) -> str:
+        """The ESO discretisation used for ``controller`` (resolving ``eso = None``)."""
+        if self.eso is not None:
+            return self.eso
+        return "zoh" if controller.eso == "linear" else "euler"
+
+    def check(self, controller: Controller) -> None:
+        """Raise ValueError if ``controller`` cannot run with these settings."""
+        if controller.law == "iofl" and controller.td != "exact":
+            raise ValueError(
+                f"a sampled IOFL law needs td_kind = 'exact' (got {controller.td!r}): it "
+                "reads the reference derivatives at each sample"
+            )
+        if controller.eso == "improved" and self.eso_method(controller) == "zoh":
+            raise ValueError(
+                "controller.discrete.eso = 'zoh' needs the linear ESO; the improved ESO "
+                "(INLESO) is discretised by forward Euler (allowed: euler)"
+            )
+
+    def describe(self, controller: Controller) -> list[str]:
+        """The discretisation of each component, one line each (for reports and code)."""
+        lines = [f"sample time Ts = {self.ts:g} s, computation delay {self.delay} sample(s)"]
+        eso = self.eso_method(controller)
+        lines.append(
+            "ESO: exact ZOH discretisation, current-observer form (Miklosovic, Radke & Gao "
+            "2006), poles z = exp(s_i Ts)"
+            if eso == "zoh"
+            else "ESO: forward Euler"
+        )
+        td = {
+            "exact": "reference derivatives: supplied by the caller (r, r', ..., r^(rho))",
+            "han": (
+                "TD: Han's discrete TD with fhan (Han 2009), h0 = "
+                + ("Ts" if self.h0 is None else f"{self.h0:g} s")
+                if self.td == "fhan"
+                else "TD: forward Euler on eq. (18)"
+            ),
+            "improved": "TD: forward Euler on the ITD, eq. (21)",
+            "linear": "TD: linear prefilter, exact ZOH discretisation",
+        }[controller.td]
+        lines.append(td)
+        lines.append("SEF, law and saturation: the continuous formulas at each sample")
+        if self.y_quantum or self.u_quantum:
+            lines.append(
+                f"quantisation: y_quantum = {self.y_quantum:g}, u_quantum = {self.u_quantum:g}"
+            )
+        return lines
+
+
+def sample_steps(ts: float, dt: float) -> int:
+    """Engine steps per sample, N = Ts/dt; ValueError unless Ts is an integer multiple of dt."""
+    n = round(ts / dt)
+    if n < 1 or abs(n * dt - ts) > 1e-9 * ts:
+        raise ValueError(
+            f"controller.discrete.ts = {ts:g} s is not an integer multiple of the step "
+            f"dt = {dt:g} s; allowed: k·dt for k = 1, 2, ... (e.g. {max(n, 1) * dt:g} s)"
+        )
+    return n
+
+
+def _row(
+    ints: NDArray[np.int64], floats: NDArray[np.float64], s: Sampling, dt: float
+) -> NDArray[np.float64]:
+    rho = int(ints[L.I_RHO])
+    n = rho + 1
+    row = np.zeros(N_DISC)
+    row[D_STEPS] = sample_steps(s.ts, dt)
+    row[D_TS] = s.ts
+    row[D_DELAY] = s.delay
+    row[D_YQ] = s.y_quantum
+    row[D_UQ] = s.u_quantum
+    row[D_TDM] = TDM_FHAN if s.td == "fhan" else TDM_EULER
+    row[D_H0] = s.h0 if s.h0 is not None else s.ts
+    w0 = floats[L.F_OMEGA0]
+    b0 = floats[L.F_B0]
+    alphas = floats[L.F_ALPHA : L.F_ALPHA + n]
+    eso_kind = int(ints[L.I_ESO])
+    if int(ints[L.I_LAW]) == L.LAW_IOFL and int(ints[L.I_TD]) != L.TD_EXACT:
+        raise ValueError(
+            "a sampled IOFL law needs td_kind = 'exact': it reads the reference derivatives "
+            "at each sample"
+        )
+    method = s.eso or ("zoh" if eso_kind == L.ESO_LINEAR else "euler")
+    if method == "zoh":
+        if eso_kind != L.ESO_LINEAR:
+            raise ValueError(
+                "controller.discrete.eso = 'zoh' needs the linear ESO; the improved ESO "
+                "(INLESO) is discretised by forward Euler (allowed: euler)"
+            )
+        eso = D.eso_current_observer(rho, alphas, w0, b0, s.ts)
+        row[D_ESO] = ESO_ZOH
+    else:
+        betas = [eso_gain(float(alphas[i]), float(w0), i + 1) for i in range(n)]
+        eso = D.eso_forward_euler(rho, betas, b0, s.ts)
+        row[D_ESO] = ESO_EULER
+    for i in range(n):
+        row[D_PHI + i * STRIDE : D_PHI + i * STRIDE + n] = eso.dphi[i]
+    row[D_GAM : D_GAM + n] = eso.gamma
+    row[D_K : D_K + n] = eso.k
+    row[D_L : D_L + n] = eso.l
+    if int(ints[L.I_TD]) == L.TD_LINEAR:
+        pf_phi, pf_gam = D.linear_prefilter_zoh(rho, floats[L.F_TD_OMEGA], s.ts, delta=True)
+        for i in range(rho):
+            row[D_PF_PHI + i * PF_STRIDE : D_PF_PHI + i * PF_STRIDE + rho] = pf_phi[i]
+        row[D_PF_GAM : D_PF_GAM + rho] = pf_gam
+    if not np.all(np.isfinite(row)):
+        raise ValueError(
+            f"the discretisation at Ts = {s.ts:g} s has non-finite coefficients "
+            "(an observer or prefilter bandwidth too large for this sample time)"
+        )
+    return row
+
+
+def sampling_rows(
+    batch: ControllerBatch, samplings: Sequence[Sampling | None], dt: float
+) -> NDArray[np.float64]:
+    """The engine's per-member discrete rows (B, N_DISC); zeros for continuous members.
+
+    Coefficients are computed once per distinct (controller row, settings) pair, from the
+    packed rows, so a GA population's tuned ω0, b0, α are always the ones discretised.
+    """
+    if len(samplings) != len(batch):
+        raise ValueError(f"{len(samplings)} sampling settings for a batch of {len(batch)}")
+    out = np.zeros((len(batch), N_DISC))
+    memo: dict[tuple[bytes, bytes, Sampling], NDArray[np.float64]] = {}
+    for i, s in enumerate(samplings):
+        if s is None:
+            continue
+        key = (batch.ints[i].tobytes(), batch.floats[i].tobytes(), s)
+        if key not in memo:
+            memo[key] = _row(batch.ints[i], batch.floats[i], s, dt)
+        out[i] = memo[key]
+    return out
