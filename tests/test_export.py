@@ -6,6 +6,7 @@ float code compiles under -Wconversion -Wdouble-promotion; IOFL is refused."""
 from __future__ import annotations
 
 import ctypes
+import dataclasses
 import math
 import re
 import shutil
@@ -297,3 +298,58 @@ def test_an_inleso_that_chatters_near_zero_error_parts_implementations(tmp_path)
         u_c, u_e, _ = closed_loop(lib, "double", get_plant(name), ref, ctrl, Sampling(1e-3), 2.0)
         rel[ga] = np.max(np.abs(u_c - u_e)) / np.max(np.abs(u_e))
     assert rel[1.0] < 1e-11 < 1e-9 < rel[0.9]
+
+
+@needs_cc
+@pytest.mark.parametrize(
+    ("structure", "precision"),
+    [("LADRC", "double"), ("LADRC", "float"), ("INLESO", "double")],
+)
+def test_eso_init_zero_and_output_c_equals_the_engine(tmp_path, structure, precision):
+    """``eso.init`` reaches aiofl_init: "zero" (the default) starts the ESO at 0 and ignores
+    y0, "output" at (y0, 0, ...); for each, the C commands equal the engine's discrete
+    controller's.  On the tank, started at y0 = 1, the two starts give different commands
+    (zero: the first correction sees the whole y0)."""
+    name, _, ref = PLANTS[1]
+    base = design(structure, 1)
+    assert base.eso_init == "zero"
+    commands = {}
+    for init in ("zero", "output"):
+        ctrl = dataclasses.replace(base, eso_init=init)
+        files = export_c(ctrl, Sampling(1e-3), precision=precision)
+        init_code = files[SOURCE].split("void aiofl_init", 1)[1].split("\n}\n", 1)[0]
+        if init == "zero":
+            assert "(void)y0;" in init_code and "= y0" not in init_code
+            assert "(eso.init = zero:\n * the ESO starts at 0, y0 is not used)" in files[HEADER]
+        else:
+            assert "s->y_prev = y0;" in init_code and "s->xhat[0] = y0;" in init_code
+            assert "(eso.init = output:\n * the ESO starts at xhat = (y0, 0" in files[HEADER]
+        (tmp_path / init).mkdir()  # a new path: dlopen returns a loaded library again
+        lib = compile_library(tmp_path / init, files, STRICT_FLOAT if precision == "float" else [])
+        u_c, u_e, y = closed_loop(lib, precision, get_plant(name), ref, ctrl, Sampling(1e-3), 1.0)
+        assert y[0] == ref.offset and np.all(np.isfinite(u_e))
+        rel = np.max(np.abs(u_c - u_e)) / np.max(np.abs(u_e))
+        assert rel < (1e-9 if precision == "double" else 1e-4), (init, rel)
+        commands[init] = u_e
+    assert np.max(np.abs(commands["zero"] - commands["output"])) > 0.1
+
+
+@needs_cc
+@pytest.mark.parametrize("structure", ["LESO", "INLESO", "LADRC"])
+def test_asymmetric_actuator_range_c_equals_the_engine(tmp_path, structure):
+    """An asymmetric range law.u_min = -0.5 law.u_max: the C code clamps to [U_MIN, U_MAX]
+    like the engine; on the tank (ρ = 1) both limits are reached, and the commands agree."""
+    name, _, ref = PLANTS[1]
+    u_max = 10.0
+    ctrl = design(structure, 1).with_values(**{"law.u_max": u_max, "law.u_min": -0.5 * u_max})
+    assert ctrl.u_range() == (-5.0, 10.0)
+    files = export_c(ctrl, Sampling(1e-3))
+    src = files[SOURCE]
+    assert "static const aiofl_real U_MIN = -5.0;" in src
+    assert "static const aiofl_real U_MAX = 10.0;" in src
+    assert "if (u < U_MIN) u = U_MIN;" in src and "if (u > U_MAX) u = U_MAX;" in src
+    lib = compile_library(tmp_path, files)
+    u_c, u_e, _ = closed_loop(lib, "double", get_plant(name), ref, ctrl, Sampling(1e-3), 2.0)
+    assert np.min(u_e) == -5.0 and np.max(u_e) == 10.0  # both clamps active
+    assert np.min(u_c) == -5.0 and np.max(u_c) == 10.0
+    assert np.max(np.abs(u_c - u_e)) < 1e-9 * u_max

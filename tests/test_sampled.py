@@ -4,6 +4,7 @@ Python, convergence to the continuous loop, divergence, configs and the CLI."""
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from pathlib import Path
 
@@ -14,7 +15,7 @@ from typer.testing import CliRunner
 from aiofl.cli.app import app
 from aiofl.config import ConfigError, load_config, parse_config
 from aiofl.controller import Controller
-from aiofl.engine.discrete import Sampling, sample_steps
+from aiofl.engine.discrete import D_L, Sampling, sample_steps
 from aiofl.engine.sampled import DiscreteController
 from aiofl.engine.simulation import simulate, simulate_batch
 from aiofl.plants import get_plant
@@ -244,3 +245,54 @@ def test_tune_ts_tunes_the_sampled_controller_and_writes_it(tmp_path: Path):
     bad = CliRunner().invoke(app, [*args, "--ts", "1.5e-4", "--out", str(tmp_path / "b")])
     assert bad.exit_code == 2 and "controller.discrete.ts" in bad.output
     assert not (tmp_path / "b").exists()
+
+
+# ------------------------------------------------------------------ the observer's start
+def test_discrete_eso_starts_as_eso_init_says():
+    """Before the first sample the ESO's prediction is p_0 = 0 ("zero", the default) or
+    (y0, 0, ..., 0) ("output"); the first correction ξ̂_0 = p_0 + L φ(y0 - p_{0,1}) is then
+    L y0 (the ZOH current observer's gain; 0 for Euler, whose L = 0) or exactly (y0, 0, ...)."""
+    y0 = 0.3
+    assert ladrc().eso_init == "zero"
+    for samp in (Sampling(1e-3), Sampling(1e-3, eso="euler")):
+        for init in ("zero", "output"):
+            dc = DiscreteController(dataclasses.replace(ladrc(), eso_init=init), samp)
+            dc.init(y0)
+            dc.step(0.0, y0)
+            n = 5
+            gain = dc.row[D_L : D_L + n]
+            assert np.all(gain == 0.0) if samp.eso == "euler" else np.all(gain > 0.0)
+            expect = np.r_[y0, np.zeros(n - 1)] if init == "output" else gain * y0
+            np.testing.assert_allclose(dc.estimate, expect, rtol=1e-14, atol=1e-15)
+
+
+def test_sampled_loop_starts_its_observer_like_the_continuous_loop():
+    """The tank starts at y0 = 1: the ESO's start matters.  Sampled at Ts = 1 ms, each
+    setting of eso.init tracks the continuous loop with the same setting (output 100x closer
+    to it than to the other one's), and the engine's sampled loop runs the discrete
+    controller's start (replaying its measurements gives its commands)."""
+    cfg = load_config("tank-ladrc")
+    scen = dataclasses.replace(cfg.scenario, t_final=0.2, x0=(1.0,))
+    ctrls = [dataclasses.replace(cfg.controller, eso_init=i) for i in ("zero", "output")]
+    samp = Sampling(1e-3)
+    res = simulate_batch(
+        cfg.plant, ctrls * 2, scen, store=True, decimation=1, sampling=[None, None, samp, samp]
+    )
+    assert not res.diverged.any()
+    y = res.trajectories[:, :, 2]
+    assert np.all(y[:, 0] == 1.0)
+    for s, same, other in ((2, 0, 1), (3, 1, 0)):
+        d_same = np.max(np.abs(y[s] - y[same]))
+        d_other = np.max(np.abs(y[s] - y[other]))
+        assert d_same < 0.01 * d_other, (s, d_same, d_other)
+    n_per = sample_steps(samp.ts, 1e-4)
+    for i, ctrl in enumerate(ctrls):
+        run = res.member(2 + i)
+        dc = DiscreteController(ctrl, samp)
+        dc.init(run["y_meas"][0])
+        ref = scen.reference  # exact TD: r and ṙ of the sine at the samples
+        t = run.t[:-1:n_per]
+        rd = ref.amplitude * ref.omega * np.cos(ref.omega * t + ref.phase)
+        r, ym = run["r"][:-1:n_per], run["y_meas"][:-1:n_per]
+        u = np.array([dc.step([a, b], c) for a, b, c in zip(r, rd, ym, strict=True)])
+        np.testing.assert_allclose(run["u"][:-1:n_per], u, rtol=0, atol=1e-12 * 10.0)

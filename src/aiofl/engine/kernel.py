@@ -33,7 +33,9 @@ component functions of :mod:`aiofl.components.differentiators` (TDs, prefilter),
 :mod:`aiofl.components.observers` (INLESO injection, ESO) and :mod:`aiofl.components.law` (AIOFL
 and IOFL laws, saturation), bound into the kernel as compiled functions; per-member constants
 (observer gains, fal slopes, prefilter coefficients, ITD constants) come from the same modules'
-scalar functions.
+scalar functions.  The dispatch over the SEF kinds and the laws is written once, in
+:func:`_aiofl_command` and :func:`_iofl_command`, which the sampled controller
+(:mod:`aiofl.engine.sampled`) calls too.
 
 Speed notes.  The time loop touches only thread-local memory reached through *unmanaged*
 array views (no reference counting, see :func:`aiofl.engine.build._unmanaged_intrinsic`),
@@ -49,8 +51,12 @@ This module's source is part of the on-disk cache fingerprint of every compiled 
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 
 from aiofl import layout as L
+from aiofl.components import feedback as _fb
+from aiofl.components import law as _law
+from aiofl.components.fastmath import FASTMATH
 
 # ----------------------------------------------------------------------------- layout
 # Per-member packed parameters (thread-local inside the kernel): the controller's float row
@@ -86,6 +92,68 @@ _UNMANAGED = _KEEP_ALIVE = None  # see _unmanaged_intrinsic
 _HAN_TD = _ITD = _ITD_CONSTANTS = _PREFILTER = _PREFILTER_COEF = None
 _FAL = _FAL_SLOPE = _INLSEF_TERM = _INLSEF_LIMIT = _LINEAR_SEF = _LINEAR_SEF_GAIN = None
 _ESO_GAIN = _ESO_UPDATE = _INLESO = _AIOFL_LAW = _IOFL_LAW = _SATURATE = None
+
+
+# ------------------------------------------------------------ the law, written once
+# The state error feedback and the law are the same formulas in the continuous loop
+# (_tpl_deriv) and in the sampled controller (aiofl.engine.sampled): both call these two.
+# They depend on no plant function, so they are compiled once, here, and inlined (numba IR
+# inlining) where called, so each caller compiles to the code it had with them in place.
+@njit(inline="always", fastmath=FASTMATH, error_model="numpy")
+def _aiofl_command(iq, q, rr, ri, ref, o_ref, xh, o_x, rff):  # pragma: no cover - compiled
+    r"""The AIOFL command before saturation: SEF (17), (20) or linear, then law (14).
+
+    With :math:`e_i = r_i - \hat\xi_i`, i = 1..m, the nonlinear SEF (17)
+    :math:`v = \sum_i k_i\,\mathrm{fal}(e_i, \alpha_i, \delta_i)`, the INLSEF (20)
+    :math:`v = v_{lim}\tanh\big(\sum_i (k_i + k_{b,i}/(1 + e^{\mu_i e_i^2}))
+    |e_i|^{\alpha_i}\operatorname{sign} e_i \,/\, v_{lim}\big)` or the linear feedback of
+    the chain :math:`v = (\sum_i k_i e_i + r^{(\rho)})/b_0`, and
+    :math:`u = v - \hat\xi_{\rho+1}/b_0` (14).
+
+    :math:`r_i` is ``rr[ri, i-1]`` for the exact TD (the reference's derivatives), else
+    ``ref[o_ref + i-1]`` (the differentiator's profile); :math:`\hat\xi_i` is
+    ``xh[o_x + i-1]``; ``rff`` is :math:`r^{(\rho)}` (linear SEF only); per-member constants
+    come from ``q``/``iq`` (:func:`_tpl_setup`).
+    """
+    rho = iq[IQ_RHO]
+    m = iq[IQ_M]
+    exact = iq[IQ_TD] == L.TD_EXACT
+    b0 = q[L.F_B0]
+    sef_kind = iq[IQ_SEF]
+    if sef_kind == L.SEF_NONLINEAR:  # eq. (17)
+        v = 0.0
+        for i in range(m):
+            ei = (rr[ri, i] if exact else ref[o_ref + i]) - xh[o_x + i]
+            fe = _fb.fal_scaled(ei, q[L.F_SEF_ALPHA + i], q[L.F_SEF_DELTA + i], q[Q_SLOPE + i])
+            v += q[L.F_SEF_K + i] * fe
+    elif sef_kind == L.SEF_IMPROVED:  # eq. (20)
+        acc = 0.0
+        for i in range(m):
+            ei = (rr[ri, i] if exact else ref[o_ref + i]) - xh[o_x + i]
+            acc += _fb.inlsef_term(
+                ei, q[L.F_SEF_K + i], q[L.F_SEF_KB + i], q[L.F_SEF_MU + i], q[L.F_SEF_ALPHA + i]
+            )
+        v = _fb.inlsef_limit(acc, q[L.F_SEF_DOUT])
+    else:  # linear full-state feedback of the chain (14)
+        acc = 0.0
+        for i in range(m):
+            acc += q[Q_LINK + i] * ((rr[ri, i] if exact else ref[o_ref + i]) - xh[o_x + i])
+        v = _fb.linear_sef(acc, rff, b0)
+    return _law.aiofl_law(v, xh[o_x + rho], b0)  # eq. (14)
+
+
+@njit(inline="always", fastmath=FASTMATH, error_model="numpy")
+def _iofl_command(iq, q, rr, ri, ref, o_ref, nfx, rff):  # pragma: no cover - compiled
+    r"""The classical IOFL command on the nominal model, before saturation:
+    :math:`u = (r^{(\rho)} + \sum_i k_i (r_i - \xi_i) - \alpha(x))/\beta(x)` with
+    ``nfx`` = :math:`(\xi_1..\xi_\rho, \alpha, \beta)` of the plant's normal form and
+    :math:`r_i`, ``rff`` as in :func:`_aiofl_command`."""
+    rho = iq[IQ_RHO]
+    exact = iq[IQ_TD] == L.TD_EXACT
+    acc = rff
+    for i in range(iq[IQ_M]):
+        acc += q[Q_LINK + i] * ((rr[ri, i] if exact else ref[o_ref + i]) - nfx[i])
+    return _law.iofl_law(acc, nfx[rho], nfx[rho + 1])
 
 
 def _tpl_setup(ip, fp, q, iq):  # pragma: no cover - compiled
@@ -181,11 +249,9 @@ def _tpl_deriv(t, z, dz, iq, q, p, p_nom, sc, rr, ri, noise_val, d, xb, sig):  #
     is scratch for the plant state.
     """
     rho = iq[IQ_RHO]
-    m = iq[IQ_M]
     o_td = iq[IQ_OTD]
     o_eso = iq[IQ_OESO]
     td_kind = iq[IQ_TD]
-    exact = td_kind == L.TD_EXACT
     for i in range(_N):
         xb[i] = z[i]
 
@@ -210,33 +276,10 @@ def _tpl_deriv(t, z, dz, iq, q, p, p_nom, sc, rr, ri, noise_val, d, xb, sig):  #
 
     # state error feedback and law; e_i = r_i - ξ̂_i
     if iq[IQ_LAW] == L.LAW_AIOFL:
-        sef_kind = iq[IQ_SEF]
-        if sef_kind == L.SEF_NONLINEAR:  # eq. (17)
-            v = 0.0
-            for i in range(m):
-                ei = (rr[ri, i] if exact else z[o_td + i]) - z[o_eso + i]
-                fe = _FAL(ei, q[L.F_SEF_ALPHA + i], q[L.F_SEF_DELTA + i], q[Q_SLOPE + i])
-                v += q[L.F_SEF_K + i] * fe
-        elif sef_kind == L.SEF_IMPROVED:  # eq. (20)
-            acc = 0.0
-            for i in range(m):
-                ei = (rr[ri, i] if exact else z[o_td + i]) - z[o_eso + i]
-                acc += _INLSEF_TERM(
-                    ei, q[L.F_SEF_K + i], q[L.F_SEF_KB + i], q[L.F_SEF_MU + i], q[L.F_SEF_ALPHA + i]
-                )
-            v = _INLSEF_LIMIT(acc, q[L.F_SEF_DOUT])
-        else:  # linear full-state feedback of the chain (14)
-            acc = 0.0
-            for i in range(m):
-                acc += q[Q_LINK + i] * ((rr[ri, i] if exact else z[o_td + i]) - z[o_eso + i])
-            v = _LINEAR_SEF(acc, rff, b0)
-        u = _AIOFL_LAW(v, z[o_eso + rho], b0)  # eq. (14)
+        u = _aiofl_command(iq, q, rr, ri, z, o_td, z, o_eso, rff)  # eqs. (14), (17)/(20)
     else:  # classical IOFL on the nominal model
         nfx = _PNF(xb, p_nom)
-        acc = rff
-        for i in range(m):
-            acc += q[Q_LINK + i] * ((rr[ri, i] if exact else z[o_td + i]) - nfx[i])
-        u = _IOFL_LAW(acc, nfx[rho], nfx[rho + 1])
+        u = _iofl_command(iq, q, rr, ri, z, o_td, nfx, rff)
     u = _SATURATE(u, q[L.F_UMIN], q[L.F_UMAX])  # actuator range [u_min, u_max]
 
     # observer, eqs. (5)/(16) or (19)

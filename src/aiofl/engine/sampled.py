@@ -10,10 +10,13 @@ of :mod:`aiofl.engine.kernel`, these functions are plain Python compiled per pla
 :func:`sampled_member_for` with the same mechanism (:func:`aiofl.engine.build.plant_namespace`);
 members of one batch may mix continuous members and any sample times, and run in parallel.
 
-The controller's update calls the same component functions as the continuous loop (fal,
-INLSEF, linear SEF, the law, saturation, the INLESO injection, Han's TD (18), the ITD) and
-the discrete ones of :mod:`aiofl.components.discrete` (ESO correction and prediction,
-fhan, the prefilter's ZOH update), with the coefficients of the member's discrete row.
+The controller's update calls the same component functions as the continuous loop (the
+INLESO injection, Han's TD (18), the ITD, saturation), the same compiled SEF-and-law
+dispatch (:func:`aiofl.engine.kernel._aiofl_command`, :func:`~aiofl.engine.kernel._iofl_command`)
+and the discrete ones of :mod:`aiofl.components.discrete` (ESO correction and prediction,
+fhan, the prefilter's ZOH update), with the coefficients of the member's discrete row.  The
+ESO starts as the continuous loop's does (``eso.init``: "zero", the default, or "output",
+:math:`\hat\xi_1 = ` the first measurement; see :func:`_tpl_ctrl_init`).
 :class:`DiscreteController` compiles the same :func:`_tpl_ctrl_step` without a plant and
 steps it from Python: the engine's discrete controller, sample by sample (the C export is
 checked against it).
@@ -66,22 +69,21 @@ from aiofl.engine.discrete import (
     sampling_rows,
 )
 from aiofl.engine.kernel import (
+    IQ_EINIT,
     IQ_ESO,
     IQ_LAW,
-    IQ_M,
     IQ_NTD,
     IQ_RHO,
-    IQ_SEF,
     IQ_TD,
     N_IQ,
     N_Q,
     N_SIG,
     Q_ITD_BC,
     Q_ITD_GAIN,
-    Q_LINK,
     Q_PF,
-    Q_SLOPE,
     SWITCH_RTOL,
+    _aiofl_command,
+    _iofl_command,
 )
 from aiofl.plants.base import Plant
 
@@ -102,18 +104,28 @@ _N = _N_P = 1
 _PF = _PG = _PH = _PBD = _PNF = None
 _SETUP = _REFERENCE = _UNMANAGED = _KEEP_ALIVE = None
 _CTRL_INIT = _CTRL_STEP = _PLANT_DERIV = None
-_FAL = _INLSEF_TERM = _INLSEF_LIMIT = _LINEAR_SEF = _AIOFL_LAW = _IOFL_LAW = _SATURATE = None
+_SATURATE = None
 _INLESO = _HAN_TD = _ITD = _PREFILTER = None
 _FHAN_TD = _OBS_INNOVATION = _OBS_CORRECT = _OBS_PREDICT = _LIN_UPDATE = None
 
 
 # ---------------------------------------------------------------------------- templates
 def _tpl_ctrl_init(iq, cs, y0):  # pragma: no cover - compiled
-    """Controller state at the first sample: ESO at (y0, 0, ..., 0), TD at rest at 0."""
+    r"""Controller state before the first sample, as the continuous loop starts its ESO
+    (``eso.init``, :data:`aiofl.layout.ESO_INIT_KINDS`): the TD at rest at 0, the ESO's
+    prediction :math:`p_0 = 0` (``"zero"``, the default) or :math:`p_0 = (y_0, 0, ..., 0)`
+    with ``y0`` the first measurement (``"output"``: the first innovation is 0).
+
+    The first sample's correction then gives :math:`\hat\xi_0 = L\,\phi(y_0)` or
+    :math:`(y_0, 0, ..., 0)`.  :math:`p_1` is kept as its change since the previous
+    measurement (``cs[C_P]``) and that measurement (``cs[C_Y]``): ``0, 0`` for zero,
+    ``0, y0`` for output.
+    """
     for i in range(N_CS):
         cs[i] = 0.0
-    cs[C_Y] = y0  # p_1 = y0: its change since the measurement, cs[C_P], is 0
-    cs[C_X] = y0
+    if iq[IQ_EINIT] == L.ESO_INIT_OUTPUT:
+        cs[C_Y] = y0  # p_1 = y0: its change since the measurement, cs[C_P], is 0
+        cs[C_X] = y0
 
 
 def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri):  # pragma: no cover - compiled
@@ -128,11 +140,9 @@ def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri):  # pragma: no cover - compil
     """
     rho = iq[IQ_RHO]
     n1 = rho + 1
-    m = iq[IQ_M]
     td_kind = iq[IQ_TD]
     exact = td_kind == L.TD_EXACT
     ts = dsc[D_TS]
-    b0 = q[L.F_B0]
 
     e = _OBS_INNOVATION(cs, C_P, C_Y, y)  # y - p_1
     phi = e
@@ -141,12 +151,10 @@ def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri):  # pragma: no cover - compil
     dx1 = _OBS_CORRECT(cs, C_P, C_X, n1, dsc, D_L, y, e, phi)
 
     # the profile r_1.. at t_k (Han's TD keeps r_1 as its change since the last reference,
-    # so fhan's argument r_1 - r is formed from small numbers)
+    # so fhan's argument r_1 - r is formed from small numbers); the exact TD's are rr[ri]
     r = rr[ri, 0]
     rff = 0.0
     if exact:
-        for i in range(rho):
-            cs[C_PROF + i] = rr[ri, i]
         rff = rr[ri, rho]
     elif td_kind == L.TD_HAN:
         cs[C_PROF] = cs[C_RPREV] + cs[C_TD]
@@ -157,27 +165,9 @@ def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri):  # pragma: no cover - compil
         if td_kind == L.TD_LINEAR:
             rff = _PREFILTER(cs, scr, C_TD, rho, r, q, Q_PF)
 
-    sef_kind = iq[IQ_SEF]
-    if sef_kind == L.SEF_NONLINEAR:  # eq. (17)
-        v = 0.0
-        for i in range(m):
-            ei = cs[C_PROF + i] - cs[C_X + i]
-            fe = _FAL(ei, q[L.F_SEF_ALPHA + i], q[L.F_SEF_DELTA + i], q[Q_SLOPE + i])
-            v += q[L.F_SEF_K + i] * fe
-    elif sef_kind == L.SEF_IMPROVED:  # eq. (20)
-        s = 0.0
-        for i in range(m):
-            ei = cs[C_PROF + i] - cs[C_X + i]
-            s += _INLSEF_TERM(
-                ei, q[L.F_SEF_K + i], q[L.F_SEF_KB + i], q[L.F_SEF_MU + i], q[L.F_SEF_ALPHA + i]
-            )
-        v = _INLSEF_LIMIT(s, q[L.F_SEF_DOUT])
-    else:  # linear full-state feedback of the chain (14)
-        s = 0.0
-        for i in range(m):
-            s += q[Q_LINK + i] * (cs[C_PROF + i] - cs[C_X + i])
-        v = _LINEAR_SEF(s, rff, b0)
-    u = _SATURATE(_AIOFL_LAW(v, cs[C_X + rho], b0), q[L.F_UMIN], q[L.F_UMAX])  # eq. (14)
+    # SEF and law (14), the continuous loop's formulas (aiofl.engine.kernel._aiofl_command)
+    u = _aiofl_command(iq, q, rr, ri, cs, C_PROF, cs, C_X, rff)
+    u = _SATURATE(u, q[L.F_UMIN], q[L.F_UMAX])  # actuator range [u_min, u_max]
 
     um = cs[C_UPREV] if dsc[D_DELAY] > 0.0 else u
     _OBS_PREDICT(cs, C_P, C_X, C_Y, n1, dsc, D_PHI, STRIDE, D_GAM, D_K, um, phi, y, dx1)
@@ -301,7 +291,6 @@ def _tpl_member_sampled(  # pragma: no cover - compiled
     yq = dsc[D_YQ]
     uq = dsc[D_UQ]
     rho = iq[IQ_RHO]
-    m = iq[IQ_M]
     ntd = iq[IQ_NTD]
     exact = iq[IQ_TD] == L.TD_EXACT
     iofl = iq[IQ_LAW] == L.LAW_IOFL
@@ -356,10 +345,8 @@ def _tpl_member_sampled(  # pragma: no cover - compiled
             u_before = cs[C_UPREV]
             if iofl:  # classical IOFL from the true state and the nominal model
                 nfx = _PNF(xb, pn)
-                a = rrs[3, rho]
-                for i in range(m):
-                    a += q[Q_LINK + i] * (rrs[3, i] - nfx[i])
-                uc = _SATURATE(_IOFL_LAW(a, nfx[rho], nfx[rho + 1]), q[L.F_UMIN], q[L.F_UMAX])
+                uc = _iofl_command(iq, q, rrs, 3, cs, C_PROF, nfx, rrs[3, rho])
+                uc = _SATURATE(uc, q[L.F_UMIN], q[L.F_UMAX])
                 cs[C_UPREV] = uc
             else:
                 uc = _CTRL_STEP(iq, q, dsc, cs, scr, ym, rrs, 3)
@@ -582,7 +569,10 @@ class DiscreteController:
         self._rr = np.zeros((1, L.RHO_MAX + 2))
 
     def init(self, y0: float) -> None:
-        """Reset the states for the first measurement ``y0``."""
+        r"""Reset the states for the first measurement ``y0``: the differentiator at rest
+        at 0 and the ESO as ``controller.eso_init`` says (``"zero"``, the default:
+        prediction 0, ``y0`` unused; ``"output"``: :math:`\hat\xi_1 = y_0`, the other
+        states 0), as the continuous loop starts it."""
         self._fn.init(self._iq, self._cs, float(y0))
 
     def step(self, r: float | Sequence[float] | NDArray[np.float64], y: float) -> float:

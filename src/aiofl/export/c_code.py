@@ -17,6 +17,10 @@ slope, linear gains, ITD constants, prefilter coefficients).  The API::
 
 ``r`` points to ρ+1 values r, ṙ, ..., r^(ρ) at the sample instant (a controller with a
 differentiator reads ``r[0]`` only); the header defines ``AIOFL_RHO`` and ``AIOFL_TS``.
+``aiofl_init`` starts the ESO as the engine does (``eso.init``): at 0 (``"zero"``, the
+default; ``y0`` is then not used) or at :math:`\hat\xi = (y_0, 0, ..., 0)` with y0 the
+first measurement (``"output"``).  The command is clamped to ``[U_MIN, U_MAX]``
+(``law.u_min``, ``law.u_max``; each only when finite).
 In single precision every constant carries an ``f`` suffix and the float functions of
 ``<math.h>`` are called (``expf``, ``sqrtf``, ...), so the code compiles without a double
 operation under ``-Wconversion -Wdouble-promotion``.
@@ -197,7 +201,12 @@ def export_c(
         "Discretisation:",
         *(f"  {ln}" for ln in s.describe(c)),
         "",
-        "Use: aiofl_init(&s, y0) once with the first measurement; then at every sample",
+        f"Use: aiofl_init(&s, y0) once with the first measurement y0 (eso.init = {c.eso_init}:",
+        (
+            "the ESO starts at xhat = (y0, 0, ..., 0)); then at every sample"
+            if c.eso_init == "output"
+            else "the ESO starts at 0, y0 is not used); then at every sample"
+        ),
         "t_k = k*AIOFL_TS: u = aiofl_step(&s, r, y) with y the measurement at t_k and r[0..rho]",
         "= r, r', ..., r^(rho) at t_k"
         + (" (only r[0] is read: the controller has a differentiator)." if ntd else "."),
@@ -428,6 +437,10 @@ def _helpers(c: Controller, w: _Writer, s_td: str) -> list[str]:
 
 
 def _init(c: Controller, w: _Writer, ntd: int, delay: int) -> list[str]:
+    r"""``aiofl_init``: the differentiator at rest at 0 and the ESO as ``eso.init`` says,
+    like the engine's :func:`aiofl.engine.sampled._tpl_ctrl_init`: prediction
+    :math:`p_0 = 0` (``"zero"``, the default; ``y0`` unused) or :math:`(y_0, 0, ..., 0)`
+    (``"output"``)."""
     zero = w.lit(0.0)
     out = ["void aiofl_init(aiofl_state *s, aiofl_real y0)", "{", "    int i;"]
     if ntd:
@@ -439,9 +452,11 @@ def _init(c: Controller, w: _Writer, ntd: int, delay: int) -> list[str]:
         f"        s->p[i] = {zero};",
         f"        s->xhat[i] = {zero};",
         "    }",
-        "    s->y_prev = y0;  /* p_1 = y0 */",
-        "    s->xhat[0] = y0;",
     ]
+    if c.eso_init == "output":  # p_0 = (y0, 0, ..., 0): the first innovation is 0
+        out += ["    s->y_prev = y0;  /* p_1 = y0 (eso.init = output) */", "    s->xhat[0] = y0;"]
+    else:  # p_0 = 0 (p[0] holds p_1 - y_prev)
+        out += [f"    s->y_prev = {zero};  /* p_1 = 0 (eso.init = zero) */", "    (void)y0;"]
     if delay:
         out.append(f"    s->u_prev = {zero};")
     return [*out, "}", ""]
