@@ -21,7 +21,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     # the paper's pieces; atomic file output; the bounds on every input size
     ("aiofl.components", "aiofl.outputs", "aiofl.limits"),
     ("aiofl.layout",),  # the member vocabulary: component kinds, parameter columns
-    ("aiofl.controller", "aiofl.scenario"),  # plain descriptions of a design and a test
+    # plain descriptions of a design, a test and the model error (uncertainty)
+    ("aiofl.controller", "aiofl.scenario", "aiofl.uncertainty"),
     ("aiofl.plants",),
     ("aiofl.engine",),
     ("aiofl.config",),  # TOML -> plant + scenario + controller (+ run settings)

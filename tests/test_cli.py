@@ -49,7 +49,7 @@ def _click_group() -> Any:
     return typer.main.get_command(app)
 
 
-COMMANDS = ("presets", "show", "simulate", "reproduce", "tune", "analyze", "export")
+COMMANDS = ("presets", "show", "simulate", "reproduce", "tune", "analyze", "export", "robustness")
 
 
 @pytest.mark.parametrize("flag", ["--version", "-V"])

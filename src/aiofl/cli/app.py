@@ -92,6 +92,10 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
         "aiofl export retuned-s1-leso --ts 1e-3 --out firmware",
         "aiofl export my-run.toml --ts 5e-4 --precision float -o firmware",
     ),
+    "robustness": (
+        "aiofl robustness my-run.toml --out robust",
+        "aiofl robustness my-run.toml -o robust --draws 1000 --seed 1 --dask-workers 2",
+    ),
 }
 """Example invocations shown at the end of each command's ``--help``."""
 
@@ -444,6 +448,7 @@ def register_feature(name: str, target: str) -> None:
 register_feature("tune", "aiofl.cli.tune:tune_command")
 register_feature("analyze", "aiofl.cli.analyze:analyze_command")
 register_feature("export", "aiofl.cli.export:export_command")
+register_feature("robustness", "aiofl.cli.robustness:robustness_command")
 
 
 def _finish_commands() -> None:

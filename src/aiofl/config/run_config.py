@@ -83,6 +83,7 @@ from aiofl.limits import (
 )
 from aiofl.plants.base import Plant, PlantError
 from aiofl.scenario import Scenario
+from aiofl.uncertainty import UncertaintyModel
 
 __all__ = [
     "MAX_NOISE_SAMPLES",
@@ -116,6 +117,7 @@ class RunConfig:
     weights: OPIWeights
     raw: dict[str, Any]
     sampling: Any = None  # aiofl.engine.discrete.Sampling: [controller.discrete], or None
+    uncertainty: UncertaintyModel | None = None  # [uncertainty] (aiofl.uncertainty), or None
 
     def simulate(self, *, store: bool = True) -> Any:
         """Run this config once (see :func:`aiofl.engine.simulation.simulate`)."""
@@ -367,6 +369,13 @@ def parse_config(
         raise ConfigError(f"invalid config {source}: {exc}{note}") from None
     if missing:
         raise ConfigError(f"invalid config {source}:{note}")
+    if model.uncertainty is not None:  # plant parameters by name; ts needs a sampled controller
+        try:
+            model.uncertainty.check(
+                plant.param_names, discrete=model.controller.discrete is not None, dt=sim.dt
+            )
+        except ValueError as exc:
+            raise ConfigError(f"invalid config {source}: {exc}") from None
     cfg = RunConfig(
         name=model.name,
         description=model.description,
@@ -379,6 +388,7 @@ def parse_config(
         divergence_threshold=sim.divergence_threshold,
         weights=model.metrics.build(),
         raw=data,
+        uncertainty=model.uncertainty,
     )
     if model.controller.discrete is not None:  # [controller.discrete]: a sampled controller
         try:

@@ -24,6 +24,7 @@ from aiofl.limits import (
     T_FINAL_MAX,
 )
 from aiofl.scenario import Reference, Scenario
+from aiofl.uncertainty import UncertaintyModel
 
 __all__ = [
     "REQUIRED_KEYS",
@@ -292,6 +293,8 @@ class ConfigModel(_Model):
     metrics: MetricsModel = Field(default_factory=MetricsModel)
     # Tables owned by other features (e.g. [tune]) are validated by those features.
     tune: dict[str, Any] | None = None
+    # [uncertainty]: model error as data (aiofl.uncertainty); plant names checked in run_config
+    uncertainty: UncertaintyModel | None = None
 
     @field_validator("plant")
     @classmethod

@@ -1,0 +1,374 @@
+r"""Robustness of one design under model error: K draws of ``[uncertainty]``, batched.
+
+:func:`run_robustness` draws the config's ``[uncertainty]`` table (common random numbers,
+:mod:`aiofl.uncertainty`), turns every draw into an engine member (its scenario with the
+drawn plant from t = 0, its drawn noise variance and sample time) and runs the nominal plant
+plus the K draws through :func:`aiofl.engine.simulation.simulate_batch` — one call, split
+only to keep each call's stored trajectories and noise rows within
+:data:`CALL_TRAJECTORY_BYTES` — or as chunks on a Dask cluster.  Members are independent,
+so the split never changes a number.
+
+**Statistics.**  A diverged draw counts as :math:`\mathrm{ITAE} = \mathrm{ISU} = +\infty`
+(it is unstable); ``stable_fraction`` is the fraction of draws that did not diverge.
+Quantiles are taken over *all* K draws with ``numpy.quantile(method="inverted_cdf")`` (the
+empirical quantile, :math:`\min\{x : \hat F(x) \ge q\}`, no interpolation, so it is
+defined with +inf values); a quantile that falls on a diverged draw is written as ``null``
+in the JSON (which never holds NaN or Infinity).  The worst draw is the one with the largest
+ITAE, a diverged draw being worse than any finite one (the earliest divergence first).
+The influence of a drawn quantity is its Spearman rank correlation with ITAE
+(``scipy.stats.spearmanr``; a rank statistic, so with log ITAE too).
+
+**Trajectories.**  The tracking error :math:`e = y - r` of every draw is kept at
+:math:`P \le` :data:`MAX_POINTS` decimated points, :math:`P` lowered so the (K, P) float32
+table stays within :data:`ERROR_TABLE_BYTES`; the envelope is its pointwise min/max and
+5-95 % band.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from aiofl import layout as L
+from aiofl.uncertainty import Draws, aggregate, sample_draws
+
+__all__ = [
+    "CALL_TRAJECTORY_BYTES",
+    "ERROR_TABLE_BYTES",
+    "MAX_POINTS",
+    "RobustnessResult",
+    "robustness_figure",
+    "run_robustness",
+    "simulate_draws",
+]
+
+#: most saved points of a draw's tracking error
+MAX_POINTS = 401
+#: most bytes of the (K, P) float32 error table kept for the envelope
+ERROR_TABLE_BYTES = 64 * 2**20
+#: most bytes one engine call allocates per member table: the stored trajectories
+#: (members x points x columns x 8) and the held-noise rows (members x samples x 8)
+CALL_TRAJECTORY_BYTES = 128 * 2**20
+_LOCK = threading.Lock()
+#: the quantiles reported
+QUANTILES = {"q05": 0.05, "q50": 0.5, "q95": 0.95}
+
+
+@dataclass(frozen=True)
+class DrawRuns:
+    """Engine results of the nominal plant (member 0) and the K draws (members 1..K)."""
+
+    metrics: NDArray[np.float64]  # (K+1, 5)
+    diverged: NDArray[np.bool_]
+    diverged_at: NDArray[np.float64]
+    t: NDArray[np.float64]  # (P,)
+    error: NDArray[np.float32]  # (K+1, P), y - r; NaN after a divergence
+    engine_calls: int
+
+
+def _points(k: int, n_steps: int) -> tuple[int, int]:
+    """(decimation, saved points) for K draws of ``n_steps``: P <= MAX_POINTS and the
+    (K, P) float32 table within ERROR_TABLE_BYTES."""
+    p_max = max(2, min(MAX_POINTS, ERROR_TABLE_BYTES // (4 * (k + 1))))
+    dec = max(1, math.ceil(n_steps / (p_max - 1)))
+    return dec, n_steps // dec + 1
+
+
+def _chunk(
+    config: Any, draws: Draws, nominal: bool, decimation: int
+) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64], NDArray[np.float32]]:
+    """Simulate ``draws`` (and the nominal plant first if ``nominal``) of ``config`` (a
+    RunConfig, or its raw dict on a Dask worker) in one engine call."""
+    from aiofl.config import parse_config
+    from aiofl.engine.simulation import simulate_batch
+
+    cfg = parse_config(dict(config), "robustness chunk") if isinstance(config, dict) else config
+    scenarios = draws.scenarios(cfg.scenario)
+    samplings = draws.samplings(cfg.sampling)
+    if nominal:
+        scenarios, samplings = [cfg.scenario, *scenarios], [cfg.sampling, *samplings]
+    if not scenarios:
+        return np.zeros((0, L.N_METRIC)), np.zeros(0, bool), np.zeros(0), np.zeros((0, 0), "f4")
+    with _LOCK:  # one engine call at a time per process (threaded Dask workers)
+        res = simulate_batch(
+            cfg.plant,
+            [cfg.controller] * len(scenarios),
+            scenarios,
+            dt=cfg.dt,
+            method=cfg.method,
+            store=True,
+            decimation=decimation,
+            divergence_threshold=cfg.divergence_threshold,
+            sampling=samplings if any(s is not None for s in samplings) else None,
+        )
+    traj = res.trajectories
+    assert traj is not None
+    cols = list(res.columns)
+    err = (traj[:, :, cols.index("y")] - traj[:, :, cols.index("r")]).astype(np.float32)
+    return res.metrics.copy(), res.diverged.copy(), res.diverged_at.copy(), err
+
+
+def _subset(draws: Draws, idx: slice) -> Draws:
+    return Draws(
+        seed=draws.seed,
+        factors={k: v[idx] for k, v in draws.factors.items()},
+        ts=None if draws.ts is None else draws.ts[idx],
+        noise_variance=None if draws.noise_variance is None else draws.noise_variance[idx],
+    )
+
+
+def simulate_draws(
+    cfg: Any, draws: Draws, *, client: Any = None, chunks: int | None = None
+) -> DrawRuns:
+    """Run the nominal plant and every draw of ``cfg`` (a :class:`~aiofl.config.RunConfig`).
+
+    Locally: one :func:`~aiofl.engine.simulation.simulate_batch` call, split into the fewest
+    calls that keep each call's stored trajectories and noise rows within
+    :data:`CALL_TRAJECTORY_BYTES`.
+    With a ``distributed.Client``: ``chunks`` tasks (default: the number of workers).
+    """
+    from aiofl.engine.build import kernel_for
+    from aiofl.limits import check_run_size
+
+    k = len(draws)
+    n_steps = check_run_size(cfg.scenario.t_final, cfg.dt, what="robustness")
+    dec, n_pts = _points(k, n_steps)
+    # the stored trajectory and the engine's per-scenario noise table (every draw is its
+    # own scenario, so simulate_batch holds one held-noise row per member)
+    n_noise = math.ceil(cfg.scenario.t_final / cfg.scenario.noise_hold) + 2
+    per_member = (n_pts * kernel_for(cfg.plant).n_cols + n_noise) * 8
+    per_call = max(1, CALL_TRAJECTORY_BYTES // per_member)
+    if client is not None:
+        if chunks is None:
+            chunks = max(1, len(client.scheduler_info(n_workers=-1).get("workers", {})))
+        per_call = min(per_call, math.ceil((k + 1) / chunks))
+    bounds = [*range(0, k + 1, per_call), k + 1]
+    # member m is draw m - 1; member 0 is the nominal plant
+    tasks = [
+        (_subset(draws, slice(max(a - 1, 0), b - 1)), a == 0) for a, b in itertools.pairwise(bounds)
+    ]
+    if client is None:
+        parts = [_chunk(cfg, d, nom, dec) for d, nom in tasks]
+    else:
+        raw_f = client.scatter(dict(cfg.raw), broadcast=True, hash=False)
+        futures = [client.submit(_chunk, raw_f, d, nom, dec, pure=False) for d, nom in tasks]
+        parts = client.gather(futures)
+    t = np.arange(n_pts) * (dec * cfg.dt)
+    return DrawRuns(
+        metrics=np.concatenate([p[0] for p in parts]),
+        diverged=np.concatenate([p[1] for p in parts]),
+        diverged_at=np.concatenate([p[2] for p in parts]),
+        t=t,
+        error=np.concatenate([p[3] for p in parts]),
+        engine_calls=len(tasks),
+    )
+
+
+def _num(x: float) -> float | None:
+    """A JSON number, or None for +-inf / NaN."""
+    return float(x) if math.isfinite(x) else None
+
+
+@dataclass(frozen=True)
+class RobustnessResult:
+    """The outcome of :func:`run_robustness` (arrays over the K draws)."""
+
+    name: str
+    draws: Draws
+    nominal_params: dict[str, float]
+    itae: NDArray[np.float64]  # +inf where diverged
+    isu: NDArray[np.float64]
+    diverged: NDArray[np.bool_]
+    diverged_at: NDArray[np.float64]
+    nominal: dict[str, Any]
+    t: NDArray[np.float64]
+    error: NDArray[np.float32]  # (K, P)
+    engine_calls: int
+    seconds: float
+    uncertainty: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def stable_fraction(self) -> float:
+        """Fraction of draws that did not diverge."""
+        return float(np.mean(~self.diverged))
+
+    def quantiles(self, values: NDArray[np.float64]) -> dict[str, float | None]:
+        """q05, q50, q95 (empirical, ``inverted_cdf``) and max; None where +inf."""
+        out = {k: _num(np.quantile(values, q, method="inverted_cdf")) for k, q in QUANTILES.items()}
+        out["max"] = _num(np.max(values))
+        return out
+
+    def worst_index(self) -> int:
+        """The worst draw: largest ITAE; a diverged draw (earliest first) beats any finite."""
+        if self.diverged.any():
+            idx = np.flatnonzero(self.diverged)
+            return int(idx[np.argmin(self.diverged_at[idx])])
+        return int(np.argmax(self.itae))
+
+    def influence(self) -> list[tuple[str, float | None]]:
+        """Drawn quantities by decreasing |Spearman correlation| with ITAE."""
+        from scipy.stats import spearmanr
+
+        ranked = []
+        for name, col in self.draws.columns().items():
+            if np.ptp(col) == 0 or np.ptp(np.where(np.isinf(self.itae), 1e300, self.itae)) == 0:
+                ranked.append((name, None))
+                continue
+            ranked.append((name, _num(spearmanr(col, self.itae).statistic)))
+        return sorted(ranked, key=lambda p: -abs(p[1]) if p[1] is not None else 1.0)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``robustness.json`` record (no NaN or Infinity: +inf is ``null``)."""
+        w = self.worst_index()
+        cols = self.draws.columns()
+        worst: dict[str, Any] = {
+            "draw": w,
+            "itae": _num(self.itae[w]),
+            "isu": _num(self.isu[w]),
+            "diverged_at": float(self.diverged_at[w]) if self.diverged[w] else None,
+            "factors": {k: float(v[w]) for k, v in self.draws.factors.items()},
+            "parameters": {
+                k: float(v[w]) * self.nominal_params[k] for k, v in self.draws.factors.items()
+            },
+        }
+        for key in ("ts", "noise_variance"):
+            if key in cols:
+                worst[key] = float(cols[key][w])
+        return {
+            "name": self.name,
+            "draws": len(self.draws),
+            "seed": self.draws.seed,
+            "uncertainty": self.uncertainty,
+            "stable_fraction": self.stable_fraction,
+            "diverged": [
+                {"draw": int(i), "t": float(self.diverged_at[i])}
+                for i in np.flatnonzero(self.diverged)
+            ],
+            "itae": self.quantiles(self.itae),
+            "isu": self.quantiles(self.isu),
+            "aggregates": {
+                "itae_mean": _num(aggregate(self.itae, "mean")),
+                "itae_cvar90": _num(aggregate(self.itae, "cvar", alpha=0.9)),
+            },
+            "worst": worst,
+            "nominal": self.nominal,
+            "influence": [{"name": n, "spearman_itae": r} for n, r in self.influence()],
+            "notes": (
+                "quantiles: numpy inverted_cdf over all draws, a diverged draw counting as "
+                "+inf; null = the value falls on a diverged draw (infeasible)"
+            ),
+        }
+
+
+def run_robustness(
+    cfg: Any,
+    *,
+    draws: int | None = None,
+    seed: int | None = None,
+    client: Any = None,
+    chunks: int | None = None,
+) -> RobustnessResult:
+    """Draw ``cfg.uncertainty`` and run the design over the draws (module docstring).
+
+    Raises ``ValueError`` if the config has no ``[uncertainty]`` table or ``draws``/``seed``
+    are out of range (before anything runs).
+    """
+    if cfg.uncertainty is None:
+        raise ValueError(
+            f"config {cfg.name!r} has no [uncertainty] table; add one, e.g.\n"
+            "  [uncertainty]\n  draws = 64\n  seed = 0\n  [uncertainty.parameters]\n"
+            "  J_l = { uniform = 0.2 }"
+        )
+    d = sample_draws(cfg.uncertainty, draws=draws, seed=seed, dt=cfg.dt)
+    d.scenarios(cfg.scenario)  # refuses an incompatible scenario before anything runs
+    t0 = time.perf_counter()
+    runs = simulate_draws(cfg, d, client=client, chunks=chunks)
+    seconds = time.perf_counter() - t0
+    m, div = runs.metrics, runs.diverged
+    itae = np.where(div, np.inf, m[:, L.METRIC_NAMES.index("itae")])
+    isu = np.where(div, np.inf, m[:, L.METRIC_NAMES.index("isu")])
+    nominal = {
+        "itae": _num(itae[0]),
+        "isu": _num(isu[0]),
+        "diverged": bool(div[0]),
+        "diverged_at": float(runs.diverged_at[0]) if div[0] else None,
+    }
+    spec = cfg.uncertainty.model_dump(exclude_none=True)
+    spec.update(draws=len(d), seed=d.seed)
+    return RobustnessResult(
+        name=cfg.name,
+        draws=d,
+        nominal_params=dict(cfg.plant.params),
+        itae=itae[1:],
+        isu=isu[1:],
+        diverged=div[1:],
+        diverged_at=runs.diverged_at[1:],
+        nominal=nominal,
+        t=runs.t,
+        error=runs.error[1:],
+        engine_calls=runs.engine_calls,
+        seconds=seconds,
+        uncertainty=spec,
+    )
+
+
+def robustness_figure(res: RobustnessResult) -> Any:
+    """ECDF of ITAE, the envelope of :math:`y - r` across draws, and ITAE against the two
+    most influential drawn quantities (a matplotlib ``Figure``; diverged draws drawn as
+    red crosses at the top)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(12, 8), layout="constrained")
+    axes = fig.subplots(2, 2).ravel()
+    k = len(res.itae)
+    finite = np.sort(res.itae[np.isfinite(res.itae)])
+    ax = axes[0]
+    if finite.size:
+        ax.step(finite, np.arange(1, finite.size + 1) / k, where="post")
+        ax.set_xscale("log")
+    ax.set_ylim(0, 1.02)
+    ax.axhline(res.stable_fraction, color="0.6", ls=":", label="stable fraction")
+    if res.nominal["itae"] is not None:
+        ax.axvline(res.nominal["itae"], color="k", ls="--", label="nominal")
+    ax.set(xlabel="ITAE", ylabel="fraction of draws", title=f"ECDF of ITAE ({k} draws)")
+    ax.legend(loc="lower right")
+
+    ax = axes[1]
+    err = res.error.astype(np.float64)
+    ok = ~res.diverged
+    if ok.any():
+        e = err[ok]
+        lo, hi = np.quantile(e, [0.05, 0.95], axis=0)
+        ax.fill_between(res.t, e.min(axis=0), e.max(axis=0), color="C0", alpha=0.2, label="min-max")
+        ax.fill_between(res.t, lo, hi, color="C0", alpha=0.5, label="5-95 %")
+    ax.set(xlabel="t [s]", ylabel="y - r", title="tracking error across stable draws")
+    ax.legend(loc="upper right")
+
+    ranked = [n for n, r in res.influence() if r is not None][:2]
+    cols = res.draws.columns()
+    for ax, name in zip(axes[2:], ranked, strict=False):
+        x = cols[name]
+        ok = np.isfinite(res.itae)
+        ax.scatter(x[ok], res.itae[ok], s=8, alpha=0.6)
+        if (~ok).any():
+            top = finite.max() * 2 if finite.size else 1.0
+            ax.scatter(x[~ok], np.full((~ok).sum(), top), marker="x", color="r", label="diverged")
+            ax.legend(loc="upper left")
+        if finite.size:
+            ax.set_yscale("log")
+        r = dict(res.influence())[name]
+        ax.set(xlabel=name + (" factor" if name in res.draws.factors else ""), ylabel="ITAE")
+        ax.set_title(f"ITAE vs {name} (Spearman {r:+.2f})")
+    for ax in axes[2 + len(ranked) :]:
+        ax.set_axis_off()
+    fig.suptitle(
+        f"{res.name}: stable {100 * res.stable_fraction:.1f} % of {k} draws (seed {res.draws.seed})"
+    )
+    return fig

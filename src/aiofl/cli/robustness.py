@@ -1,0 +1,115 @@
+"""``aiofl robustness CONFIG [--draws N] [--seed S] [--scheduler ...] --out DIR``.
+
+Runs the design of CONFIG over the draws of its ``[uncertainty]`` table
+(:func:`aiofl.analysis.robustness.run_robustness`) and writes ``DIR/robustness.json``
+(stable fraction, ITAE/ISU quantiles, the worst draw, the nominal run) and
+``DIR/robustness.png`` (ECDF of ITAE, the envelope of y - r, ITAE against the two most
+influential parameters), all or nothing.  A config without ``[uncertainty]``, a bad table
+or option exits with status 2 and writes nothing.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Annotated, Any
+
+import typer
+
+from aiofl.cli.errors import _check_out, bad_input_exits
+
+__all__ = ["robustness_command"]
+
+
+def _client(scheduler: str | None, dask_workers: int | None) -> tuple[Any, list[Any]]:
+    """A ``distributed.Client`` (and what to close), or (None, []) for a local run."""
+    if scheduler is None and dask_workers is None:
+        return None, []
+    from distributed import Client, LocalCluster
+
+    if scheduler is not None:
+        try:
+            client = Client(scheduler, timeout="5s")
+        except (OSError, TimeoutError, ValueError) as exc:
+            raise ConnectionError(
+                f"--scheduler {scheduler!r}: cannot connect within 5 s: {exc}"
+            ) from None
+        return client, [client]
+    cluster = LocalCluster(
+        n_workers=dask_workers, threads_per_worker=1, processes=True, dashboard_address=None
+    )
+    client = Client(cluster)
+    return client, [client, cluster]
+
+
+def _fmt(x: float | None) -> str:
+    return "diverged" if x is None else f"{x:.4g}"
+
+
+def robustness_command(
+    config: Annotated[
+        str, typer.Argument(help="A TOML config file or preset, with an [uncertainty] table.")
+    ],
+    out: Annotated[Path, typer.Option("--out", "-o", help="Output directory.")],
+    draws: Annotated[
+        int | None, typer.Option("--draws", help="Override uncertainty.draws.")
+    ] = None,
+    seed: Annotated[int | None, typer.Option("--seed", help="Override uncertainty.seed.")] = None,
+    scheduler: Annotated[
+        str | None,
+        typer.Option("--scheduler", help="Dask scheduler address tcp://HOST:PORT."),
+    ] = None,
+    dask_workers: Annotated[
+        int | None,
+        typer.Option("--dask-workers", help="Start a local Dask cluster with N workers."),
+    ] = None,
+) -> None:
+    """Measure a design's robustness over the draws of its [uncertainty] table."""
+    from aiofl.analysis.robustness import robustness_figure, run_robustness
+    from aiofl.config import load_config
+    from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
+    from aiofl.uncertainty import MAX_DRAWS, sample_draws
+
+    with bad_input_exits():
+        if scheduler is not None and dask_workers is not None:
+            raise ValueError("give --scheduler or --dask-workers, not both")
+        if dask_workers is not None and not 1 <= dask_workers <= 64:
+            raise ValueError(f"--dask-workers = {dask_workers}; allowed: 1 <= N <= 64")
+        if draws is not None and not 1 <= draws <= MAX_DRAWS:
+            raise ValueError(f"--draws = {draws}; allowed: 1 <= N <= {MAX_DRAWS}")
+        if seed is not None and not 0 <= seed < 2**63:
+            raise ValueError(f"--seed = {seed}; allowed: 0 <= S < 2**63")
+        _check_out(out)
+        cfg = load_config(config)
+        if cfg.uncertainty is None:
+            raise ValueError(
+                f"{config}: no [uncertainty] table; add one, e.g.\n  [uncertainty]\n"
+                "  draws = 64\n  [uncertainty.parameters]\n  J_l = { uniform = 0.2 }"
+            )
+        # a scenario the draws cannot be applied to (its own plant change at t > 0)
+        sample_draws(cfg.uncertainty, draws=1, dt=cfg.dt).scenarios(cfg.scenario)
+        client, owned = _client(scheduler, dask_workers)
+    try:
+        with bad_input_exits(run=True):
+            res = run_robustness(cfg, draws=draws, seed=seed, client=client)
+            info = res.to_dict()
+            import io
+
+            with atomic_output_dir(out) as stage:
+                text = json.dumps(info, indent=2, allow_nan=False) + "\n"
+                atomic_write_text(stage / "robustness.json", text)
+                buf = io.BytesIO()
+                robustness_figure(res).savefig(buf, format="png", dpi=100)
+                atomic_write_bytes(stage / "robustness.png", buf.getvalue())
+    finally:
+        for obj in owned:
+            obj.close()
+    itae = info["itae"]
+    typer.echo(
+        f"{res.name}: {len(res.itae)} draws (seed {res.draws.seed}), stable "
+        f"{100 * res.stable_fraction:.1f} %, ITAE q05/q50/q95/max = "
+        f"{_fmt(itae['q05'])} / {_fmt(itae['q50'])} / {_fmt(itae['q95'])} / "
+        f"{_fmt(itae['max'])} (nominal {_fmt(info['nominal']['itae'])}); "
+        f"{res.engine_calls} engine call(s), {res.seconds:.1f} s\n"
+        f"wrote {out}/robustness.json, robustness.png"
+    )

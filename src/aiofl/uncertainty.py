@@ -1,0 +1,341 @@
+r"""Model uncertainty as data: the ``[uncertainty]`` table, its draws and their aggregates.
+
+.. code-block:: toml
+
+    [uncertainty]
+    draws = 1000                       # 1 .. MAX_DRAWS
+    seed = 0
+    ts = [5e-4, 2e-3]                  # optional, needs [controller.discrete]
+    noise_variance = [0.0, 1e-4]       # optional, output-noise variance range
+    [uncertainty.parameters]           # true-plant parameters, as factors on the nominal
+    J_l = { uniform = 0.2 }            # factor ~ U[1 - p, 1 + p], 0 < p < 1
+    K_s = { normal = 0.05 }            # factor = 1 + sigma z, z ~ N(0, 1), |z| < 1/sigma
+    R_m = { log_uniform = [0.5, 2.0] } # ln factor ~ U[ln a, ln b], 0 < a < b
+
+**Common random numbers.**  The draws depend only on ``(seed, the table, draws)`` (and, for
+``ts``, the engine step ``dt`` that sample times are rounded to), never on the controller:
+every design is scored on the same plants, so two designs' results are paired.  Each drawn
+quantity has its own stream, ``numpy.random.Generator(PCG64(SeedSequence(seed,
+spawn_key=(crc32(name),))))``: adding or removing a parameter does not change the other
+parameters' draws, and every value is a fixed transform of one uniform variate
+:math:`u_k \in [0, 1)` (inverse CDF), so the first ``n`` of ``N`` draws are the ``n``
+draws of a run with ``draws = n`` (prefix-stable).
+
+**How a draw reaches the engine** (:meth:`Draws.scenarios`): the factors multiply the true
+plant's parameters from t = 0 (``Scenario.plant_scale`` with ``parameter_change_time =
+0``); the controller's nominal model is unchanged.  They compose with a scenario's own
+change at t = 0 by multiplication (the shipped S2 presets' J_l × 1.4 becomes J_l × 1.4 ×
+f).  A scenario whose own plant change is at t > 0 is refused for now: the engine's scenario
+carries a single parameter change, so a draw cannot both apply from t = 0 and be
+compounded at the change time.  A drawn noise variance replaces the scenario's (same noise
+seed, so the noise *shape* is common to all draws); a drawn sample time replaces
+``[controller.discrete] ts`` (:meth:`Draws.samplings`).
+
+**Aggregates** over the draws (:func:`aggregate`) treat a diverged draw as :math:`+\infty`:
+``mean`` and ``worst`` are then infinite (the design is infeasible), and ``cvar`` is the
+Conditional Value-at-Risk at level α (Rockafellar & Uryasev, *Optimization of conditional
+value-at-risk*, J. Risk 2(3), 2000): the mean of the worst :math:`\lceil (1-\alpha) K\rceil`
+of K values.
+"""
+
+from __future__ import annotations
+
+import math
+import zlib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from pydantic import BaseModel, ConfigDict, Field, model_validator
+
+from aiofl.scenario import Scenario
+
+__all__ = [
+    "AGGREGATES",
+    "MAX_DRAWS",
+    "Distribution",
+    "Draws",
+    "UncertaintyModel",
+    "aggregate",
+    "cvar",
+    "sample_draws",
+]
+
+#: most draws of one ``[uncertainty]`` table (one engine member each)
+MAX_DRAWS = 100_000
+#: the names :func:`aggregate` accepts
+AGGREGATES = ("mean", "worst", "cvar")
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
+
+
+PosFinite = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+
+
+class Distribution(_Model):
+    r"""One parameter's distribution, as a factor :math:`f` on its nominal value.
+
+    Exactly one of:
+
+    ``uniform = p``
+        :math:`f = 1 + p(2u - 1)`, i.e. :math:`f \sim U[1-p, 1+p]`, :math:`0 < p < 1`.
+    ``normal = σ``
+        :math:`f = 1 + \sigma z`, :math:`z` standard normal truncated to
+        :math:`|z| < 1/\sigma` (so :math:`0 < f < 2` and :math:`E f = 1`), drawn by the
+        inverse CDF of ``scipy.stats.truncnorm``; :math:`0 < \sigma \le 0.5`.
+    ``log_uniform = [a, b]``
+        :math:`\ln f \sim U[\ln a, \ln b]`, :math:`0 < a < b`.
+    """
+
+    uniform: Annotated[float, Field(gt=0, lt=1)] | None = None
+    normal: Annotated[float, Field(gt=0, le=0.5)] | None = None
+    log_uniform: Annotated[list[PosFinite], Field(min_length=2, max_length=2)] | None = None
+
+    @model_validator(mode="after")
+    def _one(self) -> Distribution:
+        given = [k for k in ("uniform", "normal", "log_uniform") if getattr(self, k) is not None]
+        if len(given) != 1:
+            raise ValueError(
+                f"a parameter's distribution sets exactly one of uniform = p, normal = sigma, "
+                f"log_uniform = [a, b]; got {', '.join(given) or 'none'}"
+            )
+        if self.log_uniform is not None and not self.log_uniform[0] < self.log_uniform[1]:
+            raise ValueError(
+                f"log_uniform = {self.log_uniform}; allowed: [a, b] with 0 < a < b (factors)"
+            )
+        return self
+
+    @property
+    def kind(self) -> str:
+        """``"uniform"``, ``"normal"`` or ``"log_uniform"``."""
+        return next(k for k in ("uniform", "normal", "log_uniform") if getattr(self, k) is not None)
+
+    def factors(self, u: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The factors for uniform variates ``u`` in [0, 1) (inverse CDF)."""
+        if self.uniform is not None:
+            return 1.0 + self.uniform * (2.0 * u - 1.0)
+        if self.normal is not None:
+            from scipy.stats import truncnorm
+
+            bound = 1.0 / self.normal
+            z = truncnorm.ppf(u, -bound, bound)
+            return np.clip(1.0 + self.normal * z, np.nextafter(0.0, 1.0), None)
+        a, b = self.log_uniform  # type: ignore[misc]
+        return np.exp(math.log(a) + u * (math.log(b) - math.log(a)))
+
+
+#: a range [a, b] of non-negative numbers
+Pair = Annotated[
+    list[Annotated[float, Field(ge=0, allow_inf_nan=False)]], Field(min_length=2, max_length=2)
+]
+
+
+class UncertaintyModel(_Model):
+    """The ``[uncertainty]`` table (see the module docstring)."""
+
+    draws: Annotated[int, Field(ge=1, le=MAX_DRAWS)] = 64
+    seed: Annotated[int, Field(ge=0, lt=2**63)] = 0
+    parameters: dict[str, Distribution] = Field(default_factory=dict)
+    ts: Pair | None = None
+    noise_variance: Pair | None = None
+
+    @model_validator(mode="after")
+    def _ranges(self) -> UncertaintyModel:
+        for key in ("ts", "noise_variance"):
+            pair = getattr(self, key)
+            if pair is not None and not pair[0] <= pair[1]:
+                raise ValueError(f"uncertainty.{key} = {pair}; allowed: [a, b] with a <= b")
+        if self.ts is not None and not (self.ts[0] > 0 and self.ts[1] <= 1.0):
+            raise ValueError(f"uncertainty.ts = {self.ts}; allowed: [a, b] with 0 < a <= b <= 1 s")
+        if not self.parameters and self.ts is None and self.noise_variance is None:
+            raise ValueError(
+                "nothing is uncertain; set [uncertainty.parameters] (e.g. "
+                "J_l = { uniform = 0.2 }), ts = [a, b] or noise_variance = [a, b]"
+            )
+        return self
+
+    def check(self, param_names: Sequence[str], *, discrete: bool, dt: float) -> None:
+        """Refuse parameters the plant does not have, and ``ts`` without a sampled
+        controller or without a multiple of ``dt`` in range; raises ``ValueError``."""
+        unknown = sorted(set(self.parameters) - set(param_names))
+        if unknown:
+            raise ValueError(
+                f"uncertainty.parameters: unknown plant parameter(s) {', '.join(unknown)}; "
+                f"allowed: {', '.join(param_names)}"
+            )
+        if self.ts is not None:
+            if not discrete:
+                raise ValueError(
+                    "uncertainty.ts is set but the config has no [controller.discrete] table; "
+                    "a sample-time range needs a sampled controller (add [controller.discrete] "
+                    "ts = ...) or remove uncertainty.ts"
+                )
+            _ts_steps(self.ts, dt)
+
+
+def _ts_steps(ts: Sequence[float], dt: float) -> tuple[int, int]:
+    """The integer multiples k of ``dt`` with ``ts[0] <= k dt <= ts[1]`` (within 1e-9)."""
+    lo = math.ceil(ts[0] / dt - 1e-9)
+    hi = math.floor(ts[1] / dt + 1e-9)
+    if lo < 1 or hi < lo:
+        raise ValueError(
+            f"uncertainty.ts = {list(ts)} holds no integer multiple of simulation.dt = {dt:g} s; "
+            "allowed: a range containing k*dt for some integer k >= 1"
+        )
+    return lo, hi
+
+
+def _uniforms(seed: int, name: str, n: int) -> NDArray[np.float64]:
+    """``n`` variates U[0, 1) of the stream named ``name`` (independent of other names)."""
+    ss = np.random.SeedSequence(seed, spawn_key=(zlib.crc32(name.encode()),))
+    return np.random.Generator(np.random.PCG64(ss)).random(n)
+
+
+@dataclass(frozen=True)
+class Draws:
+    """K draws of an ``[uncertainty]`` table.
+
+    Attributes
+    ----------
+    seed
+        The seed they were drawn with.
+    factors
+        Per plant parameter (sorted by name), the (K,) factors on its nominal value.
+    ts
+        (K,) sample times [s] (integer multiples of dt), or None.
+    noise_variance
+        (K,) output-noise variances, or None.
+    """
+
+    seed: int
+    factors: Mapping[str, NDArray[np.float64]]
+    ts: NDArray[np.float64] | None = None
+    noise_variance: NDArray[np.float64] | None = None
+
+    def __len__(self) -> int:
+        for arr in (*self.factors.values(), self.ts, self.noise_variance):
+            if arr is not None:
+                return len(arr)
+        return 0
+
+    def columns(self) -> dict[str, NDArray[np.float64]]:
+        """Every drawn quantity by name (parameters as factors, then ``ts``,
+        ``noise_variance``)."""
+        cols = dict(self.factors)
+        if self.ts is not None:
+            cols["ts"] = self.ts
+        if self.noise_variance is not None:
+            cols["noise_variance"] = self.noise_variance
+        return cols
+
+    def scenarios(self, base: Scenario) -> list[Scenario]:
+        """One scenario per draw: ``base`` with the drawn plant from t = 0 (and the drawn
+        noise variance); raises ``ValueError`` for a base with its own plant change at t > 0
+        (see the module docstring)."""
+        has_change = bool(base.plant_scale or base.plant_overrides)
+        if self.factors and has_change and base.parameter_change_time > 0:
+            raise ValueError(
+                f"scenario {base.name!r} changes the plant at t = {base.parameter_change_time:g} "
+                "s; uncertain plant parameters apply from t = 0 and the engine's scenario holds "
+                "one parameter change, so they cannot be combined yet (use a scenario without "
+                "plant_scale / plant_overrides, or parameter_change_time = 0)"
+            )
+        out = []
+        for k in range(len(self)):
+            scale = dict(base.plant_scale)
+            for name, f in self.factors.items():
+                scale[name] = scale.get(name, 1.0) * float(f[k])
+            changes: dict[str, Any] = {}
+            if self.factors:
+                changes.update(plant_scale=scale, parameter_change_time=0.0)
+            if self.noise_variance is not None:
+                changes["noise_variance"] = float(self.noise_variance[k])
+            out.append(replace(base, **changes) if changes else base)
+        return out
+
+    def samplings(self, base: Any) -> list[Any]:
+        """One sampling setting per draw: ``base`` (an ``aiofl.engine.discrete.Sampling``,
+        or None) with the drawn sample time; ``[base] * K`` if ``ts`` is not drawn."""
+        if self.ts is None or base is None:
+            return [base] * len(self)
+        return [replace(base, ts=float(t)) for t in self.ts]
+
+
+def sample_draws(
+    spec: UncertaintyModel, *, draws: int | None = None, seed: int | None = None, dt: float = 1e-4
+) -> Draws:
+    """Draw the table's uncertain quantities (common random numbers, see the module
+    docstring).  ``draws`` / ``seed`` override the table's; ``dt`` is the engine step the
+    sample times are multiples of."""
+    n = spec.draws if draws is None else int(draws)
+    s = spec.seed if seed is None else int(seed)
+    if not 1 <= n <= MAX_DRAWS:
+        raise ValueError(f"uncertainty.draws = {n}; allowed: 1 <= draws <= {MAX_DRAWS}")
+    if not 0 <= s < 2**63:
+        raise ValueError(f"uncertainty.seed = {s}; allowed: 0 <= seed < 2**63")
+    factors = {
+        name: spec.parameters[name].factors(_uniforms(s, name, n))
+        for name in sorted(spec.parameters)
+    }
+    ts = None
+    if spec.ts is not None:
+        lo, hi = _ts_steps(spec.ts, dt)
+        k = lo + np.minimum(np.floor(_uniforms(s, "ts", n) * (hi - lo + 1)), hi - lo)
+        ts = k * dt
+    nv = None
+    if spec.noise_variance is not None:
+        a, b = spec.noise_variance
+        nv = a + (b - a) * _uniforms(s, "noise_variance", n)
+    return Draws(seed=s, factors=factors, ts=ts, noise_variance=nv)
+
+
+# ------------------------------------------------------------------ aggregates
+def cvar(values: ArrayLike, alpha: float = 0.9, axis: int = -1) -> NDArray[np.float64]:
+    r"""CVaR\ :sub:`α` along ``axis``: the mean of the worst :math:`m = \lceil (1-\alpha) K
+    \rceil` of K values (Rockafellar & Uryasev 2000, the upper-tail mean for a loss).
+
+    ``(1 - α) K`` is rounded up after removing a 1e-9 floating-point excess, so
+    :math:`\alpha = 0.7, K = 10` gives m = 3, not 4.  A +inf value (a diverged draw) among
+    the worst m makes the result +inf.
+    """
+    if not 0.0 <= alpha < 1.0:
+        raise ValueError(f"cvar alpha = {alpha}; allowed: 0 <= alpha < 1")
+    x = np.moveaxis(np.asarray(values, dtype=np.float64), axis, -1)
+    k = x.shape[-1]
+    m = max(1, math.ceil((1.0 - alpha) * k - 1e-9))
+    worst = np.sort(x, axis=-1)[..., k - m :]
+    return np.mean(worst, axis=-1)
+
+
+def aggregate(
+    values: ArrayLike,
+    how: Literal["mean", "worst", "cvar"] = "mean",
+    *,
+    alpha: float = 0.9,
+    diverged: ArrayLike | None = None,
+    axis: int = -1,
+) -> NDArray[np.float64]:
+    r"""Aggregate a metric over draws (along ``axis``), diverged draws as :math:`+\infty`.
+
+    ``mean``: :math:`\frac1K\sum_k v_k`; ``worst``: :math:`\max_k v_k`; ``cvar``:
+    :func:`cvar` at level ``alpha``.  ``diverged`` (same shape, bool) marks draws whose
+    value is replaced by +inf; a NaN value is treated as diverged too.  A +inf result means
+    the design is infeasible.
+    """
+    x = np.array(values, dtype=np.float64)
+    if diverged is not None:
+        x[np.asarray(diverged, dtype=bool)] = np.inf
+    x[np.isnan(x)] = np.inf
+    if x.shape[axis] == 0:
+        raise ValueError("aggregate over zero draws")
+    if how == "mean":
+        return np.mean(x, axis=axis)
+    if how == "worst":
+        return np.max(x, axis=axis)
+    if how == "cvar":
+        return cvar(x, alpha, axis)
+    raise ValueError(f"aggregate = {how!r}; allowed: {', '.join(AGGREGATES)}")
