@@ -55,8 +55,10 @@ def tune_command(
     """Tune a controller with a GA (pymoo) on the OPI of eq. (22), per the config's tune table.
 
     Writes OUT/best.toml (runs with `aiofl simulate`), history.csv, evaluations.csv,
-    convergence.png and summary.json; OUT/checkpoint.npz is updated after every
-    generation so `--resume` continues a killed run with the same final result.
+    convergence.png and summary.json (with algorithm = "nsga2" also the Pareto front,
+    front.csv and front.png, best.toml being the design picked by `choose`);
+    OUT/checkpoint.npz is updated after every generation so `--resume` continues a killed
+    run with the same final result.
     """
     from aiofl.tuning.checkpoint import CHECKPOINT, load_checkpoint
     from aiofl.tuning.results import write_outputs
@@ -113,4 +115,5 @@ def tune_command(
         f"{int(result.diverged.sum())} diverged, {result.evals_per_second:.1f} eval/s)\n"
         f"best config over {full['t_final']:g} s: {status}\n"
         f"wrote {out}/best.toml, history.csv, evaluations.csv, convergence.png, summary.json"
+        + (", front.csv, front.png" if result.front is not None else "")
     )

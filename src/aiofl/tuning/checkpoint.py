@@ -108,11 +108,14 @@ def _check_shapes(g: dict[str, Any], generation: int) -> None:
     """Refuse a stored generation whose arrays do not fit together (a damaged file)."""
     s, m = g["s"], g["metrics"]
     n = s.shape[0] if s.ndim == 2 else -1
+    # (n, 5) and (n,); a robust run stores every draw: (n, K+1, 5) and (n, K+1)
     ok = (
         n >= 0
-        and m.shape == (n, 5)
-        and g["diverged"].shape == (n,)
-        and g["diverged_at"].shape == (n,)
+        and m.ndim in (2, 3)
+        and m.shape[0] == n
+        and m.shape[-1] == 5
+        and g["diverged"].shape == m.shape[:-1]
+        and g["diverged_at"].shape == m.shape[:-1]
         and g["diverged"].dtype == np.bool_
         and all(np.issubdtype(a.dtype, np.floating) for a in (s, m, g["diverged_at"]))
     )

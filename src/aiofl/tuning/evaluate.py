@@ -52,6 +52,11 @@ class EvalSpec:
         Tuning horizon [s] (replaces the scenario's).
     dt, method, divergence_threshold
         Integrator settings.
+    draws
+        Robust tuning: K dicts of scenario fields (e.g. ``{"plant_scale": {"J_l": 1.1}}``,
+        and ``"ts"``, a drawn sample time) that make the K perturbed scenarios; each
+        candidate is simulated on the nominal scenario and on every draw (K + 1
+        members).  Empty: the nominal scenario only.
     """
 
     config: Mapping[str, Any]
@@ -60,6 +65,7 @@ class EvalSpec:
     dt: float
     method: str
     divergence_threshold: float
+    draws: tuple[Mapping[str, Any], ...] = ()
 
     def key(self) -> str:
         """A digest identifying the spec (used to cache the built objects on a worker)."""
@@ -71,6 +77,7 @@ class EvalSpec:
                 self.dt,
                 self.method,
                 self.divergence_threshold,
+                list(self.draws),
             ],
             sort_keys=True,
             default=repr,
@@ -80,7 +87,11 @@ class EvalSpec:
 
 @dataclass(frozen=True)
 class PopulationResult:
-    """Engine results of a population: ``metrics`` (B, 5), ``diverged``, ``diverged_at`` (B,)."""
+    """Engine results of a population: ``metrics`` (B, 5), ``diverged``, ``diverged_at`` (B,).
+
+    In a robust run (K draws) the shapes are (B, K+1, 5) and (B, K+1), column 0 being the
+    nominal plant.
+    """
 
     metrics: NDArray[np.float64]
     diverged: NDArray[np.bool_]
@@ -108,34 +119,54 @@ def _build(spec: EvalSpec) -> Any:
         cfg = parse_config(dict(spec.config), "tuning spec")
         _BUILT.clear()  # keep only the current spec's objects
         scenario = replace(cfg.scenario, t_final=spec.t_final)
-        _BUILT[key] = (cfg.plant, cfg.controller, scenario, cfg.sampling)
+        scenarios = [scenario] + [
+            replace(scenario, **{k: v for k, v in d.items() if k != "ts"}) for d in spec.draws
+        ]
+        sampling: Any = cfg.sampling
+        if any("ts" in d for d in spec.draws):  # drawn sample times: one setting per member
+            sampling = [sampling] + [
+                replace(sampling, ts=d["ts"]) if "ts" in d else sampling for d in spec.draws
+            ]
+        _BUILT[key] = (cfg.plant, cfg.controller, scenarios, sampling)
     return _BUILT[key]
 
 
 def evaluate_chunk(spec: EvalSpec, values: NDArray[np.float64]) -> PopulationResult:
-    """Simulate the members with parameter ``values`` (B, d) in one batched engine call."""
+    """Simulate the members with parameter ``values`` (B, d) in one batched engine call.
+
+    With K robust draws the call has B (K+1) members, candidate-major: member
+    ``b (K+1) + k`` is candidate b on scenario k (0 = nominal).
+    """
     from aiofl.controller import controller_batch
     from aiofl.engine.simulation import simulate_batch
 
     values = np.asarray(values, dtype=np.float64)
+    k1 = 1 + len(spec.draws)
+    shape = (values.shape[0], k1) if spec.draws else (values.shape[0],)
     if values.shape[0] == 0:
-        return PopulationResult(np.zeros((0, 5)), np.zeros(0, dtype=bool), np.zeros(0))
+        return PopulationResult(np.zeros((*shape, 5)), np.zeros(shape, dtype=bool), np.zeros(shape))
     with _LOCK:
-        plant, controller, scenario, sampling = _build(spec)
+        plant, controller, scenarios, sampling = _build(spec)
+        members = np.repeat(values, k1, axis=0)
         batch = controller_batch(
-            controller, {name: values[:, j] for j, name in enumerate(spec.names)}
+            controller, {name: members[:, j] for j, name in enumerate(spec.names)}
         )
         res = simulate_batch(
             plant,
             batch,
-            scenario,
+            scenarios * values.shape[0] if spec.draws else scenarios[0],
             dt=spec.dt,
             method=spec.method,
             store=False,
             divergence_threshold=spec.divergence_threshold,
-            sampling=sampling,  # a [controller.discrete] table tunes the sampled controller
+            # a [controller.discrete] table tunes the sampled controller
+            sampling=sampling * values.shape[0] if isinstance(sampling, list) else sampling,
         )
-    return PopulationResult(res.metrics.copy(), res.diverged.copy(), res.diverged_at.copy())
+    return PopulationResult(
+        res.metrics.reshape(*shape, 5).copy(),
+        res.diverged.reshape(shape).copy(),
+        res.diverged_at.reshape(shape).copy(),
+    )
 
 
 class LocalEvaluator:

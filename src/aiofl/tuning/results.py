@@ -18,6 +18,13 @@
 ``summary.json``
     Settings, budget, best values, and the best config's metrics over the tuning horizon
     and over the config's own horizon (:func:`full_horizon_record`).
+``front.csv``, ``front.png`` (``algorithm = "nsga2"`` only)
+    The Pareto front and its figure (:mod:`aiofl.tuning.front`); ``best.toml`` is then the
+    design chosen by ``[tune] choose``.  The figure marks the paper's printed designs
+    (the ``paper-s{N}-{leso,inleso}`` presets whose plant and scenario tables equal the
+    config's, simulated over the tuning horizon), the exact-tracking ISU floor
+    (:func:`aiofl.analysis.exact_tracking.exact_tracking_cost`) and the y ≡ 0 controller
+    (:func:`reference_markers`).
 """
 
 from __future__ import annotations
@@ -35,7 +42,13 @@ from aiofl import layout as L
 if TYPE_CHECKING:  # pragma: no cover
     from aiofl.tuning.search import TuneResult
 
-__all__ = ["best_toml", "convergence_png", "full_horizon_record", "write_outputs"]
+__all__ = [
+    "best_toml",
+    "convergence_png",
+    "full_horizon_record",
+    "reference_markers",
+    "write_outputs",
+]
 
 
 def _history_csv(result: TuneResult) -> str:
@@ -181,6 +194,75 @@ def best_toml(result: TuneResult, out: str | Path, header: str = "") -> str:
     return to_toml(config, header)
 
 
+def reference_markers(
+    result: TuneResult,
+) -> tuple[list[tuple[str, float, float]], float | None, list[str]]:
+    r"""Reference points for the front figure: (markers, ISU floor, notes).
+
+    Markers are (label, objective 2, objective 1) on the **nominal** plant over the tuning
+    horizon: the y ≡ 0 controller (:math:`e = r`: ITAE :math:`=\int_0^{t_f} t|r|\,dt`,
+    IAE, ISE likewise, ISU = IAU = 0, by the trapezoidal rule on the tuning step) and the
+    paper's printed designs whose presets share the config's plant and scenario tables.
+    Objectives that are not plain metrics (``stable_fraction``) get no markers.
+    """
+    from dataclasses import replace
+
+    from aiofl.config import load_config
+    from aiofl.engine.simulation import simulate_batch
+
+    front = result.front
+    cfg = result.run_config()
+    st = result.settings
+    tf, dt = st.t_final, st.dt or cfg.dt
+    metric = [q.split(":")[0] for q in front.objectives[:2]]
+    notes: list[str] = []
+    if not all(m in L.METRIC_NAMES for m in metric):
+        return [], None, ["no reference markers: an objective is not an engine metric"]
+    if any(":" in q for q in front.objectives) or st.robust is not None:
+        notes.append("markers on the nominal plant")
+    t = np.linspace(0.0, tf, max(2, round(tf / dt) + 1))
+    r = np.asarray(cfg.scenario.reference.evaluate(t), dtype=np.float64)
+    zero = {
+        "itae": np.trapezoid(t * np.abs(r), t),
+        "iae": np.trapezoid(np.abs(r), t),
+        "ise": np.trapezoid(r * r, t),
+        "isu": 0.0,
+        "iau": 0.0,
+    }
+    markers = [("y ≡ 0 (u = 0)", float(zero[metric[1]]), float(zero[metric[0]]))]
+    found = False
+    for n in (1, 2, 3):
+        for structure in ("leso", "inleso"):
+            name = f"paper-s{n}-{structure}"
+            paper = load_config(name)
+            if paper.raw.get("plant") != cfg.raw.get("plant") or paper.raw.get(
+                "scenario"
+            ) != cfg.raw.get("scenario"):
+                continue
+            found = True
+            res = simulate_batch(
+                paper.plant,
+                paper.controller,
+                replace(paper.scenario, t_final=tf),
+                dt=dt,
+                method=st.method or cfg.method,
+                sampling=paper.sampling,
+            )
+            if res.diverged[0]:
+                notes.append(f"{name} diverged over {tf:g} s")
+                continue
+            m = dict(zip(L.METRIC_NAMES, res.metrics[0], strict=True))
+            markers.append((name, float(m[metric[1]]), float(m[metric[0]])))
+    if not found:
+        notes.append("paper designs not shown: no paper preset has this plant and scenario")
+    floor = None
+    if "isu" in metric:
+        from aiofl.analysis.exact_tracking import exact_tracking_cost
+
+        floor = float(exact_tracking_cost(replace(cfg, dt=dt), t_final=tf)["isu"])
+    return markers, floor, notes
+
+
 def write_outputs(result: TuneResult, out: str | Path, *, header: str = "") -> dict[str, Any]:
     """Write best.toml, history.csv, evaluations.csv, convergence.png, summary.json to ``out``.
 
@@ -207,6 +289,25 @@ def write_outputs(result: TuneResult, out: str | Path, *, header: str = "") -> d
     text = best_toml(result, out, header)
     from aiofl.tuning.checkpoint import CHECKPOINT
 
+    front_files: dict[str, str | bytes] = {}
+    if result.front is not None:
+        from aiofl.tuning.front import front_csv, front_png
+
+        markers, floor, notes = reference_markers(result)
+        title = f"{result.source}: {result.settings.budget()}, t_f = {result.settings.t_final:g} s"
+        front_files["front.csv"] = front_csv(result.front)
+        front_files["front.png"] = front_png(result.front, title, markers, floor, notes)
+        summary["front"] = {
+            "designs": int(result.front.F.shape[0]),
+            "choose": result.front.rule,
+            "objectives": list(result.front.objectives),
+            "constraints": list(result.front.constraints),
+            "chosen_objectives": result.front.F[result.front.chosen].tolist(),
+            "exact_tracking_isu_floor": floor,
+            "markers": [{"label": a, "x": x, "y": y} for a, x, y in markers],
+            "notes": notes,
+        }
+
     with atomic_output_dir(out, keep=(CHECKPOINT,)) as stage:
         atomic_write_text(stage / "best.toml", text)
         atomic_write_text(stage / "history.csv", _history_csv(result))
@@ -215,6 +316,11 @@ def write_outputs(result: TuneResult, out: str | Path, *, header: str = "") -> d
         atomic_write_text(
             stage / "summary.json", json.dumps(summary, indent=2, default=_json_default) + "\n"
         )
+        for name, data in front_files.items():
+            if isinstance(data, bytes):
+                atomic_write_bytes(stage / name, data)
+            else:
+                atomic_write_text(stage / name, data)
     return summary
 
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -93,7 +93,11 @@ class TuneResult:
     evaluator
         ``"local"`` or a description of the Dask cluster.
     live_evaluations, live_seconds
-        Members simulated in this call (not replayed from a checkpoint) and the time spent.
+        Candidates simulated in this call (not replayed from a checkpoint) and the time
+        spent (a robust candidate is K + 1 simulations).
+    front
+        ``algorithm = "nsga2"``: the Pareto front and its chosen design
+        (:class:`aiofl.tuning.front.Front`; ``best_values`` is the chosen design).
     """
 
     settings: TuneSettings
@@ -111,6 +115,7 @@ class TuneResult:
     evaluator: str = "local"
     live_evaluations: int = 0
     live_seconds: float = 0.0
+    front: Any = None  # nsga2: the Pareto front (aiofl.tuning.front.Front)
 
     @property
     def n_evaluations(self) -> int:
@@ -138,9 +143,26 @@ class TuneResult:
         """Provenance lines for the TOML header."""
         s = self.settings
         obj = s.objective if isinstance(s.objective, str) else json.dumps(s.objective)
+        rob = ""
+        if s.robust is not None:
+            r = s.robust
+            agg = f"cvar alpha = {r.alpha:g}" if r.aggregate == "cvar" else r.aggregate
+            rob = f", robust over the nominal plant + {r.draws} [uncertainty] draws ({agg})"
+        if self.front is not None:
+            f = self.front
+            cons = f" under {', '.join(f.constraints)}" if f.constraints else ""
+            chosen = ", ".join(
+                f"{q} {v:.6g}" for q, v in zip(f.objectives, f.F[f.chosen], strict=True)
+            )
+            return (
+                f"Tuned by `aiofl tune` from {self.source or 'a config'}: {s.budget()}, "
+                f"objectives {', '.join(f.objectives)}{cons} over t_f = {s.t_final:g} s{rob}.\n"
+                f"Chosen from the {f.F.shape[0]}-design Pareto front by {f.rule}: {chosen} "
+                f"({self.n_evaluations} evaluations, {int(self.diverged.sum())} diverged)."
+            )
         return (
             f"Tuned by `aiofl tune` from {self.source or 'a config'}: {s.budget()}, "
-            f"objective {obj} over t_f = {s.t_final:g} s.\n"
+            f"objective {obj} over t_f = {s.t_final:g} s{rob}.\n"
             f"Best objective {self.best_objective:.6g} after {self.n_evaluations} evaluations "
             f"({int(self.diverged.sum())} diverged)."
         )
@@ -158,7 +180,15 @@ def describe_tuning(run_config: RunConfig) -> str | None:
         obj_text = obj.upper()
     else:
         obj_text = " + ".join(("" if w == 1 else f"{w:g}·") + k.upper() for k, w in obj.items())
-    return f"{st.budget()}, objective {obj_text} over {st.t_final:g} s (aiofl tune)"
+    if st.objectives:
+        obj_text = "objectives " + ", ".join(q.upper() for q in st.objectives)
+        obj_text += f" under {', '.join(st.constraints)}" if st.constraints else ""
+        obj_text += f", chosen by {st.choose}"
+    else:
+        obj_text = f"objective {obj_text}"
+    if st.robust is not None:
+        obj_text += f", robust ({st.robust.aggregate} over nominal + {st.robust.draws} draws)"
+    return f"{st.budget()}, {obj_text} over {st.t_final:g} s (aiofl tune)"
 
 
 # ---------------------------------------------------------------------- preparing
@@ -172,6 +202,8 @@ class _Prepared:
     initial: NDArray[np.float64]  # initial population in the unit cube
     fingerprint: str
     source: str
+    objectives: tuple[Any, ...] = ()  # nsga2: parsed Quantity objects
+    constraints: tuple[Any, ...] = ()  # nsga2: parsed Constraint objects
 
 
 def _check_parameters(cfg: RunConfig, settings: TuneSettings) -> None:
@@ -211,13 +243,18 @@ def _initial_population(space: SearchSpace, cfg: RunConfig, settings: TuneSettin
 def prepare(
     run_config: RunConfig | str | Path,
     settings: TuneSettings | Mapping[str, Any] | None = None,
+    *,
+    draws: Sequence[Mapping[str, Any]] | None = None,
     **overrides: Any,
 ) -> _Prepared:
     """Validate a config and its tune settings before anything is run or written.
 
     ``run_config`` is a :class:`~aiofl.config.RunConfig`, a TOML path or a preset name;
     ``settings`` defaults to the config's ``[tune]`` table; ``overrides`` (e.g.
-    ``seed=3``) replace settings fields.  Raises :class:`aiofl.config.ConfigError`.
+    ``seed=3``) replace settings fields.  ``draws`` (robust runs only) gives the K
+    scenario changes explicitly (dicts of :class:`~aiofl.scenario.Scenario` fields, e.g.
+    ``{"plant_scale": {"J_l": 1.2}}``) instead of drawing them from the config's
+    ``[uncertainty]`` table.  Raises :class:`aiofl.config.ConfigError`.
     """
     from aiofl.config import ConfigError, load_config
     from aiofl.limits import check_run_size
@@ -247,6 +284,24 @@ def prepare(
         replace(cfg, dt=st.dt).check_sampling()
     space = SearchSpace(st.parameters)
     raw = {k: v for k, v in cfg.raw.items() if k != "tune"}
+    robust_draws: tuple[Mapping[str, Any], ...] = ()
+    if st.robust is not None:
+        from aiofl.tuning.robust import draw_fields
+
+        if draws is None:
+            robust_draws = draw_fields(cfg, st.robust.draws, st.dt or cfg.dt)
+        else:
+            robust_draws = tuple(dict(d) for d in draws)
+        if len(robust_draws) != st.robust.draws:
+            raise ConfigError(
+                f"tune.robust.draws = {st.robust.draws} but {len(robust_draws)} draws given"
+            )
+    elif draws is not None:
+        raise ConfigError("draws given but the [tune] table has no robust = {...} setting")
+    from aiofl.tuning.robust import parse_constraint, parse_quantity
+
+    objectives = tuple(parse_quantity(q) for q in st.objectives or ())
+    constraints = tuple(parse_constraint(c) for c in st.constraints)
     spec = EvalSpec(
         config=raw,
         names=space.names,
@@ -254,6 +309,7 @@ def prepare(
         dt=st.dt or cfg.dt,
         method=st.method or cfg.method,
         divergence_threshold=cfg.divergence_threshold,
+        draws=robust_draws,
     )
     coeffs = objective_coefficients(st, cfg)
     initial = _initial_population(space, cfg, st)
@@ -265,7 +321,9 @@ def prepare(
         "coefficients": coeffs.tolist(),
     }
     fingerprint = hashlib.sha256(json.dumps(fp_data, sort_keys=True).encode()).hexdigest()
-    return _Prepared(cfg, st, space, spec, coeffs, initial, fingerprint, source)
+    return _Prepared(
+        cfg, st, space, spec, coeffs, initial, fingerprint, source, objectives, constraints
+    )
 
 
 # -------------------------------------------------------------------------- runner
@@ -274,6 +332,10 @@ def _algorithm(st: TuneSettings, initial: NDArray[np.float64]) -> Any:
         from pymoo.algorithms.soo.nonconvex.ga import GA
 
         return GA(pop_size=st.population, sampling=initial, eliminate_duplicates=True)
+    if st.algorithm == "nsga2":
+        from pymoo.algorithms.moo.nsga2 import NSGA2
+
+        return NSGA2(pop_size=st.population, sampling=initial, eliminate_duplicates=True)
     if st.algorithm == "de":
         from pymoo.algorithms.soo.nonconvex.de import DE
 
@@ -284,17 +346,28 @@ def _algorithm(st: TuneSettings, initial: NDArray[np.float64]) -> Any:
     return CMAES(x0=initial, pop_size=st.population, sigma=0.2)
 
 
-def _problem(n_var: int, fn: Callable[[NDArray[np.float64]], NDArray[np.float64]]) -> Any:
+def _problem(
+    n_var: int,
+    fn: Callable[[NDArray[np.float64]], Any],
+    n_obj: int = 1,
+    n_constr: int = 0,
+) -> Any:
     from pymoo.core.problem import Problem
 
     class TuningProblem(Problem):
         """Vectorized problem in the unit cube: a whole population per call."""
 
         def __init__(self) -> None:
-            super().__init__(n_var=n_var, n_obj=1, xl=0.0, xu=1.0, vtype=float)
+            super().__init__(
+                n_var=n_var, n_obj=n_obj, n_ieq_constr=n_constr, xl=0.0, xu=1.0, vtype=float
+            )
 
         def _evaluate(self, x: Any, out: dict[str, Any], *args: Any, **kwargs: Any) -> None:
-            out["F"] = fn(np.asarray(x, dtype=np.float64))[:, None]
+            r = fn(np.asarray(x, dtype=np.float64))
+            if n_obj == 1:
+                out["F"] = r[:, None]
+            else:
+                out["F"], out["G"] = r
 
     return TuningProblem()
 
@@ -400,9 +473,8 @@ def tune(
             res_m, res_d, res_t = res.metrics, res.diverged, res.diverged_at
             secs = time.perf_counter() - t0
             live = True
-        obj = objective_values(
-            res_m, res_d, res_t, prep.coefficients, st.divergence_penalty, st.t_final
-        )
+        scores = _scores(prep, res_m, res_d, res_t)
+        obj, cand_div = scores["objective"], scores["candidate_diverged"]
         gens.append(
             {
                 "s": s.copy(),
@@ -410,22 +482,25 @@ def tune(
                 "diverged": res_d,
                 "diverged_at": res_t,
                 "seconds": secs,
-                "objective": obj,
+                **scores,
             }
         )
         state["total"] += obj.size
         state["best"] = min(state["best"], float(obj.min()))
-        history.append(_generation_row(len(gens), obj, res_d, state["total"], state["best"], secs))
+        history.append(
+            _generation_row(len(gens), obj, cand_div, state["total"], state["best"], secs)
+        )
         if live:
             state["live_n"] += obj.size
             state["live_s"] += secs
             if ckpt is not None:
                 save_checkpoint(ckpt, prep.fingerprint, gens)
         bar.update(len(gens), state["best"], obj.size, secs, live)
-        return obj
+        return (scores["F"], scores["G"]) if prep.objectives else obj
 
     try:
-        problem = _problem(space.n_var, evaluate)
+        n_con = 1 + len(prep.constraints) if prep.objectives else 0
+        problem = _problem(space.n_var, evaluate, max(1, len(prep.objectives)), n_con)
         algo = _algorithm(st, prep.initial)
         algo.setup(problem, termination=("n_gen", st.generations), seed=st.seed, verbose=False)
         if st.algorithm == "cmaes":
@@ -440,11 +515,20 @@ def tune(
 
     s_all = np.concatenate([g["s"] for g in gens])
     obj_all = np.concatenate([g["objective"] for g in gens])
-    div_all = np.concatenate([g["diverged"] for g in gens])
+    div_all = np.concatenate([g["candidate_diverged"] for g in gens])  # any member
     met_all = np.concatenate([g["metrics"] for g in gens])
+    if met_all.ndim == 3:  # robust: best_metrics are the nominal plant's
+        met_all = met_all[:, 0, :]
     gen_idx = np.concatenate([np.full(g["s"].shape[0], i + 1) for i, g in enumerate(gens)])
     values = space.decode(s_all)
-    ib = int(np.argmin(obj_all))
+    front = None
+    if prep.objectives:
+        from aiofl.tuning.front import front_index, front_of_run
+
+        front = front_of_run(prep, gens, values)
+        ib = front_index(front, values)
+    else:
+        ib = int(np.argmin(obj_all))
     best_values = {n: float(values[ib, j]) for j, n in enumerate(space.names)}
     best_metrics = (
         None
@@ -468,7 +552,46 @@ def tune(
         evaluator=getattr(ev, "description", type(ev).__name__),
         live_evaluations=int(state["live_n"]),
         live_seconds=float(state["live_s"]),
+        front=front,
     )
+
+
+def _scores(
+    prep: _Prepared,
+    metrics: NDArray[np.float64],
+    diverged: NDArray[np.bool_],
+    diverged_at: NDArray[np.float64],
+) -> dict[str, NDArray[Any]]:
+    """Per-candidate objective (and for NSGA-II ``F``, ``G``, constraint values)."""
+    from aiofl.tuning.robust import objective_matrix, robust_objective
+
+    st = prep.settings
+    cand_div = diverged.any(axis=1) if diverged.ndim == 2 else diverged
+    kind, alpha = (st.robust.aggregate, st.robust.alpha) if st.robust else ("nominal", 0.9)
+    if prep.objectives:
+        cap = 2.0 * st.divergence_penalty
+        F, G, raw = objective_matrix(
+            prep.objectives, prep.constraints, metrics, diverged, kind, alpha, cap
+        )
+        feasible = (G <= 0).all(axis=1)
+        obj = np.where(feasible, F[:, 0], cap)  # history: the first objective when feasible
+        return {"objective": obj, "candidate_diverged": cand_div, "F": F, "G": G, "raw": raw}
+    if st.robust is None:
+        obj = objective_values(
+            metrics, diverged, diverged_at, prep.coefficients, st.divergence_penalty, st.t_final
+        )
+    else:
+        obj = robust_objective(
+            metrics,
+            diverged,
+            diverged_at,
+            prep.coefficients,
+            st.divergence_penalty,
+            st.t_final,
+            kind,
+            alpha,
+        )
+    return {"objective": obj, "candidate_diverged": cand_div}
 
 
 class _Progress:

@@ -3,13 +3,18 @@ r"""The ``[tune]`` table: settings, search space, objective, and writing a tuned
 .. code-block:: toml
 
     [tune]
-    algorithm = "ga"          # ga | de | cmaes (pymoo)
+    algorithm = "ga"          # ga | de | cmaes | nsga2 (pymoo)
     objective = "opi"         # opi | itae | iae | ise | isu | iau | {itae = 1.0, isu = 0.01}
     t_final = 6.0             # tuning horizon [s] (paper: 6 s)
     population = 64
     generations = 50
     seed = 1
     divergence_penalty = 1e6  # objective of a member that diverged (see below)
+    robust = { draws = 16, aggregate = "cvar", alpha = 0.9 }  # optional; needs [uncertainty]
+    # nsga2 only: objectives (2 or 3) and constraints, see aiofl.tuning.robust
+    # objectives = ["itae", "isu"]          # METRIC or METRIC:AGGREGATE
+    # constraints = ["isu <= 15.5", "stable_fraction >= 1"]
+    # choose = "best-first-under-constraints"   # or "knee" (aiofl.tuning.front)
     [tune.parameters]
     "eso.omega0" = { lo = 10.0, hi = 2000.0, log = true }
     "law.b0" = { lo = 1.0, hi = 1e5, log = true }
@@ -53,6 +58,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "ParameterBounds",
+    "RobustSettings",
     "SearchSpace",
     "TuneSettings",
     "config_with_values",
@@ -64,7 +70,9 @@ __all__ = [
     "used_parameters",
 ]
 
-ALGORITHMS = ("ga", "de", "cmaes")
+ALGORITHMS = ("ga", "de", "cmaes", "nsga2")
+#: largest ``robust.draws`` (each candidate costs K + 1 simulations)
+MAX_ROBUST_DRAWS = 1000
 
 
 class _Model(BaseModel):
@@ -88,10 +96,18 @@ class ParameterBounds(_Model):
         return self
 
 
+class RobustSettings(_Model):
+    """``robust = { draws = K, aggregate = "mean" | "worst" | "cvar", alpha = 0.9 }``."""
+
+    draws: Annotated[int, Field(ge=1, le=MAX_ROBUST_DRAWS)]
+    aggregate: Literal["mean", "worst", "cvar"] = "mean"
+    alpha: Annotated[float, Field(gt=0, lt=1, allow_inf_nan=False)] = 0.9
+
+
 class TuneSettings(_Model):
     """Validated ``[tune]`` table (see the module docstring for the fields)."""
 
-    algorithm: Literal["ga", "de", "cmaes"] = "ga"
+    algorithm: Literal["ga", "de", "cmaes", "nsga2"] = "ga"
     objective: str | dict[str, Annotated[float, Field(ge=0, allow_inf_nan=False)]] = "opi"
     t_final: Annotated[float, Field(gt=0, le=T_FINAL_MAX, allow_inf_nan=False)] = 6.0
     population: Annotated[int, Field(ge=2, le=MAX_POPULATION)] = 64
@@ -103,9 +119,64 @@ class TuneSettings(_Model):
     method: Literal["rk4", "euler"] | None = None
     chunks: Annotated[int, Field(ge=1, le=100_000)] | None = None
     parameters: dict[str, ParameterBounds]
+    robust: RobustSettings | None = None
+    objectives: list[str] | None = None
+    constraints: list[str] = Field(default_factory=list, max_length=16)
+    choose: Literal["best-first-under-constraints", "knee"] = "best-first-under-constraints"
+
+    @field_validator("objectives")
+    @classmethod
+    def _objectives(cls, v: list[str] | None) -> list[str] | None:
+        from aiofl.tuning.robust import parse_quantity
+
+        if v is None:
+            return v
+        if not 2 <= len(v) <= 3:
+            raise ValueError(f"objectives has {len(v)} entries; allowed: 2 or 3")
+        parsed = [parse_quantity(q) for q in v]
+        if any(q.metric == "stable_fraction" for q in parsed):
+            raise ValueError("stable_fraction is not an objective; use it as a constraint")
+        texts = [q.text() for q in parsed]
+        if len(set(texts)) != len(texts):
+            raise ValueError(f"objectives repeat a quantity: {v}")
+        return v
+
+    @field_validator("constraints")
+    @classmethod
+    def _constraints(cls, v: list[str]) -> list[str]:
+        from aiofl.tuning.robust import parse_constraint
+
+        for c in v:
+            parse_constraint(c)
+        return v
 
     @model_validator(mode="after")
     def _budget(self) -> TuneSettings:
+        if self.algorithm == "nsga2" and self.objectives is None:
+            raise ValueError('algorithm = "nsga2" needs objectives, e.g. ["itae", "isu"]')
+        if self.algorithm != "nsga2" and (self.objectives is not None or self.constraints):
+            raise ValueError(
+                f'objectives and constraints need algorithm = "nsga2" (got {self.algorithm!r}; '
+                "the single-objective algorithms use objective)"
+            )
+        if self.robust is None:
+            from aiofl.tuning.robust import parse_constraint, parse_quantity
+
+            named = [parse_quantity(q) for q in self.objectives or ()]
+            named += [parse_constraint(c).quantity for c in self.constraints]
+            over = [q.text() for q in named if q.aggregate not in (None, "nominal")]
+            if over:
+                raise ValueError(
+                    f"{', '.join(over)}: an aggregate over draws needs robust = "
+                    "{ draws = K, ... } (and an [uncertainty] table)"
+                )
+        k1 = 1 + (self.robust.draws if self.robust else 0)
+        if self.population * k1 > MAX_POPULATION:
+            raise ValueError(
+                f"population x (robust.draws + 1) = {self.population} x {k1} = "
+                f"{self.population * k1} members per generation; allowed: at most "
+                f"{MAX_POPULATION} (one batched engine call)"
+            )
         total = self.population * self.generations
         if total > MAX_EVALUATIONS:
             raise ValueError(

@@ -1,0 +1,221 @@
+r"""Multi-objective tuning's outputs: the Pareto front, the chosen design, its figure.
+
+NSGA-II (pymoo) keeps only its last population; the front reported here is taken over
+**every** evaluated design of the run: the feasible designs (no diverged member, every
+constraint met) that no other feasible design dominates (:math:`a` dominates :math:`b` if
+:math:`F_a \le F_b` in every objective and :math:`<` in one; pymoo's
+``NonDominatedSorting``), duplicates removed.
+
+The chosen point (``best.toml``) follows ``[tune] choose``:
+
+``"best-first-under-constraints"`` (default)
+    the front design with the lowest first objective (ties: the lowest second ...);
+``"knee"``
+    the front design closest (Euclidean) to the ideal point after normalising each
+    objective to [0, 1] over the front, on a log10 scale when the objective is positive
+    on the whole front (ITAE and ISU span decades).
+
+Both pick from the front, whose designs are all feasible: a constraint-violating design is
+never chosen.  With no feasible design there is no front and no choice
+(:class:`NoFeasibleDesign`).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from aiofl.config import ConfigError
+
+__all__ = [
+    "Front",
+    "NoFeasibleDesign",
+    "choose",
+    "front_csv",
+    "front_index",
+    "front_of_run",
+    "front_png",
+    "pareto_front",
+]
+
+
+class NoFeasibleDesign(ConfigError):
+    """No evaluated design met the constraints (and stayed stable on every draw): the
+    ``[tune]`` table asks for the impossible, reported as bad input (exit status 2)."""
+
+
+@dataclass(frozen=True)
+class Front:
+    """The Pareto front of a run.
+
+    Attributes
+    ----------
+    names
+        Tuned parameters; ``values`` (n, d) their values per front design.
+    objectives, constraints
+        The quantities as written in the config; ``F`` (n, n_obj) and ``raw`` (n, n_con)
+        their values per design.
+    chosen
+        Row of the chosen design; ``rule`` the rule that chose it.
+    """
+
+    names: tuple[str, ...]
+    objectives: tuple[str, ...]
+    constraints: tuple[str, ...]
+    values: NDArray[np.float64]
+    F: NDArray[np.float64]
+    raw: NDArray[np.float64]
+    chosen: int
+    rule: str
+
+
+def pareto_front(F: NDArray[np.float64], G: NDArray[np.float64]) -> NDArray[np.int64]:
+    """Indices of the feasible (``G <= 0``) rows of ``F`` that no feasible row dominates."""
+    from pymoo.util.nds.non_dominated_sorting import NonDominatedSorting
+
+    feasible = np.flatnonzero((G <= 0).all(axis=1) & np.isfinite(F).all(axis=1))
+    if feasible.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    nd = NonDominatedSorting().do(F[feasible], only_non_dominated_front=True)
+    return np.sort(feasible[np.asarray(nd, dtype=np.int64)])
+
+
+def choose(F: NDArray[np.float64], rule: str) -> int:
+    """Row of ``F`` (a front) chosen by ``rule`` (see the module docstring)."""
+    if F.shape[0] == 0:
+        raise NoFeasibleDesign("no feasible design to choose from")
+    if rule == "knee":
+        z = np.array(F, dtype=np.float64)
+        pos = (z > 0).all(axis=0)
+        z[:, pos] = np.log10(z[:, pos])
+        span = z.max(axis=0) - z.min(axis=0)
+        span = np.where(span > 0, span, 1.0)
+        zn = (z - z.min(axis=0)) / span
+        return int(np.argmin(np.sqrt((zn**2).sum(axis=1))))
+    if rule == "best-first-under-constraints":
+        return int(np.lexsort(F.T[::-1])[0])
+    raise ValueError(f"choose = {rule!r}; allowed: best-first-under-constraints, knee")
+
+
+def front_of_run(prep: Any, gens: list[dict[str, Any]], values: NDArray[np.float64]) -> Any:
+    """The Pareto front over every evaluated design of a run, and the chosen one.
+
+    ``prep`` is the run's prepared settings (:func:`aiofl.tuning.search.prepare`), ``gens``
+    its generations (dicts with ``F``, ``G``, ``raw`` per candidate), ``values`` (N, d) the
+    parameter values of all N evaluated candidates.
+    """
+    F = np.concatenate([g["F"] for g in gens])
+    G = np.concatenate([g["G"] for g in gens])
+    raw = np.concatenate([g["raw"] for g in gens])
+    idx = pareto_front(F, G)
+    if idx.size == 0:
+        raise NoFeasibleDesign(
+            f"no design of the {F.shape[0]} evaluated stayed stable on every member and met "
+            f"the constraints {[c.text() for c in prep.constraints]}; loosen them or widen "
+            "the search"
+        )
+    # one row per distinct design (a design may be evaluated twice across generations)
+    _, first = np.unique(values[idx], axis=0, return_index=True)
+    idx = idx[np.sort(first)]
+    st = prep.settings
+    front = Front(
+        names=prep.space.names,
+        objectives=tuple(q.text() for q in prep.objectives),
+        constraints=tuple(c.text() for c in prep.constraints),
+        values=values[idx],
+        F=F[idx],
+        raw=raw[idx],
+        chosen=choose(F[idx], st.choose),
+        rule=st.choose,
+    )
+    return front
+
+
+def front_index(front: Any, values: NDArray[np.float64]) -> int:
+    """Row of ``values`` that is the front's chosen design (its first evaluation)."""
+    hit = np.flatnonzero((values == front.values[front.chosen]).all(axis=1))
+    return int(hit[0])
+
+
+def _csv_float(v: float) -> str:
+    return repr(float(v)) if np.isfinite(v) else ""
+
+
+def front_csv(front: Front) -> str:
+    """``front.csv``: one row per front design (parameters, objectives, constraint values),
+    sorted by the first objective, with a ``chosen`` flag."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow([*front.names, *front.objectives, *front.constraints, "chosen"])
+    for i in np.argsort(front.F[:, 0], kind="stable"):
+        w.writerow(
+            [
+                *(_csv_float(v) for v in front.values[i]),
+                *(_csv_float(v) for v in front.F[i]),
+                *(_csv_float(v) for v in front.raw[i]),
+                int(i == front.chosen),
+            ]
+        )
+    return buf.getvalue()
+
+
+def front_png(
+    front: Front,
+    title: str,
+    markers: Sequence[tuple[str, float, float]] = (),
+    isu_floor: float | None = None,
+    notes: Sequence[str] = (),
+) -> bytes:
+    """``front.png``: objective 1 against objective 2 (log axes where all values are > 0).
+
+    ``markers`` are labelled reference points (the paper's printed designs, the y ≡ 0
+    controller); ``isu_floor`` draws the exact-tracking ISU floor as a vertical line when
+    the second objective is an ISU (or a horizontal one when the first is); ``notes`` are
+    printed under the title (e.g. why the paper's designs are not shown).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    x, y = front.F[:, 1], front.F[:, 0]
+    fig, ax = plt.subplots(figsize=(7, 4.8), dpi=110)
+    order = np.argsort(x)
+    ax.plot(x[order], y[order], "o-", ms=4, lw=1, label=f"Pareto front ({x.size} designs)")
+    c = front.chosen
+    ax.plot(x[c], y[c], "*", ms=14, color="C3", label=f"chosen ({front.rule})")
+    xs, ys = list(x), list(y)
+    for k, (label, mx, my) in enumerate(markers):
+        if np.isfinite(mx) and np.isfinite(my):
+            ax.plot(mx, my, "s", ms=7, color=f"C{(k + 4) % 10}", label=label)
+            xs.append(mx)
+            ys.append(my)
+    if isu_floor is not None and np.isfinite(isu_floor):
+        if front.objectives[1].split(":")[0] == "isu":
+            ax.axvline(isu_floor, ls="--", color="k", lw=1, label="exact-tracking ISU floor")
+            xs.append(isu_floor)
+        elif front.objectives[0].split(":")[0] == "isu":
+            ax.axhline(isu_floor, ls="--", color="k", lw=1, label="exact-tracking ISU floor")
+            ys.append(isu_floor)
+    if min(xs) > 0:
+        ax.set_xscale("log")
+    else:  # a zero (the y ≡ 0 controller's ISU) cannot sit on a log axis
+        ax.set_xscale("symlog", linthresh=max(1e-6, min(v for v in xs if v > 0) / 10))
+    if min(ys) > 0:
+        ax.set_yscale("log")
+    ax.set_xlabel(front.objectives[1])
+    ax.set_ylabel(front.objectives[0])
+    ax.set_title(title + ("\n" + "; ".join(notes) if notes else ""), fontsize=8)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png")
+    plt.close(fig)
+    return buf.getvalue()

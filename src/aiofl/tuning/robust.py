@@ -1,0 +1,283 @@
+r"""Robust and multi-objective scoring: a candidate over the nominal plant and K model draws.
+
+With ``[tune] robust = { draws = K, aggregate = ..., alpha = 0.9 }`` every candidate is
+simulated on the nominal plant and on the same K perturbed plants (common random numbers:
+the draws depend on the config's ``[uncertainty]`` table and seed only, never on the
+candidate), all :math:`P\times(K+1)` members of a generation in one batched engine call.
+A metric :math:`m` of a candidate is then aggregated over its :math:`K+1` values
+:math:`m_0` (nominal), :math:`m_1..m_K` (draws):
+
+``mean``
+    :math:`\frac{1}{K+1}\sum_k m_k`;
+``worst``
+    :math:`\max_k m_k`;
+``cvar``
+    :math:`\mathrm{CVaR}_\alpha`, the mean of the worst :math:`\lceil(1-\alpha)(K+1)\rceil`
+    values (Rockafellar & Uryasev, 2000, the discrete form of eq. (3) with equal weights
+    when :math:`(1-\alpha)(K+1)` is an integer, the tail rounded up otherwise);
+``nominal``
+    :math:`m_0` (for objectives/constraints that name it).
+
+A diverged member has :math:`m_k = +\infty`, so any aggregate but ``nominal`` of a
+candidate with a diverged draw is :math:`+\infty`: **infeasible**.  The single-objective
+algorithms (GA, DE, CMA-ES) see the existing finite penalty instead of :math:`+\infty`
+(:func:`robust_objective`): CMA-ES has no constraint handling in pymoo, the penalty is
+ordered by how many draws stayed stable and how long the unstable ones lasted, and the
+non-robust objective and checkpoints stay unchanged.  NSGA-II gets a real pymoo
+constraint, ``G = (diverged members) > 0`` (:func:`objective_matrix`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from aiofl import layout as L
+
+__all__ = [
+    "AGGREGATES",
+    "Constraint",
+    "Quantity",
+    "aggregate",
+    "objective_matrix",
+    "parse_constraint",
+    "parse_quantity",
+    "robust_objective",
+]
+
+AGGREGATES = ("mean", "worst", "cvar", "nominal")
+#: quantities a constraint or objective may name besides the engine metrics
+EXTRA_QUANTITIES = ("stable_fraction",)
+
+
+def aggregate(values: NDArray[np.float64], kind: str, alpha: float = 0.9) -> NDArray[np.float64]:
+    r"""Aggregate ``values`` (..., K+1) over the last axis (column 0 = nominal plant).
+
+    ``mean``, ``worst`` and ``cvar`` are :func:`aiofl.uncertainty.aggregate` (non-finite
+    entries, i.e. diverged members, count as :math:`+\infty`); ``nominal`` is column 0.
+    """
+    from aiofl.uncertainty import aggregate as over_draws
+
+    v = np.asarray(values, dtype=np.float64)
+    v = np.where(np.isfinite(v), v, np.inf)
+    if kind == "nominal":
+        return v[..., 0]
+    if kind not in AGGREGATES:
+        raise ValueError(f"aggregate {kind!r}; allowed: {', '.join(AGGREGATES)}")
+    return over_draws(v, kind, alpha=alpha)  # type: ignore[arg-type]
+
+
+# ----------------------------------------------------------------- the grammar
+_NAME = r"[a-z_]+"
+_QUANTITY = re.compile(rf"^\s*({_NAME})\s*(?::\s*({_NAME})\s*)?$")
+_CONSTRAINT = re.compile(
+    rf"^\s*({_NAME}(?:\s*:\s*{_NAME})?)\s*(<=|>=)\s*"
+    r"([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*$"
+)
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """A metric of a candidate, aggregated over the draws: ``itae``, ``isu:cvar`` ...
+
+    ``aggregate`` None means the run's ``robust.aggregate`` (or the nominal plant alone
+    when the run is not robust).
+    """
+
+    metric: str
+    aggregate: str | None = None
+
+    def text(self) -> str:
+        """The quantity as written in the config."""
+        return self.metric + (f":{self.aggregate}" if self.aggregate else "")
+
+
+@dataclass(frozen=True)
+class Constraint:
+    """``quantity <= bound`` (``upper``) or ``quantity >= bound``."""
+
+    quantity: Quantity
+    upper: bool
+    bound: float
+
+    def text(self) -> str:
+        """The constraint as written in the config."""
+        return f"{self.quantity.text()} {'<=' if self.upper else '>='} {self.bound:g}"
+
+
+def parse_quantity(text: str) -> Quantity:
+    """Parse ``METRIC`` or ``METRIC:AGGREGATE`` (no eval: a regular expression).
+
+    METRIC is one of :data:`aiofl.layout.METRIC_NAMES` or ``stable_fraction`` (the
+    fraction of the K+1 members that did not diverge; it takes no aggregate); AGGREGATE
+    one of ``mean``, ``worst``, ``cvar``, ``nominal``.  Raises ``ValueError`` naming the
+    allowed values.
+    """
+    m = _QUANTITY.match(text) if isinstance(text, str) else None
+    allowed = (*L.METRIC_NAMES, *EXTRA_QUANTITIES)
+    if m is None:
+        raise ValueError(
+            f"{text!r} is not METRIC or METRIC:AGGREGATE; METRIC one of {', '.join(allowed)}, "
+            f"AGGREGATE one of {', '.join(AGGREGATES)}"
+        )
+    metric, agg = m.group(1), m.group(2)
+    if metric not in allowed:
+        raise ValueError(f"unknown metric {metric!r} in {text!r}; allowed: {', '.join(allowed)}")
+    if agg is not None and agg not in AGGREGATES:
+        raise ValueError(f"unknown aggregate {agg!r} in {text!r}; allowed: {', '.join(AGGREGATES)}")
+    if metric in EXTRA_QUANTITIES and agg is not None:
+        raise ValueError(f"{metric} takes no aggregate (got {text!r})")
+    return Quantity(metric, agg)
+
+
+def parse_constraint(text: str) -> Constraint:
+    """Parse ``QUANTITY <= NUMBER`` or ``QUANTITY >= NUMBER`` (e.g. ``"isu:worst <= 15.5"``).
+
+    A regular expression, never ``eval``: one quantity (:func:`parse_quantity`), one of
+    the two comparisons, one finite decimal number.
+    """
+    m = _CONSTRAINT.match(text) if isinstance(text, str) else None
+    if m is None:
+        raise ValueError(
+            f"constraint {text!r} is not 'QUANTITY <= NUMBER' or 'QUANTITY >= NUMBER' "
+            "(e.g. 'isu <= 15.5', 'stable_fraction >= 1', 'itae:cvar <= 0.05')"
+        )
+    bound = float(m.group(3))
+    if not math.isfinite(bound):
+        raise ValueError(f"constraint {text!r}: the bound must be finite")
+    return Constraint(parse_quantity(m.group(1)), m.group(2) == "<=", bound)
+
+
+# --------------------------------------------------------------------- scoring
+def _as_draws(
+    metrics: NDArray[np.float64], diverged: NDArray[np.bool_]
+) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+    """Metrics as (B, K+1, 5) and divergence as (B, K+1) (a non-robust run has K = 0)."""
+    m = np.asarray(metrics, dtype=np.float64)
+    d = np.asarray(diverged, dtype=bool)
+    if m.ndim == 2:
+        m, d = m[:, None, :], d[:, None]
+    return m, d
+
+
+def quantity_values(
+    q: Quantity,
+    metrics: NDArray[np.float64],
+    diverged: NDArray[np.bool_],
+    default: str,
+    alpha: float,
+) -> NDArray[np.float64]:
+    """Per candidate value (B,) of quantity ``q`` (``default``: the run's aggregate)."""
+    m, d = _as_draws(metrics, diverged)
+    if q.metric == "stable_fraction":
+        return 1.0 - d.mean(axis=1)
+    col = m[:, :, L.METRIC_NAMES.index(q.metric)]
+    col = np.where(d, np.inf, col)
+    return aggregate(col, q.aggregate or default, alpha)
+
+
+def robust_objective(
+    metrics: NDArray[np.float64],
+    diverged: NDArray[np.bool_],
+    diverged_at: NDArray[np.float64],
+    coefficients: NDArray[np.float64],
+    penalty: float,
+    t_final: float,
+    kind: str,
+    alpha: float,
+) -> NDArray[np.float64]:
+    r"""Scalar objective of each candidate over its K+1 members.
+
+    :math:`J = \mathrm{agg}_k(c^T m_k)` when every member is stable and
+    :math:`J` finite; otherwise :math:`P\,(2 - \bar f)` with :math:`\bar f` the mean over
+    the K+1 members of :math:`t_{d,k}/t_f` (1 for a stable member): finite, worse than
+    any feasible :math:`J < P`, and better the more draws stay stable and the later the
+    others diverge.  With K = 0 this is :func:`aiofl.tuning.space.objective_values`.
+    """
+    m, d = _as_draws(metrics, diverged)
+    t = np.asarray(diverged_at, dtype=np.float64).reshape(d.shape)
+    with np.errstate(all="ignore"):
+        per = m @ coefficients  # (B, K+1)
+    per = np.where(d, np.inf, per)
+    j = aggregate(per, kind, alpha)
+    frac = np.where(d, np.clip(np.nan_to_num(t / t_final, nan=0.0), 0.0, 1.0), 1.0)
+    pen = penalty * (2.0 - frac.mean(axis=1))
+    j = np.where(d.any(axis=1), pen, j)
+    return np.where(np.isfinite(j), j, 2.0 * penalty)
+
+
+def objective_matrix(
+    objectives: Sequence[Quantity],
+    constraints: Sequence[Constraint],
+    metrics: NDArray[np.float64],
+    diverged: NDArray[np.bool_],
+    default: str,
+    alpha: float,
+    cap: float,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """pymoo's ``F`` (B, n_obj), ``G`` (B, 1 + n_con) and the raw constraint values.
+
+    ``G[:, 0]`` is the number of diverged members (> 0: infeasible); ``G[:, 1+i]`` is
+    ``value - bound`` for ``<=`` and ``bound - value`` for ``>=`` (pymoo: feasible iff
+    ``G <= 0``).  Non-finite objectives (diverged) are replaced by ``cap`` so that pymoo's
+    sorting stays well defined; such candidates are infeasible through ``G[:, 0]``.
+    """
+    _, d = _as_draws(metrics, diverged)
+    f = np.column_stack([quantity_values(q, metrics, diverged, default, alpha) for q in objectives])
+    raw = np.zeros((f.shape[0], len(constraints)))
+    g = np.zeros((f.shape[0], 1 + len(constraints)))
+    g[:, 0] = d.sum(axis=1).astype(np.float64)
+    for i, c in enumerate(constraints):
+        v = quantity_values(c.quantity, metrics, diverged, default, alpha)
+        raw[:, i] = v
+        viol = v - c.bound if c.upper else c.bound - v
+        g[:, 1 + i] = np.where(np.isfinite(viol), viol, cap)
+    f = np.where(np.isfinite(f), f, cap)
+    return f, g, raw
+
+
+def draw_fields(config: Any, draws: int, dt: float) -> tuple[dict[str, Any], ...]:
+    """The K per-draw changes of ``config``'s ``[uncertainty]`` table, as plain data.
+
+    Drawn by :func:`aiofl.uncertainty.sample_draws` with the table's seed and ``draws`` =
+    K (common random numbers: the same for every candidate and every run with that seed).
+    Each draw is a dict of :class:`aiofl.scenario.Scenario` fields that differ from the
+    nominal scenario (``plant_scale``, ``noise_variance`` ...), plus ``"ts"`` when the
+    sample time is drawn, so it travels to Dask workers in the picklable evaluation spec.
+    Raises :class:`aiofl.config.ConfigError` when the config has no ``[uncertainty]`` table.
+    """
+    from dataclasses import fields
+
+    from aiofl.config import ConfigError
+    from aiofl.uncertainty import sample_draws
+
+    unc = getattr(config, "uncertainty", None)
+    if unc is None:
+        raise ConfigError(
+            "tune.robust: needs the config's [uncertainty] table (the model error to be "
+            "robust against), e.g. [uncertainty] parameters = { J_l = { uniform = 0.2 } }"
+        )
+    try:
+        d = sample_draws(unc, draws=draws, dt=dt)
+        scenarios = d.scenarios(config.scenario)
+    except ValueError as exc:
+        raise ConfigError(f"tune.robust: {exc}") from None
+    nominal = config.scenario
+    out = []
+    for k, s in enumerate(scenarios):
+        diff: dict[str, Any] = {}
+        for f in fields(s):
+            v, v0 = getattr(s, f.name), getattr(nominal, f.name)
+            if f.name == "t_final" or v == v0:
+                continue
+            diff[f.name] = dict(v) if f.name in ("plant_scale", "plant_overrides") else v
+        if d.ts is not None:
+            diff["ts"] = float(d.ts[k])
+        out.append(diff)
+    return tuple(out)
