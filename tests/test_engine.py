@@ -214,6 +214,77 @@ def test_kernel_fingerprint_covers_the_component_modules(slfjm, monkeypatch):
     assert engine._kernel_fingerprint(slfjm) == before
 
 
+def _reachable_dispatchers(ns: dict) -> list:
+    """Every numba dispatcher a kernel compiled from the globals ``ns`` can call: those in
+    ``ns``, in the modules it names, and, transitively, in their functions' globals."""
+    import types
+
+    from numba.core.dispatcher import Dispatcher
+
+    seen: dict[int, Dispatcher] = {}
+    spaces, done = [ns], set()
+    while spaces:
+        space = spaces.pop()
+        if id(space) in done:
+            continue
+        done.add(id(space))
+        for obj in list(space.values()):
+            if isinstance(obj, types.ModuleType) and obj.__name__.startswith("aiofl."):
+                spaces.append(vars(obj))
+            elif isinstance(obj, Dispatcher) and id(obj) not in seen:
+                seen[id(obj)] = obj
+                spaces.append(obj.py_func.__globals__)
+    return list(seen.values())
+
+
+def test_kernel_links_no_component_from_numbas_per_function_cache(slfjm):
+    """numba keys a ``cache=True`` function's disk cache on its own file only, so a cached
+    ``feedback.linear_sef_gain`` keeps an old ``fastmath.binomial_power`` linked in after
+    fastmath.py is edited; a kernel compiled against it was then stored under the new
+    fingerprint and differed from a fresh compile of the same source (by rounding, in the
+    exact-TD designs).  Nothing the kernel calls may come from such a cache, and the
+    private copies it calls compute bitwise what the public components do."""
+    from aiofl.components import differentiators, fastmath, feedback, law, observers
+
+    ns, _, _ = engine.plant_namespace(slfjm)
+    found = _reachable_dispatchers(ns)
+    component = [d for d in found if d.py_func.__module__.startswith("aiofl.components.")]
+    names = {d.py_func.__name__ for d in component}
+    # the kernel's own functions, the components it binds and what they call across modules
+    assert {"fal_scaled", "linear_sef_gain", "binomial_power", "abspow", "aiofl_law"} <= names
+    assert any(d.py_func.__name__ == "_aiofl_command" for d in found)
+    for d in found:
+        if d.py_func.__module__.startswith(("aiofl.components.", "aiofl.engine.kernel")):
+            assert type(d._cache).__name__ == "NullCache", d.py_func.__qualname__
+    for public in (fastmath, feedback, observers, differentiators, law):
+        assert not any(d is v for d in found for v in vars(public).values())
+    # same code, same flags: the same numbers
+    for i in range(1, 5):
+        assert ns["_LINEAR_SEF_GAIN"](4, i, 17.3) == feedback.linear_sef_gain(4, i, 17.3)
+    for e in (-0.7, -1e-3, 0.0, 2e-4, 0.31, 5.0):
+        args = (e, 0.5, 0.01, feedback.fal_inner_slope(0.5, 0.01))
+        assert ns["_FAL"](*args) == feedback.fal_scaled(*args)
+        assert ns["_INLSEF_TERM"](e, 3.0, 2.0, 1.5, 0.7) == feedback.inlsef_term(
+            e, 3.0, 2.0, 1.5, 0.7
+        )
+
+
+def test_a_source_edited_after_loading_is_not_cached_under_the_new_fingerprint(monkeypatch):
+    """The fingerprint digests the files on disk, numba compiles the code this process
+    loaded: when another process edits kernel.py (or a component) in between, the kernel
+    must be compiled uncached rather than stored as the new source's."""
+    from aiofl.components import fastmath
+
+    assert set(engine._LOADED) == set(engine._engine_sources())
+    assert not engine._engine_sources_changed()
+    real = engine._source_digest
+    for path in (engine.kernel.__file__, fastmath.__file__):
+        monkeypatch.setattr(
+            engine, "_source_digest", lambda p, f=path: "edited" if p == f else real(p)
+        )
+        assert engine._engine_sources_changed(), path
+
+
 # ------------------------------------------------------------------ convergence order
 def _max_error(plant, ctrl, scen, dt, method, ref):
     res = simulate(plant, ctrl, scen, dt=dt, method=method, decimation=round(8e-3 / dt))

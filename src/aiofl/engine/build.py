@@ -67,6 +67,7 @@ class Kernel:
 
 _KERNELS: dict[int, tuple[Plant, Kernel]] = {}
 _KERNELS_LOCK = threading.Lock()
+_PRIVATE_LOCK = threading.Lock()
 _PLANT_OF_MEMBER: dict[int, Plant] = {}  # id(kernel.member) -> its plant, for diagnosis
 
 
@@ -112,9 +113,8 @@ def _kernel_fingerprint(plant: Plant) -> str | None:
     parts = [sys.version, __import__("numba").__version__, str(plant.n_states)]
     # the layout, the templates, how they are compiled (this module and, for the plant
     # functions' compile flags, plants.base) and what they call
-    base = sys.modules[Plant.__module__]
-    for mod in (L, kernel, sys.modules[__name__], base, *_component_modules()):
-        parts.append(_source_digest(mod.__file__))
+    for path in _engine_sources():
+        parts.append(_source_digest(path))
     for fname in ("f", "g", "h", "bd", "normal_form"):
         fn = getattr(plant, fname)
         if fn is None:
@@ -127,6 +127,19 @@ def _kernel_fingerprint(plant: Plant) -> str | None:
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:20]
 
 
+def _engine_sources() -> list[str]:
+    """The files of the modules the kernel's code comes from (besides the plant's)."""
+    base = sys.modules[Plant.__module__]
+    return [m.__file__ for m in (L, kernel, sys.modules[__name__], base, *_component_modules())]
+
+
+def _engine_sources_changed() -> bool:
+    """Whether a source file of :func:`_engine_sources` changed on disk since this process
+    loaded it (another process editing the tree).  The fingerprint digests the files *now*
+    while numba compiles the code loaded *then*: such a kernel must not be cached under it."""
+    return any(_source_digest(path) != digest for path, digest in _LOADED.items())
+
+
 def _component_modules() -> tuple[Any, ...]:
     """The modules whose compiled functions the kernel calls (their sources are part of the
     kernel's cache fingerprint)."""
@@ -136,12 +149,11 @@ def _component_modules() -> tuple[Any, ...]:
 
 
 def _component_functions() -> dict[str, Any]:
-    """The controller's component functions, by the global name the templates use."""
-    from aiofl.components import differentiators as td
-    from aiofl.components import feedback as fb
-    from aiofl.components import law
-    from aiofl.components import observers as ob
-
+    """The controller's component functions, by the global name the templates use: the
+    process's private, uncached copies (see :func:`_private_components`)."""
+    fb, law, ob, td = (
+        _private_components()[m] for m in ("feedback", "law", "observers", "differentiators")
+    )
     return {
         "_HAN_TD": td.han_td_rhs,
         "_ITD": td.improved_td_rhs_scaled,
@@ -161,6 +173,53 @@ def _component_functions() -> dict[str, Any]:
         "_IOFL_LAW": law.iofl_law,
         "_SATURATE": law.saturate_range,
     }
+
+
+_PRIVATE: dict[str, types.ModuleType] = {}
+
+
+def _private_components() -> dict[str, types.ModuleType]:
+    """Uncached copies of the component modules' compiled functions, built once per process.
+
+    The component functions are compiled with ``cache=True``, and numba keys each one's
+    on-disk cache on *its own* source file only: ``feedback.linear_sef_gain`` cached before
+    an edit of :func:`aiofl.components.fastmath.binomial_power` (or of ``FASTMATH``) is
+    loaded unchanged after it, with the old callee's code linked in.  A kernel compiled
+    against it would be stored under the *new* fingerprint (which covers fastmath.py) and
+    differ from a fresh compile of the same source.  So the kernel never links the cached
+    component functions: each is re-compiled from its Python function, without ``cache``
+    and with its other options (fast-math flags, error model, inlining), in a copy of its
+    module's globals whose compiled functions are these copies too.  Returns one stand-in
+    module per component module (by short name), holding its copied functions.
+    """
+    with _PRIVATE_LOCK:
+        if _PRIVATE:
+            return _PRIVATE
+        from numba import njit
+        from numba.core.dispatcher import Dispatcher
+
+        mods = _component_modules()
+        copies: dict[int, Any] = {}  # id(original dispatcher) -> uncached copy
+        spaces: list[dict[str, Any]] = []
+        for mod in mods:
+            space = dict(vars(mod))
+            spaces.append(space)
+            for obj in vars(mod).values():
+                if isinstance(obj, Dispatcher) and obj.py_func.__module__ == mod.__name__:
+                    fn = obj.py_func
+                    py = types.FunctionType(fn.__code__, space, fn.__name__, fn.__defaults__)
+                    py.__qualname__, py.__doc__ = fn.__qualname__, fn.__doc__
+                    opts = {k: v for k, v in obj.targetoptions.items() if k != "nopython"}
+                    copies[id(obj)] = njit(locals=dict(obj.locals), **opts)(py)
+        for space in spaces:  # calls between components go to the copies too
+            for name, obj in list(space.items()):
+                if id(obj) in copies:
+                    space[name] = copies[id(obj)]
+        for mod, space in zip(mods, spaces, strict=True):
+            stand_in = types.ModuleType(mod.__name__)
+            stand_in.__dict__.update(space)
+            _PRIVATE[mod.__name__.rsplit(".", 1)[1]] = stand_in
+        return _PRIVATE
 
 
 def _instantiate(tpl: Any, ns: dict[str, Any], suffix: str, **jit_options: Any) -> Any:
@@ -185,7 +244,7 @@ def _build_kernel(plant: Plant, *, cache: bool | None = None, guarded: bool = Fa
     """
     ns, plant_key, fingerprint = plant_namespace(plant, guarded=guarded)
     use_cache = _cache_enabled() if cache is None else cache
-    use_cache = use_cache and fingerprint is not None
+    use_cache = use_cache and fingerprint is not None and not _engine_sources_changed()
     n = plant.n_states
     if not use_cache and _user_functions(plant):
         plant.typecheck()  # numba compiles them now rather than inside the kernel
@@ -223,6 +282,7 @@ def plant_namespace(
     if guarded:
         f, g, h, bd, nf = (_guarded(fn, k, n) for k, fn in enumerate((f, g, h, bd, nf)))
     ns = dict(vars(kernel))
+    _bind_private(ns)
     ns.update(
         _N=n,
         _N_P=len(plant.params),
@@ -241,6 +301,26 @@ def plant_namespace(
     )
     plant_key = hashlib.sha256(ident.encode()).hexdigest()[:8]
     return ns, plant_key, fingerprint
+
+
+def _bind_private(ns: dict[str, Any]) -> None:
+    """Point the component modules ``ns`` names (``_fb``, ``_law``) at the private copies of
+    :func:`_private_components`, and re-compile the kernel module's own compiled functions
+    (``_aiofl_command``, ``_iofl_command``, inlined where called) with ``ns`` as globals, so
+    nothing a kernel compiled from ``ns`` calls comes from numba's per-function disk cache."""
+    from numba import njit
+    from numba.core.dispatcher import Dispatcher
+
+    private = _private_components()
+    for name, obj in list(ns.items()):
+        if isinstance(obj, types.ModuleType) and obj.__name__.startswith("aiofl.components."):
+            ns[name] = private[obj.__name__.rsplit(".", 1)[1]]
+        elif isinstance(obj, Dispatcher) and obj.py_func.__module__ == kernel.__name__:
+            fn = obj.py_func
+            py = types.FunctionType(fn.__code__, ns, fn.__name__, fn.__defaults__)
+            py.__qualname__, py.__doc__ = fn.__qualname__, fn.__doc__
+            opts = {k: v for k, v in obj.targetoptions.items() if k != "nopython"}
+            ns[name] = njit(locals=dict(obj.locals), **opts)(py)
 
 
 def _guarded(fn: Any, index: int, n: int) -> Any:
@@ -389,3 +469,7 @@ def _explain_failure(member: Any, i: int, exc: Exception, args: tuple[Any, ...])
         ) from None
     except Exception:  # not a plant function: the caller re-raises the original
         pass
+
+
+# the engine's sources as this process loaded them (see _engine_sources_changed)
+_LOADED: dict[str, str] = {path: _source_digest(path) for path in _engine_sources()}
