@@ -212,3 +212,268 @@ def test_every_key_of_a_preset_with_an_edge_value_is_refused_or_valid(literal: s
         n_keys = len(fuzz._key_lines(head.splitlines()))
         for index in range(n_keys):
             _run_case(base, [fuzz.Mutation("replace", index=index, literal=literal)], full=False)
+
+
+# ---------------------------------------------- [controller.discrete], [uncertainty], [tune]
+# The tables and commands added after the fuzzer (sampled controllers, C export, robustness,
+# robust / multi-objective tuning): each table is mutated on its own, appended to a short
+# SLFJM preset, and driven through its command on cheap settings.
+SHORT = BASES["retuned-s1-leso"][0].split("\n[tune]")[0]
+DISCRETE = """
+[controller.discrete]
+ts = 0.001
+delay = 0
+y_quantum = 0.0
+u_quantum = 0.0
+eso = "zoh"
+td = "fhan"
+h0 = 0.002
+"""
+UNCERTAINTY = """
+[uncertainty]
+draws = 3
+seed = 0
+ts = [0.0005, 0.002]
+noise_variance = [0.0, 1e-6]
+[uncertainty.parameters]
+J_l = { uniform = 0.2 }
+K_s = { normal = 0.05 }
+R_m = { log_uniform = [0.5, 2.0] }
+"""
+TUNE = """
+[tune]
+algorithm = "nsga2"
+objectives = ["itae", "isu"]
+constraints = ["isu <= 1e3", "stable_fraction >= 1"]
+choose = "knee"
+t_final = 0.2
+population = 4
+generations = 1
+seed = 1
+robust = { draws = 2, aggregate = "cvar", alpha = 0.9 }
+[tune.parameters]
+'eso.omega0' = { lo = 10.0, hi = 100.0, log = true }
+"""
+TABLE_LITERALS = (
+    *fuzz.BAD_LITERALS,
+    "1e9",  # draws = 1e9 (a float) and as an integer below
+    "1000000000",
+    "0.00015",  # ts not a multiple of dt
+    "1.0",  # ts > t_final
+    "-0.001",
+    '"euler"',
+    '"fhan"',
+    '"nsga2"',
+    '"ga"',
+    '["itae"]',
+    '["itae", "isu", "iae", "ise"]',
+    '["itae:cvar", "isu:worst"]',
+    "[\"__import__('os')\"]",
+    "[\"__import__('os').system('true') <= 1\"]",
+    '["isu <= 1e999"]',
+    '["isu <= nan"]',
+    '["isu < 1"]',
+    '["itae:cvar <= 1e-300"]',
+    "{ uniform = 0.9999999 }",
+    "{ uniform = 1.0 }",
+    "{ normal = 0.5 }",
+    "{ normal = 0.6 }",
+    "{ log_uniform = [1e-300, 1e300] }",
+    "{ log_uniform = [2.0, 0.5] }",
+    "{ log_uniform = [0.0, 1.0] }",
+    "[1e-4, 1e-4]",
+    "[0.4, 1.0]",
+    "[0.0, inf]",
+    '{ draws = 1000000000, aggregate = "cvar", alpha = 0.9 }',
+    '{ draws = 2, aggregate = "cvar", alpha = 1.0 }',
+    '{ draws = 2, aggregate = "worst" }',
+    '{ draws = 2, aggregate = "median" }',
+)
+TABLE_KEYS = (
+    "ts",
+    "delay",
+    "h0",
+    "y_quantum",
+    "u_quantum",
+    "draws",
+    "seed",
+    "noise_variance",
+    "robust",
+    "objectives",
+    "constraints",
+    "choose",
+    "algorithm",
+    "J_h",
+)
+table_mutations = st.lists(
+    st.builds(
+        fuzz.Mutation,
+        # mostly a replaced value (half of them plausible numbers, so many cases run)
+        kind=st.sampled_from(("replace",) * 8 + fuzz.MUTATION_KINDS),
+        index=st.integers(0, 10_000),
+        literal=st.one_of(
+            st.sampled_from(TABLE_LITERALS),
+            st.floats(min_value=1e-4, max_value=2.0, allow_nan=False).map(repr),
+        ),
+        key=st.sampled_from(TABLE_KEYS),
+    ),
+    min_size=1,
+    max_size=2,
+)
+#: files a tune run refused *after* it ran (no feasible design) keeps: the checkpoint, so
+#: ``--resume --generations N`` can carry on (README, Checkpoint and resume)
+RESUMABLE = frozenset({"checkpoint.npz", ".aiofl-output"})
+
+
+def _strict_json(path: Path) -> Any:
+    def refuse(token: str) -> Any:
+        raise AssertionError(f"{path.name} holds {token}")
+
+    return json.loads(path.read_text(encoding="utf-8"), parse_constant=refuse)
+
+
+def _command(
+    table_text: str, command: str, *extra: str, ran_ok: frozenset[str] = frozenset()
+) -> Any:
+    """Run ``aiofl COMMAND case.toml [--out DIR] EXTRA`` on ``SHORT + table_text`` and check
+    the properties every outcome must have; returns the result."""
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        cfg = work / "case.toml"
+        cfg.write_text(table_text, encoding="utf-8")
+        out = work / "out"
+        args = [command, str(cfg)]
+        if command != "analyze":
+            args += ["--out", str(out)]
+        res = runner.invoke(app, [*args, *extra])
+        text = (res.stdout or "") + (res.stderr or "")
+        if res.exception is not None and not isinstance(res.exception, SystemExit):
+            raise res.exception
+        assert res.exit_code in (0, 2), text
+        assert "Traceback" not in text and "Warning" not in text, text
+        assert not [p.name for p in work.iterdir() if p.name.startswith(".out.")]
+        if res.exit_code == 2:
+            assert res.stderr.startswith("aiofl: error: ") and res.stderr.strip(), text
+            left = {p.name for p in out.iterdir()} if out.exists() else set()
+            assert left <= ran_ok, (left, text)
+            return res
+        if "--check" in extra or command == "analyze":
+            assert not out.exists()
+            return res
+        for path in out.iterdir():
+            if path.suffix == ".json":
+                _strict_json(path)
+        if command == "simulate":
+            record = _strict_json(out / "metrics.json")
+            if record["diverged"]:
+                assert math.isfinite(record["diverged_at"])
+            else:
+                assert all(math.isfinite(record[k]) for k in ("itae", "isu", "iau", "opi"))
+            assert "nan" not in (out / "trajectory.csv").read_text(encoding="utf-8").lower()
+        elif command == "export":
+            c_text = (out / "aiofl_controller.c").read_text(encoding="utf-8")
+            assert "nan" not in c_text.lower().replace("aiofl_", "")
+        return res
+
+
+def _mutate(table: str, muts: list[Any]) -> str:
+    for m in muts:
+        table = fuzz.apply_mutation(table, m)
+    return table
+
+
+@settings(FUZZ, max_examples=150)
+@given(muts=table_mutations, extra=st.sampled_from([(), ("--ts", "0.002"), ("--ts", "1e-300")]))
+def test_mutated_discrete_table_simulates_and_exports_or_is_refused(
+    muts: list[Any], extra: tuple[str, ...]
+) -> None:
+    text = SHORT + _mutate(DISCRETE, muts)
+    res = _command(text, "simulate", "--check")
+    if res.exit_code == 0:
+        event(f"simulate exit {_command(text, 'simulate').exit_code}")
+    event(f"export exit {_command(text, 'export', '--precision', 'float', *extra).exit_code}")
+
+
+@settings(FUZZ, max_examples=60)
+@given(
+    muts=table_mutations,
+    tolerance=st.sampled_from(["0.1", "0", "-1", "nan", "inf", "1e300", "5e-324"]),
+)
+def test_mutated_discrete_table_sampling_analysis_or_is_refused(
+    muts: list[Any], tolerance: str
+) -> None:
+    """``aiofl analyze --sampling --json``: exit 0 with strict JSON (null, never NaN) or 2."""
+    text = SHORT + _mutate(DISCRETE, muts)
+    res = _command(text, "analyze", "--sampling", "--json", "--tolerance", tolerance)
+    if res.exit_code == 0:
+        json.loads(res.stdout, parse_constant=lambda c: pytest.fail(f"stdout holds {c}"))
+    event(f"analyze exit {res.exit_code}")
+
+
+@settings(FUZZ, max_examples=100)
+@given(muts=table_mutations)
+def test_mutated_uncertainty_table_runs_robustness_or_is_refused(muts: list[Any]) -> None:
+    text = SHORT + DISCRETE + _mutate(UNCERTAINTY, muts)
+    event(f"robustness exit {_command(text, 'robustness', '--draws', '2').exit_code}")
+
+
+@settings(FUZZ, max_examples=80)
+@given(muts=table_mutations)
+def test_mutated_tune_table_tunes_one_generation_or_is_refused(muts: list[Any]) -> None:
+    text = SHORT + _mutate(UNCERTAINTY.replace("ts = [0.0005, 0.002]\n", "") + TUNE, muts)
+    event(f"tune exit {_command(text, 'tune', '--quiet', ran_ok=RESUMABLE).exit_code}")
+
+
+@pytest.mark.parametrize(
+    ("table", "field"),
+    [
+        (DISCRETE.replace("u_quantum = 0.0", "u_quantum = 5e-324"), "u_quantum"),
+        (DISCRETE.replace("y_quantum = 0.0", "y_quantum = 1e-300"), "y_quantum"),
+        (DISCRETE.replace("u_quantum = 0.0", "u_quantum = -1"), "u_quantum"),
+        (DISCRETE.replace("ts = 0.001", "ts = 0.00015"), "ts"),
+        (DISCRETE.replace("ts = 0.001", "ts = 2.0"), "ts"),
+        (DISCRETE + "draws = 3\n", "draws"),
+    ],
+)
+def test_bad_discrete_values_are_refused_naming_the_field(table: str, field: str) -> None:
+    """Regression: a subnormal quantum (1/q = inf) used to run and write NaN rows."""
+    res = _command(SHORT + table, "simulate", "--check")
+    assert res.exit_code == 2 and f"controller.discrete.{field}" in res.stderr, res.stderr
+
+
+@pytest.mark.parametrize(
+    ("ts", "needle"),
+    [
+        ("1e-300", "controller.discrete.ts = 1e-300"),
+        ("inf", "--ts = inf; allowed: 0 < ts <= 1"),
+        ("2", "--ts = 2.0; allowed: 0 < ts <= 1"),
+        ("nan", "--ts = nan"),
+    ],
+)
+def test_export_refuses_an_absurd_sample_time_without_a_warning(ts: str, needle: str) -> None:
+    """Regression: --ts 1e-300 printed numpy's overflow RuntimeWarning before the error."""
+    res = _command(SHORT + DISCRETE, "export", "--ts", ts)
+    assert res.exit_code == 2 and needle in res.stderr, res.stderr
+
+
+@pytest.mark.parametrize(
+    ("old", "new", "field"),
+    [
+        ('"isu <= 1e3"', "\"__import__('os')\"", "tune.constraints"),
+        ('"isu <= 1e3"', '"isu <= 1e999"', "tune.constraints"),
+        ('"isu <= 1e3"', '"isu < 1"', "tune.constraints"),
+        ("draws = 2,", "draws = 1000000000,", "robust"),
+        ('["itae", "isu"]', '["itae"]', "objectives"),
+        ("draws = 3", "draws = 1e9", "uncertainty.draws"),
+    ],
+)
+def test_hostile_tune_values_are_refused_before_any_run(old: str, new: str, field: str) -> None:
+    text = SHORT + UNCERTAINTY.replace("ts = [0.0005, 0.002]\n", "") + TUNE
+    assert old in text
+    res = _command(text.replace(old, new, 1), "tune", "--quiet")
+    assert res.exit_code == 2 and field in res.stderr, res.stderr
+
+
+def test_robustness_refuses_absurd_draws() -> None:
+    res = _command(SHORT + DISCRETE + UNCERTAINTY, "robustness", "--draws", "1000000000")
+    assert res.exit_code == 2 and "--draws" in res.stderr, res.stderr

@@ -38,8 +38,8 @@ def export_command(
         _check_out(out)
         cfg = load_config(config)
         if ts is not None:
-            if not ts > 0:
-                raise ValueError(f"--ts = {ts}; allowed: > 0 [s]")
+            if not 0 < ts <= 1.0:  # the range of [controller.discrete] ts
+                raise ValueError(f"--ts = {ts}; allowed: 0 < ts <= 1 [s]")
             from dataclasses import replace
 
             from aiofl.engine.discrete import Sampling

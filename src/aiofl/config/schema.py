@@ -180,6 +180,15 @@ class DiscreteModel(_Model):
     td: Literal["fhan", "euler"] = "fhan"
     h0: PosFloat | None = None
 
+    @field_validator("y_quantum", "u_quantum")
+    @classmethod
+    def _quantum(cls, v: float) -> float:
+        from aiofl.engine.discrete import QUANTUM_MIN
+
+        if 0 < v < QUANTUM_MIN:  # 1/q overflows for subnormal q: NaN in the quantiser
+            raise ValueError(f"allowed: 0 (none) or a quantum >= {QUANTUM_MIN:g}")
+        return v
+
     def build(self) -> Any:
         from aiofl.engine.discrete import Sampling
 

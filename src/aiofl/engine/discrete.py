@@ -43,6 +43,7 @@ from aiofl.controller import Controller, ControllerBatch
 __all__ = [
     "ESO_METHODS",
     "N_DISC",
+    "QUANTUM_MIN",
     "TD_METHODS",
     "Sampling",
     "sample_steps",
@@ -53,6 +54,10 @@ ESO_METHODS = ("zoh", "euler")
 """ESO discretisations: exact ZOH current observer (linear ESO only), forward Euler."""
 TD_METHODS = ("fhan", "euler")
 """Discretisations of Han's TD (18): Han's discrete fhan TD, forward Euler."""
+QUANTUM_MIN = 1e-12
+"""Smallest non-zero ADC/DAC quantum q: Q(v) = q·floor(v/q + 1/2) needs 1/q and v/q finite
+(q = 5e-324 gives 1/q = inf and NaN at v = 0); 1e-12 is finer than any converter (a 32-bit
+ADC over ±1 has q ≈ 5e-10) and keeps v/q finite for every |v| < 1e296."""
 
 # ----------------------------------------------------------------------------- the row
 D_STEPS = 0  #: engine steps per sample N = Ts/dt (0: a continuous member)
@@ -114,8 +119,11 @@ class Sampling:
             raise ValueError(f"controller.discrete.delay = {self.delay}; allowed: 0, 1")
         for name in ("y_quantum", "u_quantum"):
             val = getattr(self, name)
-            if not (math.isfinite(val) and val >= 0):
-                raise ValueError(f"controller.discrete.{name} = {val}; allowed: >= 0")
+            if not (math.isfinite(val) and (val == 0 or val >= QUANTUM_MIN)):
+                raise ValueError(
+                    f"controller.discrete.{name} = {val}; allowed: 0 (none) or a finite "
+                    f"quantum >= {QUANTUM_MIN:g}"
+                )
         if self.eso is not None and self.eso not in ESO_METHODS:
             raise ValueError(
                 f"controller.discrete.eso = {self.eso!r}; allowed: {', '.join(ESO_METHODS)}"
@@ -191,7 +199,6 @@ def _row(
     ints: NDArray[np.int64], floats: NDArray[np.float64], s: Sampling, dt: float
 ) -> NDArray[np.float64]:
     rho = int(ints[L.I_RHO])
-    n = rho + 1
     row = np.zeros(N_DISC)
     row[D_STEPS] = sample_steps(s.ts, dt)
     row[D_TS] = s.ts
@@ -200,9 +207,6 @@ def _row(
     row[D_UQ] = s.u_quantum
     row[D_TDM] = TDM_FHAN if s.td == "fhan" else TDM_EULER
     row[D_H0] = s.h0 if s.h0 is not None else s.ts
-    w0 = floats[L.F_OMEGA0]
-    b0 = floats[L.F_B0]
-    alphas = floats[L.F_ALPHA : L.F_ALPHA + n]
     eso_kind = int(ints[L.I_ESO])
     if int(ints[L.I_LAW]) == L.LAW_IOFL and int(ints[L.I_TD]) != L.TD_EXACT:
         raise ValueError(
@@ -210,6 +214,31 @@ def _row(
             "at each sample"
         )
     method = s.eso or ("zoh" if eso_kind == L.ESO_LINEAR else "euler")
+    with np.errstate(all="ignore"):  # a Ts too small overflows: refused below, no warning
+        _fill_row(row, ints, floats, s, method, eso_kind, rho)
+    if not np.all(np.isfinite(row)):
+        raise ValueError(
+            f"controller.discrete.ts = {s.ts:g} s: the discretisation has non-finite "
+            "coefficients (an observer or prefilter bandwidth too large for this sample "
+            "time, or Ts too small to represent its powers); allowed: a larger ts"
+        )
+    return row
+
+
+def _fill_row(
+    row: NDArray[np.float64],
+    ints: NDArray[np.int64],
+    floats: NDArray[np.float64],
+    s: Sampling,
+    method: str,
+    eso_kind: int,
+    rho: int,
+) -> None:
+    """Write the ESO and prefilter coefficients of ``s`` into ``row`` (see :func:`_row`)."""
+    n = rho + 1
+    w0 = floats[L.F_OMEGA0]
+    b0 = floats[L.F_B0]
+    alphas = floats[L.F_ALPHA : L.F_ALPHA + n]
     if method == "zoh":
         if eso_kind != L.ESO_LINEAR:
             raise ValueError(
@@ -232,12 +261,6 @@ def _row(
         for i in range(rho):
             row[D_PF_PHI + i * PF_STRIDE : D_PF_PHI + i * PF_STRIDE + rho] = pf_phi[i]
         row[D_PF_GAM : D_PF_GAM + rho] = pf_gam
-    if not np.all(np.isfinite(row)):
-        raise ValueError(
-            f"the discretisation at Ts = {s.ts:g} s has non-finite coefficients "
-            "(an observer or prefilter bandwidth too large for this sample time)"
-        )
-    return row
 
 
 def sampling_rows(
