@@ -20,13 +20,15 @@ class ReproduceRun:
 
 @pytest.fixture(scope="session")
 def reproduced(tmp_path_factory: pytest.TempPathFactory) -> ReproduceRun:
-    """Run ``aiofl reproduce --out DIR`` once (in-process, through the typer app)."""
+    """Run ``aiofl reproduce --out DIR --draws 16`` once (in-process, through the typer
+    app)."""
     from typer.testing import CliRunner
 
     from aiofl.cli.app import app
 
     out = tmp_path_factory.mktemp("reproduce") / "results"
-    res = CliRunner().invoke(app, ["reproduce", "--out", str(out)])
+    # 16 model-error draws per design keep the session affordable (the default is 100)
+    res = CliRunner().invoke(app, ["reproduce", "--out", str(out), "--draws", "16"])
     if res.exception is not None and not isinstance(res.exception, SystemExit):
         raise res.exception
     return ReproduceRun(out, res.exit_code, res.stdout, res.stderr)

@@ -28,7 +28,8 @@ FILES = (
     "report.html",
 )
 KEYS = {"scenario", "structure", "source", "itae", "isu", "iau", "opi", "diverged", "diverged_at"}
-COMPUTED_KEYS = KEYS | {"preset", "tracking", "linearisation"}  # what the report measured
+# what the report measured; "robustness": its rows over model-error draws (conftest: 16)
+COMPUTED_KEYS = KEYS | {"preset", "tracking", "linearisation", "robustness"}
 
 
 def _records(reproduced) -> list[dict]:
@@ -135,7 +136,9 @@ def test_report_is_self_contained(reproduced) -> None:
     page = (reproduced.out / "report.html").read_text()
     assert "http://" not in page and "https://" not in page
     srcs = re.findall(r'src="([^"]*)"', page)
-    assert len(srcs) == 3 and all(s.startswith("data:image/png;base64,") for s in srcs)
+    n_fronts = len(list(reproduced.out.glob("fronts-s*.png")))  # one per shipped scenario
+    assert len(srcs) == 3 + n_fronts
+    assert all(s.startswith("data:image/png;base64,") for s in srcs)
     assert "<link" not in page and "<script" not in page
     for heading in (
         "What we found",
@@ -232,7 +235,26 @@ def test_report_cites_only_files_in_the_repository(reproduced) -> None:
     page = (reproduced.out / "report.html").read_text()
     page = re.sub(r'src="data:[^"]*"', "", page)
     cited = set(re.findall(r"[\w./-]+\.(?:py|md|toml|txt|json|csv|html|png|ipynb)\b", page))
-    written = set(FILES) | {"trajectory.csv"}
+    written = set(FILES) | {"trajectory.csv", "fronts-s1.png", "fronts-s3.png"}
     missing = [c for c in cited if c not in written and not (root / c).exists()]
     assert not missing, missing
     assert "benchmarks/bench_engine.py" in cited  # the check is not vacuous
+
+
+def test_every_computed_record_carries_its_robustness_row(reproduced) -> None:
+    recs = _records(reproduced)
+    for r in recs:
+        if r["source"] == "paper":
+            assert "robustness" not in r
+            continue
+        rob = r["robustness"]
+        assert (rob["draws"], rob["seed"]) == (16, 0)  # conftest runs --draws 16
+        assert 0.0 <= rob["stable_fraction"] <= 1.0
+        assert rob["diverged"] == round(16 * (1 - rob["stable_fraction"]))
+        q = rob["itae"]
+        finite = [q[k] for k in ("q05", "q50", "q95") if q[k] is not None]
+        assert finite == sorted(finite)
+    md = (reproduced.out / "tables.md").read_text()
+    assert "## Robustness: every design over the same ±20 % model errors" in md
+    assert "16 draws (seed 0)" in md
+    assert "## Pareto fronts: which structure tracks best at equal control energy?" in md

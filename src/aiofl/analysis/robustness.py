@@ -30,6 +30,7 @@ import itertools
 import math
 import threading
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -43,9 +44,11 @@ __all__ = [
     "CALL_TRAJECTORY_BYTES",
     "ERROR_TABLE_BYTES",
     "MAX_POINTS",
+    "DesignDraws",
     "RobustnessResult",
     "robustness_figure",
     "run_robustness",
+    "simulate_designs",
     "simulate_draws",
 ]
 
@@ -201,9 +204,7 @@ class RobustnessResult:
 
     def quantiles(self, values: NDArray[np.float64]) -> dict[str, float | None]:
         """q05, q50, q95 (empirical, ``inverted_cdf``) and max; None where +inf."""
-        out = {k: _num(np.quantile(values, q, method="inverted_cdf")) for k, q in QUANTILES.items()}
-        out["max"] = _num(np.max(values))
-        return out
+        return _quantiles(values)
 
     def worst_index(self) -> int:
         """The worst draw: largest ITAE; a diverged draw (earliest first) beats any finite."""
@@ -317,6 +318,132 @@ def run_robustness(
         seconds=seconds,
         uncertainty=spec,
     )
+
+
+# ---------------------------------------------------------- several designs, one call
+@dataclass(frozen=True)
+class DesignDraws:
+    """One design's results over the K draws of :func:`simulate_designs` (no trajectories,
+    no nominal run); the statistics are those of :class:`RobustnessResult`."""
+
+    draws: Draws
+    itae: NDArray[np.float64]  # +inf where diverged
+    isu: NDArray[np.float64]
+    diverged: NDArray[np.bool_]
+    diverged_at: NDArray[np.float64]
+    group: int  # designs of one group ran in the same engine call(s)
+    engine_calls: int  # the calls of its group
+
+    @property
+    def stable_fraction(self) -> float:
+        """Fraction of draws that did not diverge."""
+        return float(np.mean(~self.diverged))
+
+    def quantiles(self, values: NDArray[np.float64]) -> dict[str, float | None]:
+        """q05, q50, q95 (empirical, ``inverted_cdf``) and max; None where +inf."""
+        return _quantiles(values)
+
+    def to_dict(self) -> dict[str, Any]:
+        """``{"draws", "seed", "stable_fraction", "diverged", "itae": {q05, q50, q95, max},
+        "isu": {...}}`` (``diverged``: the number of diverged draws; no NaN or Infinity)."""
+        return {
+            "draws": len(self.draws),
+            "seed": self.draws.seed,
+            "stable_fraction": self.stable_fraction,
+            "diverged": int(np.count_nonzero(self.diverged)),
+            "itae": self.quantiles(self.itae),
+            "isu": self.quantiles(self.isu),
+        }
+
+
+def _quantiles(values: NDArray[np.float64]) -> dict[str, float | None]:
+    out = {k: _num(np.quantile(values, q, method="inverted_cdf")) for k, q in QUANTILES.items()}
+    out["max"] = _num(np.max(values))
+    return out
+
+
+def _design_key(cfg: Any) -> tuple[Any, ...]:
+    """What members of one engine call must share (the scenario is compared by value)."""
+    return (id(cfg.plant), cfg.scenario.t_final, cfg.dt, cfg.method, cfg.divergence_threshold)
+
+
+def simulate_designs(cfgs: Sequence[Any], draws: Draws) -> list[DesignDraws]:
+    """Run every design (a :class:`~aiofl.config.RunConfig`) over the same ``draws``.
+
+    Designs that share the plant, the scenario (by value), the horizon, the step, the
+    method and the divergence threshold run together: one
+    :func:`~aiofl.engine.simulation.simulate_batch` call holds every such design on every
+    draw (design-major), split over the draws only to keep each call's held-noise rows (one
+    per draw: the draws' scenarios are shared by all designs of the call) within
+    :data:`CALL_TRAJECTORY_BYTES`.  No trajectory is stored and the nominal plant is not
+    run.  Common random numbers: every design sees the same draws.
+
+    Raises ``ValueError`` (before anything runs) for zero draws or a design whose scenario
+    cannot take the draws (:meth:`aiofl.uncertainty.Draws.scenarios`).
+
+    Returns
+    -------
+    list of DesignDraws
+        In the order of ``cfgs``.
+    """
+    from aiofl.engine.simulation import simulate_batch
+
+    k = len(draws)
+    if k == 0:
+        raise ValueError("simulate_designs needs at least one draw")
+    groups: list[tuple[Any, list[int]]] = []
+    for i, cfg in enumerate(cfgs):
+        for first, idx in groups:
+            if (
+                _design_key(cfgs[first]) == _design_key(cfg)
+                and cfgs[first].scenario == cfg.scenario
+            ):
+                idx.append(i)
+                break
+        else:
+            groups.append((i, [i]))
+    scen = {first: draws.scenarios(cfgs[first].scenario) for first, _ in groups}  # may raise
+    out: dict[int, DesignDraws] = {}
+    for g, (first, idx) in enumerate(groups):
+        base = cfgs[first]
+        n_noise = math.ceil(base.scenario.t_final / base.scenario.noise_hold) + 2
+        per_call = max(1, CALL_TRAJECTORY_BYTES // (n_noise * 8))
+        bounds = [*range(0, k, per_call), k]
+        parts = []
+        for a, b in itertools.pairwise(bounds):
+            sc = scen[first][a:b]
+            sub = _subset(draws, slice(a, b))
+            sampling = [s for i in idx for s in sub.samplings(cfgs[i].sampling)]
+            res = simulate_batch(
+                base.plant,
+                [cfgs[i].controller for i in idx for _ in sc],
+                [s for _ in idx for s in sc],
+                dt=base.dt,
+                method=base.method,
+                divergence_threshold=base.divergence_threshold,
+                sampling=sampling if any(s is not None for s in sampling) else None,
+            )
+            parts.append(
+                (
+                    res.metrics.reshape(len(idx), b - a, -1),
+                    res.diverged.reshape(len(idx), b - a),
+                    res.diverged_at.reshape(len(idx), b - a),
+                )
+            )
+        metrics = np.concatenate([p[0] for p in parts], axis=1)
+        div = np.concatenate([p[1] for p in parts], axis=1)
+        t_div = np.concatenate([p[2] for p in parts], axis=1)
+        for j, i in enumerate(idx):
+            out[i] = DesignDraws(
+                draws=draws,
+                itae=np.where(div[j], np.inf, metrics[j, :, L.METRIC_NAMES.index("itae")]),
+                isu=np.where(div[j], np.inf, metrics[j, :, L.METRIC_NAMES.index("isu")]),
+                diverged=div[j].copy(),
+                diverged_at=t_div[j].copy(),
+                group=g,
+                engine_calls=len(parts),
+            )
+    return [out[i] for i in range(len(cfgs))]
 
 
 def robustness_figure(res: RobustnessResult) -> Any:

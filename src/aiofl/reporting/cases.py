@@ -17,6 +17,8 @@ when they exist, and appear as extra rows and panels everywhere without special 
 
 * ``retuned-s{N}-{leso,inleso,ladrc}``: parameters re-tuned by ``aiofl tune``
   (records with ``"source": "retuned"``);
+* ``frontier-s{N}-{leso,inleso,ladrc}``: designs at the Pareto frontier, tuned for
+  tracking, energy and robustness (records with ``"source": "robust"``);
 * ``iofl-s{N}``: the classical model-based IOFL baseline (``"structure": "IOFL"``,
   ``"source": "model"``).
 """
@@ -62,11 +64,12 @@ __all__ = [
 
 EXTRA_PRESETS: tuple[tuple[str, str], ...] = (
     (r"retuned-s(?P<s>\d+)-(?:leso|inleso|ladrc)", "retuned"),
+    (r"frontier-s(?P<s>\d+)-(?:leso|inleso|ladrc)", "robust"),
     (r"iofl-s(?P<s>\d+)", "model"),
 )
 """Optional presets (regex on the name, source label) included when they are shipped."""
 
-SOURCE_ORDER = ("paper", "printed", "retuned", "model")
+SOURCE_ORDER = ("paper", "printed", "retuned", "robust", "model")
 STRUCTURE_ORDER = ("LESO", "INLESO", "LADRC", "IOFL")
 _SCENARIO_IN_NAME = re.compile(r"(?:^|-)s(\d+)(?:-|$)")
 
@@ -105,7 +108,8 @@ def scenario_number(name: str) -> int | None:
 
 
 def discover_cases(available: Iterable[str] | None = None) -> list[Case]:
-    """The six paper cases plus every shipped ``retuned-*`` / ``iofl-*`` preset.
+    """The six paper cases plus every shipped ``retuned-*`` / ``frontier-*`` / ``iofl-*``
+    preset.
 
     Parameters
     ----------
@@ -115,7 +119,7 @@ def discover_cases(available: Iterable[str] | None = None) -> list[Case]:
     Returns
     -------
     list of Case
-        Sorted by scenario, then source (printed, retuned, model), then structure.
+        Sorted by scenario, then source (printed, retuned, robust, model), then structure.
     """
     names = set(list_presets() if available is None else available)
     cases = []
@@ -429,6 +433,10 @@ class Reproduction:
     engine: dict[str, str]
     timings: dict[str, float]
     sampling: dict[str, dict[str, Any]] = field(default_factory=dict)  # limits by preset
+    # robustness over model-error draws (aiofl.reporting.robust_rows.RobustTable), or None
+    robustness: Any = None
+    # the shipped Pareto fronts (aiofl.reporting.fronts.ShippedFronts), or None
+    fronts: Any = None
 
     def scenario_runs(self, scenario: int) -> list[CaseRun]:
         """The runs of one scenario, in table order."""

@@ -15,7 +15,16 @@ from collections.abc import Mapping, Sequence
 
 from aiofl.reporting.cases import Reproduction
 from aiofl.reporting.findings import findings
+from aiofl.reporting.fronts import (
+    ISU_BUDGET,
+    front_header,
+    front_notes,
+    front_rows,
+    front_scenarios,
+    has_front_content,
+)
 from aiofl.reporting.paper import SCENARIOS
+from aiofl.reporting.robust_rows import ROBUST_HEADER, robust_notes, robust_rows
 from aiofl.reporting.tables import (
     CONTEXT_ROWS,
     VERDICT_HEADER,
@@ -73,6 +82,31 @@ def _list(items: Sequence[str], cls: str) -> str:
     return f'<ul class="{cls}">' + "".join(f"<li>{_e(i)}</li>" for i in items) + "</ul>"
 
 
+def _img(figures: Mapping[str, bytes], name: str, alt: str) -> list[str]:
+    if name not in figures:
+        return []
+    data = base64.b64encode(figures[name]).decode("ascii")
+    return [f'<img alt="{_e(alt)}" src="data:image/png;base64,{data}">']
+
+
+def _robust_sections(rep: Reproduction, figures: Mapping[str, bytes]) -> list[str]:
+    """The robustness table and the Pareto-front section (with ``fronts-s{N}.png``)."""
+    body = ["<h2>Robustness: every design over the same ±20 % model errors</h2>"]
+    rows = robust_rows(rep)
+    if rows:
+        body.append(_html_table(ROBUST_HEADER, rows))
+    body.append(_list(robust_notes(rep), "notes"))
+    body.append("<h2>Pareto fronts: which structure tracks best at equal control energy?</h2>")
+    body.append(_list(front_notes(rep), "notes"))
+    for s, sentences in front_scenarios(rep).items():
+        body.append(f"<h3>Scenario {s} (ISU ≤ {ISU_BUDGET[s]:g})</h3>")
+        if has_front_content(rep, s):
+            body.append(_html_table(front_header(s), front_rows(rep, s), cls="settings"))
+        body.append(_list(sentences, "answers"))
+        body += _img(figures, f"fronts-s{s}.png", f"Pareto fronts, scenario {s}")
+    return body
+
+
 def html_report(rep: Reproduction, figures: Mapping[str, bytes]) -> str:
     """``report.html``: one self-contained page (inline CSS, figures as base64 PNG).
 
@@ -113,6 +147,7 @@ def html_report(rep: Reproduction, figures: Mapping[str, bytes]) -> str:
             body.append(
                 f'<img alt="Figure {info.figure}: scenario {s}" src="data:image/png;base64,{data}">'
             )
+    body += _robust_sections(rep, figures)
     para = sampling_text(rep)
     if para:
         body.append("<h2>What the sample-time limits mean</h2>")

@@ -1,8 +1,11 @@
 """Reproduce the paper's Tables I–III and Figures 3–5 (``aiofl reproduce``).
 
-:func:`reproduce` computes every case (:func:`aiofl.reporting.cases.compute`) and writes
-``metrics.json``, ``tables.md``, ``fig3.png``–``fig5.png`` and a self-contained
-``report.html`` into an output directory, all-or-nothing.
+:func:`reproduce` computes every case (:func:`aiofl.reporting.cases.compute`), runs every
+case over the same model-error draws (:mod:`aiofl.reporting.robust_rows`), reads the
+shipped Pareto fronts (:mod:`aiofl.reporting.fronts`) and writes ``metrics.json``,
+``tables.md``, ``fig3.png``–``fig5.png``, ``fronts-s1.png``/``fronts-s3.png`` (when
+fronts are shipped) and a self-contained ``report.html`` into an output directory,
+all-or-nothing.
 """
 
 from __future__ import annotations
@@ -16,9 +19,18 @@ from pathlib import Path
 from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 from aiofl.reporting.cases import Reproduction, compute
 from aiofl.reporting.figures import figure_png, scenario_figure
+from aiofl.reporting.fronts import FRONT_SCENARIOS, front_figure, fronts_markdown, load_fronts
 from aiofl.reporting.html import html_report
 from aiofl.reporting.paper import SCENARIOS
+from aiofl.reporting.robust_rows import (
+    DEFAULT_DRAWS,
+    DEFAULT_SEED,
+    compute_robustness,
+    robust_markdown,
+    with_robustness,
+)
 from aiofl.reporting.tables import tables_markdown
+from aiofl.uncertainty import MAX_DRAWS
 
 __all__ = ["reproduce"]
 
@@ -29,11 +41,15 @@ def reproduce(
     available: Iterable[str] | None = None,
     on_stage: Callable[[str], None] | None = None,
     ts: float | None = None,
+    draws: int = DEFAULT_DRAWS,
+    seed: int = DEFAULT_SEED,
+    fronts_dir: str | Path | None = None,
 ) -> Reproduction:
     """Run every case and write the reproduction into ``out`` (all-or-nothing).
 
     Writes ``metrics.json``, ``sampling.json`` (the sample-time limits of every case),
-    ``tables.md``, ``fig3.png``, ``fig4.png``, ``fig5.png`` and ``report.html``.
+    ``tables.md``, ``fig3.png``, ``fig4.png``, ``fig5.png``, ``fronts-s{N}.png`` (one per
+    scenario with a shipped front) and ``report.html``.
 
     Parameters
     ----------
@@ -46,13 +62,41 @@ def reproduce(
     ts
         Run every design as a sampled controller at this sample time [s] (default:
         continuous, or as the presets say).
+    draws, seed
+        Model-error draws per design for the robustness rows (0: skip them) and their seed.
+    fronts_dir
+        Folder of the Pareto-front files (default: the package's ``presets/fronts``).
 
     Returns
     -------
     Reproduction
     """
     stage = on_stage or (lambda _msg: None)
+    if not 0 <= draws <= MAX_DRAWS:
+        raise ValueError(f"draws = {draws}; allowed: 0 <= draws <= {MAX_DRAWS} (0 = skip)")
     rep = compute(available=available, on_stage=stage, ts=ts)
+    t0 = time.perf_counter()
+    if draws:
+        stage(f"robustness: {len(rep.runs)} designs × {draws} draws of ±20 % model error")
+    table = compute_robustness([r.case for r in rep.runs], draws=draws, seed=seed)
+    t1 = time.perf_counter()
+    stage("reading the shipped Pareto fronts")
+    rep = replace(
+        rep,
+        robustness=table,
+        records=with_robustness(rep.records, table),
+        fronts=load_fronts(fronts_dir),
+        timings={**rep.timings, "robustness": t1 - t0},
+        engine={
+            **rep.engine,
+            "model-error draws": (
+                f"{table.draws} per design, seed {table.seed}, {table.engine_calls} engine "
+                "call(s) for all designs (one per scenario)"
+                if table is not None
+                else "skipped (--draws 0)"
+            ),
+        },
+    )
     with atomic_output_dir(out) as stage_dir:
         atomic_write_text(stage_dir / "metrics.json", json.dumps(rep.records, indent=2) + "\n")
         sampling = json.dumps(rep.sampling, indent=2) + "\n"  # ts_max, ts_stable per preset
@@ -64,9 +108,19 @@ def reproduce(
             name = f"fig{info.figure}.png"
             figures[name] = figure_png(scenario_figure(rep, s))
             atomic_write_bytes(stage_dir / name, figures[name])
+        from aiofl.analysis.exact_tracking import exact_tracking_cost
+
+        for s in FRONT_SCENARIOS:
+            if not any(k[0] == s for k in rep.fronts.fronts) or not rep.scenario_runs(s):
+                continue
+            floor = exact_tracking_cost(rep.scenario_runs(s)[0].case.config)["isu"]
+            name = f"fronts-s{s}.png"
+            figures[name] = figure_png(front_figure(rep, s, floor))
+            atomic_write_bytes(stage_dir / name, figures[name])
         t1 = time.perf_counter()
         rep = replace(rep, timings={**rep.timings, "figures": t1 - t0})
         stage("writing tables and report")
-        atomic_write_text(stage_dir / "tables.md", tables_markdown(rep))
+        md = tables_markdown(rep) + "\n" + robust_markdown(rep) + "\n" + fronts_markdown(rep)
+        atomic_write_text(stage_dir / "tables.md", md)
         atomic_write_text(stage_dir / "report.html", html_report(rep, figures))
     return rep

@@ -289,14 +289,16 @@ def scenario_notes(rep: Reproduction, scenario: int) -> list[str]:
     # how the re-tuned rows were tuned, from their [tune] tables; one note per recipe
     from aiofl.tuning.search import describe_tuning
 
-    recipes: dict[str, list[str]] = {}
+    recipes: dict[tuple[str, str], list[str]] = {}
     for run in rep.scenario_runs(scenario):
-        how = describe_tuning(run.case.config) if run.case.source == "retuned" else None
+        tuned = run.case.source in ("retuned", "robust")
+        how = describe_tuning(run.case.config) if tuned else None
         if how:
-            recipes.setdefault(how, []).append(f"{run.case.label} [{run.case.preset}]")
-    for how, rows in recipes.items():
+            what = "re-tuned" if run.case.source == "retuned" else "tuned"
+            recipes.setdefault((how, what), []).append(f"{run.case.label} [{run.case.preset}]")
+    for (how, what), rows in recipes.items():
         verb = "was" if len(rows) == 1 else "were"
-        notes.append(f"{_join(rows)} {verb} re-tuned with {how}.")
+        notes.append(f"{_join(rows)} {verb} {what} with {how}.")
     return notes
 
 
