@@ -52,7 +52,8 @@ def han_td_rhs(r1: float, r2: float, r: float, big_r: float) -> tuple[float, flo
     Returns :math:`(\dot r_1, \dot r_2)`.
     """
     s = r1 - r + r2 * abs(r2) / (2.0 * big_r)
-    sgn = 1.0 if s > 0.0 else (-1.0 if s < 0.0 else 0.0)
+    sgn = 1.0 if s > 0.0 else 0.0  # sign(s); plain selects vectorize over lanes
+    sgn = -1.0 if s < 0.0 else sgn
     return r2, -big_r * sgn
 
 

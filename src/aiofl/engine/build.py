@@ -69,6 +69,15 @@ _KERNELS: dict[int, tuple[Plant, Kernel]] = {}
 _KERNELS_LOCK = threading.Lock()
 _PRIVATE_LOCK = threading.Lock()
 _PLANT_OF_MEMBER: dict[int, Plant] = {}  # id(kernel.member) -> its plant, for diagnosis
+_GROUP_FUNCTIONS: set[int] = set()  # ids of lane-kernel group functions among those
+
+
+def register_group_function(group: Any, plant: Plant) -> None:
+    """Record that ``group`` (a lane kernel's group function, :mod:`aiofl.engine.lanes`)
+    runs ``plant``: a failure in it is explained member by member like a scalar member's
+    (:func:`run_members`); its first argument after the group index is the groups table."""
+    _PLANT_OF_MEMBER[id(group)] = plant
+    _GROUP_FUNCTIONS.add(id(group))
 
 
 def _user_functions(plant: Plant) -> bool:
@@ -148,12 +157,11 @@ def _component_modules() -> tuple[Any, ...]:
     return fastmath, feedback, observers, differentiators, law
 
 
-def _component_functions() -> dict[str, Any]:
+def _component_functions(variant: str = "scalar") -> dict[str, Any]:
     """The controller's component functions, by the global name the templates use: the
     process's private, uncached copies (see :func:`_private_components`)."""
-    fb, law, ob, td = (
-        _private_components()[m] for m in ("feedback", "law", "observers", "differentiators")
-    )
+    private = _private_components(variant)
+    fb, law, ob, td = (private[m] for m in ("feedback", "law", "observers", "differentiators"))
     return {
         "_HAN_TD": td.han_td_rhs,
         "_ITD": td.improved_td_rhs_scaled,
@@ -175,10 +183,10 @@ def _component_functions() -> dict[str, Any]:
     }
 
 
-_PRIVATE: dict[str, types.ModuleType] = {}
+_PRIVATE: dict[str, dict[str, types.ModuleType]] = {}
 
 
-def _private_components() -> dict[str, types.ModuleType]:
+def _private_components(variant: str = "scalar") -> dict[str, types.ModuleType]:
     """Uncached copies of the component modules' compiled functions, built once per process.
 
     The component functions are compiled with ``cache=True``, and numba keys each one's
@@ -191,18 +199,25 @@ def _private_components() -> dict[str, types.ModuleType]:
     and with its other options (fast-math flags, error model, inlining), in a copy of its
     module's globals whose compiled functions are these copies too.  Returns one stand-in
     module per component module (by short name), holding its copied functions.
+
+    ``variant = "lanes"`` builds the copies the lane kernel (:mod:`aiofl.engine.lanes`)
+    links: every function inlined where called and ``np.exp``/``np.log``/``np.sin``/
+    ``np.cos`` rebound to the branch-free :mod:`aiofl.components.vecmath` functions
+    (:func:`vector_math_globals`), so a loop over lanes that calls them vectorizes, and the
+    lane kernel's fast-math flags (:data:`aiofl.engine.lanes.LANE_FASTMATH`).
     """
     with _PRIVATE_LOCK:
-        if _PRIVATE:
-            return _PRIVATE
+        if variant in _PRIVATE:
+            return _PRIVATE[variant]
         from numba import njit
         from numba.core.dispatcher import Dispatcher
 
+        lanes = variant == "lanes"
         mods = _component_modules()
         copies: dict[int, Any] = {}  # id(original dispatcher) -> uncached copy
         spaces: list[dict[str, Any]] = []
         for mod in mods:
-            space = dict(vars(mod))
+            space = vector_math_globals(vars(mod)) if lanes else dict(vars(mod))
             spaces.append(space)
             for obj in vars(mod).values():
                 if isinstance(obj, Dispatcher) and obj.py_func.__module__ == mod.__name__:
@@ -210,16 +225,47 @@ def _private_components() -> dict[str, types.ModuleType]:
                     py = types.FunctionType(fn.__code__, space, fn.__name__, fn.__defaults__)
                     py.__qualname__, py.__doc__ = fn.__qualname__, fn.__doc__
                     opts = {k: v for k, v in obj.targetoptions.items() if k != "nopython"}
+                    if lanes:
+                        from aiofl.engine.lanes import LANE_FASTMATH
+
+                        opts["inline"] = "always"
+                        opts["fastmath"] = LANE_FASTMATH
                     copies[id(obj)] = njit(locals=dict(obj.locals), **opts)(py)
         for space in spaces:  # calls between components go to the copies too
             for name, obj in list(space.items()):
                 if id(obj) in copies:
                     space[name] = copies[id(obj)]
+        out: dict[str, types.ModuleType] = {}
         for mod, space in zip(mods, spaces, strict=True):
             stand_in = types.ModuleType(mod.__name__)
             stand_in.__dict__.update(space)
-            _PRIVATE[mod.__name__.rsplit(".", 1)[1]] = stand_in
-        return _PRIVATE
+            out[mod.__name__.rsplit(".", 1)[1]] = stand_in
+        _PRIVATE[variant] = out
+        return out
+
+
+def vector_math_globals(space: dict[str, Any]) -> dict[str, Any]:
+    """A copy of a function's globals ``space`` in which ``exp``, ``log``, ``sin`` and
+    ``cos`` (bound by name, or reached as attributes of the ``math`` or ``numpy`` module)
+    are the branch-free functions of :mod:`aiofl.components.vecmath`."""
+    import math
+
+    import numpy as np
+
+    from aiofl.components import vecmath
+
+    swap = {"exp": vecmath.vexp, "log": vecmath.vlog, "sin": vecmath.vsin, "cos": vecmath.vcos}
+    by_id = {id(getattr(mod, name)): fn for name, fn in swap.items() for mod in (math, np)}
+    out = dict(space)
+    for name, obj in space.items():
+        if id(obj) in by_id:
+            out[name] = by_id[id(obj)]
+        elif obj is math or obj is np:
+            stand_in = types.ModuleType(obj.__name__)
+            stand_in.__dict__.update(vars(obj))
+            stand_in.__dict__.update(swap)
+            out[name] = stand_in
+    return out
 
 
 def _instantiate(tpl: Any, ns: dict[str, Any], suffix: str, **jit_options: Any) -> Any:
@@ -303,15 +349,16 @@ def plant_namespace(
     return ns, plant_key, fingerprint
 
 
-def _bind_private(ns: dict[str, Any]) -> None:
+def _bind_private(ns: dict[str, Any], variant: str = "scalar") -> None:
     """Point the component modules ``ns`` names (``_fb``, ``_law``) at the private copies of
     :func:`_private_components`, and re-compile the kernel module's own compiled functions
     (``_aiofl_command``, ``_iofl_command``, inlined where called) with ``ns`` as globals, so
-    nothing a kernel compiled from ``ns`` calls comes from numba's per-function disk cache."""
+    nothing a kernel compiled from ``ns`` calls comes from numba's per-function disk cache.
+    ``variant`` as for :func:`_private_components`."""
     from numba import njit
     from numba.core.dispatcher import Dispatcher
 
-    private = _private_components()
+    private = _private_components(variant)
     for name, obj in list(ns.items()):
         if isinstance(obj, types.ModuleType) and obj.__name__.startswith("aiofl.components."):
             ns[name] = private[obj.__name__.rsplit(".", 1)[1]]
@@ -459,16 +506,22 @@ def _explain_failure(member: Any, i: int, exc: Exception, args: tuple[Any, ...])
     if isinstance(exc, NumbaError):  # compiling the kernel failed: a plant function?
         plant.typecheck()
         return
-    try:  # replay the member with every plant function reporting where it raised
-        _build_kernel(plant, cache=False, guarded=True).member(i, *args)
-    except PlantFailure as failure:
-        index, *state = failure.args
-        raise PlantError(
-            f"plant {plant.name!r}: plant function {_PLANT_FUNCTIONS[index]} failed at state "
-            f"x = {[float(v) for v in state]}: {type(exc).__name__}: {exc}"
-        ) from None
-    except Exception:  # not a plant function: the caller re-raises the original
-        pass
+    members = [i]
+    if id(member) in _GROUP_FUNCTIONS:  # a lane group: replay its members one by one
+        members = [int(m) for m in args[0][i] if m >= 0]
+        args = args[1:]
+    guarded = _build_kernel(plant, cache=False, guarded=True).member
+    for m in members:
+        try:  # replay the member with every plant function reporting where it raised
+            guarded(m, *args)
+        except PlantFailure as failure:
+            index, *state = failure.args
+            raise PlantError(
+                f"plant {plant.name!r}: plant function {_PLANT_FUNCTIONS[index]} failed at "
+                f"state x = {[float(v) for v in state]}: {type(exc).__name__}: {exc}"
+            ) from None
+        except Exception:  # not a plant function: the caller re-raises the original
+            return
 
 
 # the engine's sources as this process loaded them (see _engine_sources_changed)

@@ -25,7 +25,7 @@ from aiofl import layout as L
 from aiofl.components.metrics import OPIWeights, opi
 from aiofl.controller import Controller, ControllerBatch, controller_batch
 from aiofl.engine.build import kernel_for, run_members
-from aiofl.engine.discrete import Sampling, sampling_rows
+from aiofl.engine.discrete import D_STEPS, Sampling, sampling_rows
 from aiofl.plants.base import Plant
 from aiofl.scenario import Scenario, noise_sequence
 
@@ -128,6 +128,7 @@ def simulate_batch(
     decimation: int = 10,
     divergence_threshold: float = 1e10,
     sampling: Sampling | Sequence[Sampling | None] | None = None,
+    engine: str | None = None,
 ) -> BatchResult:
     """Simulate a batch of closed loops in one compiled, parallel call.
 
@@ -153,11 +154,18 @@ def simulate_batch(
         all members or one per member (None = continuous); sample times must be integer
         multiples of ``dt`` (:mod:`aiofl.engine.sampled`).  Continuous members are
         unaffected.
+    engine
+        ``"lanes"`` (default): continuous members run in groups of 8, one per SIMD lane
+        (:mod:`aiofl.engine.lanes`); ``"scalar"``: every member runs the one-member
+        kernel (:mod:`aiofl.engine.kernel`), the reference the lane kernel is checked
+        against.  Default: the environment variable ``AIOFL_ENGINE``, else ``"lanes"``.
+        Sampled members run the sampled kernel (:mod:`aiofl.engine.sampled`) either way.
 
     Returns
     -------
     BatchResult
     """
+    engine = _engine_choice(engine)
     if method not in L.METHODS:
         raise ValueError(f"method = {method!r}; allowed: {', '.join(L.METHODS)}")
     if not dt > 0:
@@ -218,20 +226,17 @@ def simulate_batch(
             ref_d[j, : len(s.reference.samples)] = s.reference.samples
             ref_d[j, len(s.reference.samples) :] = s.reference.samples[-1]
 
-    kernel = kernel_for(plant)
     n_save = n_steps // decimation + 1 if store else 0
-    traj = np.empty((b, n_save, kernel.n_cols))  # rows after a divergence are set to NaN
+    n_cols = len(L.trajectory_columns(n))
+    traj = np.empty((b, n_save, n_cols))  # rows after a divergence are set to NaN
     metrics = np.zeros((b, L.N_METRIC))
     status = np.zeros(b, dtype=np.int64)
     t_div = np.zeros(b)
-    member = kernel.member
+    lane_members = np.arange(b) if engine == "lanes" else np.zeros(0, dtype=np.int64)
     if disc is not None:
-        from aiofl.engine.sampled import member_dispatch
-
-        member = member_dispatch(plant, kernel.member, disc)
-    run_members(
-        member,
-        b,
+        lane_members = lane_members[disc[lane_members, D_STEPS] <= 0]  # continuous only
+    scalar_members = np.setdiff1d(np.arange(b), lane_members)
+    args = (
         batch.ints,
         batch.floats,
         np.ascontiguousarray(p_before_d[rows]),
@@ -254,6 +259,22 @@ def simulate_batch(
         t_div,
         traj,
     )
+    if lane_members.size:
+        from aiofl.engine.lanes_build import lane_kernel_for, plan_groups, run_groups
+
+        plan = plan_groups(batch.ints, scen_d[rows, L.S_REF_KIND], lane_members)
+        for width, groups in plan.items():
+            run_groups(lane_kernel_for(plant, width), groups, *args)
+    if scalar_members.size:  # the scalar engine, and sampled members
+        member = kernel_for(plant).member
+        if disc is not None:
+            from aiofl.engine.sampled import member_dispatch
+
+            member = member_dispatch(plant, member, disc)
+        if scalar_members.size == b:
+            run_members(member, b, *args)
+        else:
+            _run_subset(member, scalar_members, args)
     return BatchResult(
         metrics=metrics,
         diverged=status == L.STATUS_DIVERGED,
@@ -262,6 +283,28 @@ def simulate_batch(
         columns=L.trajectory_columns(n),
         dt=float(dt),
     )
+
+
+ENGINES = ("lanes", "scalar")
+"""The time loops :func:`simulate_batch` can run (``engine``)."""
+
+
+def _engine_choice(engine: str | None) -> str:
+    import os
+
+    choice = engine if engine is not None else os.environ.get("AIOFL_ENGINE", "") or "lanes"
+    if choice not in ENGINES:
+        raise ValueError(f"engine = {choice!r}; allowed: {', '.join(ENGINES)}")
+    return choice
+
+
+def _run_subset(member: Any, subset: NDArray[np.int64], args: tuple[Any, ...]) -> None:
+    """Run ``member`` for the batch members ``subset`` only."""
+
+    def one(i: int, *rest: Any) -> None:
+        member(int(subset[i]), *rest)
+
+    run_members(one, int(subset.size), *args)
 
 
 def simulate(

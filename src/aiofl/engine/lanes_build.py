@@ -1,0 +1,257 @@
+"""A plant's lane kernel: compiling the templates of :mod:`aiofl.engine.lanes`, grouping a
+batch by component kinds and running the groups.
+
+:func:`lane_kernel_for` compiles the lane templates for one plant with the mechanism of
+:mod:`aiofl.engine.build` (a namespace that binds the plant; the on-disk cache under a
+fingerprint of every source involved), with two differences that make the lane loops
+vectorize: the plant's f, g, h and b_d and the controller's component functions are
+compiled *inlined* (numba IR inlining) and with ``exp``/``log``/``sin``/``cos`` rebound to
+:mod:`aiofl.components.vecmath` (:func:`aiofl.engine.build.vector_math_globals`).
+
+:func:`group_members` splits a batch into groups of :data:`aiofl.engine.lanes.WIDTH`
+members with uniform component kinds (ESO, TD, SEF and law kinds, ρ, the feedback length,
+the ESO start and the reference kind), in batch order, padding the last group of each kind
+with -1; :func:`run_groups` runs them on ``numba.get_num_threads()`` threads through
+:func:`aiofl.engine.build.run_members`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import types
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from aiofl import layout as L
+from aiofl.engine import build, kernel, lane_blocks, lanes
+from aiofl.plants.base import Plant
+
+__all__ = ["group_members", "lane_kernel_for", "plan_groups", "run_groups"]
+
+_LANE_KERNELS: dict[tuple[int, int], tuple[Plant, Any]] = {}
+_LOCK = threading.Lock()
+
+
+def _lane_plant_function(fn: Any, *, inline: bool = True) -> Any:
+    """``fn`` (a plant function) compiled for the lane kernel: a private copy, with vector
+    math and inlined where called (``inline``), else as the scalar kernel compiles it."""
+    from numba import njit
+
+    py = getattr(fn, "py_func", fn)
+    space = build.vector_math_globals(py.__globals__) if inline else py.__globals__
+    copy = types.FunctionType(py.__code__, space, py.__name__, py.__defaults__, py.__closure__)
+    copy.__qualname__ = py.__qualname__
+    if inline:
+        return njit(inline="always", error_model="numpy")(copy)
+    return njit(error_model="numpy")(copy)
+
+
+def _noalias_option() -> dict[str, Any]:
+    """``{"_noalias": True}``: compile a function with LLVM's ``noalias`` on its pointer
+    arguments, or ``{}`` where this numba cannot.
+
+    Without it LLVM must assume that two array arguments of a lane block may overlap, and
+    does not vectorize a loop of 8 lanes that stores into one and loads from the other (the
+    run-time overlap check costs more than the loop).  numba sets this flag only for its
+    parallel gufuncs (``Flags.noalias``); the CPU target's option table maps decorator
+    keywords to flags, and this adds the mapping ``_noalias -> noalias`` to it (nothing
+    else changes: a function compiled without the keyword is compiled as before).  Every
+    block is called with arrays that do not overlap (distinct rows of the group's
+    workspace), which is what ``noalias`` promises.  If a future numba lacks the flag or
+    the table, the blocks compile without it: the same numbers, unvectorized.
+    """
+    try:
+        from numba.core.compiler import Flags
+        from numba.core.cpu import CPUTargetOptions
+        from numba.core.options import TargetOptions
+    except ImportError:  # pragma: no cover - numba internals moved
+        return {}
+    if not hasattr(Flags, "noalias"):  # pragma: no cover
+        return {}
+    if not isinstance(getattr(CPUTargetOptions, "_noalias", None), TargetOptions.Mapping):
+        CPUTargetOptions._noalias = TargetOptions.Mapping("noalias")
+    return {"_noalias": True}
+
+
+def _lane_sources() -> list[str]:
+    """Source files of the lane kernel besides the scalar kernel's (fingerprint)."""
+    import sys
+
+    from aiofl.components import vecmath
+
+    return [m.__file__ for m in (lanes, lane_blocks, sys.modules[__name__], vecmath)]
+
+
+def _build(plant: Plant, width: int, *, cache: bool | None = None) -> Any:
+    """Compile the lane kernel of ``plant`` for groups of ``width`` (see the module notes)."""
+    import hashlib
+
+    from aiofl.components import vecmath
+
+    _, plant_key, fingerprint = build.plant_namespace(plant)
+    if fingerprint is not None:
+        digests = [build._source_digest(path) for path in _lane_sources()]
+        fingerprint = hashlib.sha256("|".join([fingerprint, *digests]).encode()).hexdigest()[:20]
+    use_cache = build._cache_enabled() if cache is None else cache
+    use_cache = use_cache and fingerprint is not None and not build._engine_sources_changed()
+    suffix = f"{plant_key}_{fingerprint}" if fingerprint else f"nocache{id(plant):x}"
+    suffix = f"w{width}_{suffix}"
+    opts = {"fastmath": lanes.LANE_FASTMATH, "error_model": "numpy"}
+    inst = build._instantiate
+    # the per-member setup and the IOFL law are the scalar kernel's templates, compiled
+    # here against the lane variant's private components (nothing is shared with the
+    # scalar kernel, whose code must not depend on what was compiled first)
+    bd, nf = plant.compiled[3:]
+    if not use_cache and build._user_functions(plant):
+        plant.typecheck()  # numba compiles them now rather than inside the kernel
+    ns_setup = dict(vars(kernel))
+    build._bind_private(ns_setup, "lanes")
+    ns_setup.update(_N=plant.n_states, **build._component_functions("lanes"))
+    setup = inst(kernel._tpl_setup, ns_setup, suffix, **opts)
+
+    ns = {**vars(lane_blocks), **vars(lanes)}
+    ns.update(
+        _W=width,
+        _N=plant.n_states,
+        _N_P=len(plant.params),
+        _NZ=plant.n_states + L.N_METRIC + 2 * L.RHO_MAX + 1,
+        _PF=_lane_plant_function(plant.f),
+        _PG=_lane_plant_function(plant.g),
+        _PH=_lane_plant_function(plant.h),
+        _PBD=_lane_plant_function(bd),
+        _PNF=_lane_plant_function(nf, inline=False),
+        _SETUP=setup,
+        _IOFL_COMMAND=ns_setup["_iofl_command"],
+        _UNMANAGED=build._unmanaged_intrinsic(),
+        _SIN=vecmath.vsin,
+        _COS=vecmath.vcos,
+        **build._component_functions("lanes"),
+    )
+    block_opts = {**opts, **_noalias_option()}
+    for name, fn in vars(lane_blocks).items():  # each block its own function
+        if name.startswith("_blk_"):
+            ns[name.upper()] = inst(fn, ns, suffix, **block_opts)
+    ns["_KEEP_ALIVE"] = inst(lanes._tpl_keep_alive, ns, suffix)
+    ns["_GROUP_SETUP"] = inst(lanes._tpl_group_setup, ns, suffix, **opts)
+    ns["_REFERENCE"] = inst(lanes._tpl_reference, ns, suffix, inline="always", **opts)
+    ns["_DERIV"] = inst(lanes._tpl_deriv, ns, suffix, inline="always", **opts)
+    group = inst(lanes._tpl_group, ns, suffix, nogil=True, cache=use_cache, **opts)
+    if use_cache:
+        build._prune_stale_cache(group, plant_key, suffix, lanes._tpl_group)
+    build.register_group_function(group, plant)
+    return group
+
+
+def lane_kernel_for(plant: Plant, width: int = lanes.WIDTH) -> Any:
+    """The compiled lane kernel (group function) of ``plant`` for groups of ``width``,
+    built on first use."""
+    key = (id(plant), width)
+    with _LOCK:
+        if key not in _LANE_KERNELS or _LANE_KERNELS[key][0] is not plant:
+            _LANE_KERNELS[key] = (plant, _build(plant, width))
+        return _LANE_KERNELS[key][1]
+
+
+def group_members(
+    ints: NDArray[np.int64],
+    ref_kind: NDArray[np.float64],
+    members: NDArray[np.int64],
+    width: int = lanes.WIDTH,
+) -> NDArray[np.int64]:
+    """Groups of :data:`~aiofl.engine.lanes.WIDTH` members with uniform kinds.
+
+    Parameters
+    ----------
+    ints
+        The batch's integer rows (:data:`aiofl.layout.INT_NAMES`).
+    ref_kind
+        Each member's reference kind (scenario column ``S_REF_KIND``).
+    members
+        The members to group (indices into the batch), in the order to keep.
+    width
+        Lanes per group.
+
+    Returns
+    -------
+    ndarray of int64, shape (G, width)
+        Member indices per group, -1 for the pads of a group's last lanes.
+    """
+    w = width
+    by_kind: dict[tuple[int, ...], list[int]] = {}
+    for i in members.tolist():
+        key = (*(int(v) for v in ints[i]), int(ref_kind[i]))
+        by_kind.setdefault(key, []).append(i)
+    rows: list[list[int]] = []
+    for group in by_kind.values():
+        for start in range(0, len(group), w):
+            chunk = group[start : start + w]
+            rows.append(chunk + [-1] * (w - len(chunk)))
+    return np.array(rows, dtype=np.int64).reshape(len(rows), w)
+
+
+def plan_groups(
+    ints: NDArray[np.int64], ref_kind: NDArray[np.float64], members: NDArray[np.int64]
+) -> dict[int, NDArray[np.int64]]:
+    """The groups to run, by lane width: members of a kind that fill at least half a group
+    of :data:`~aiofl.engine.lanes.WIDTH` run in such groups (the last one padded), the
+    others in groups of one lane.  Either way a member's numbers are the same (bitwise)."""
+    w = lanes.WIDTH
+    by_kind: dict[tuple[int, ...], list[int]] = {}
+    for i in members.tolist():
+        by_kind.setdefault((*(int(v) for v in ints[i]), int(ref_kind[i])), []).append(i)
+    wide = [i for group in by_kind.values() if 2 * len(group) >= w for i in group]
+    narrow = [i for group in by_kind.values() if 2 * len(group) < w for i in group]
+    plan = {}
+    if wide:
+        plan[w] = group_members(ints, ref_kind, np.array(wide, dtype=np.int64), w)
+    if narrow:
+        plan[1] = np.array(narrow, dtype=np.int64).reshape(-1, 1)
+    return plan
+
+
+def run_groups(group_fn: Any, groups: NDArray[np.int64], *args: Any) -> None:
+    """Run ``group_fn(g, groups, *args)`` for every group, on all threads.
+
+    The group function is compiled (or loaded from the disk cache) here, in the calling
+    thread, before any worker starts: with LLVM's SLP vectorizer on (:func:`_slp_on`).
+    """
+    import numba
+    from numba.core.errors import NumbaError
+
+    sig = tuple(numba.typeof(a) for a in (0, groups, *args))
+    if sig not in group_fn.signatures:
+        try:
+            with _slp_on():
+                group_fn.compile(sig)
+        except NumbaError:  # a user plant function numba cannot compile: say which
+            plant = build._PLANT_OF_MEMBER.get(id(group_fn))
+            if plant is not None and build._user_functions(plant):
+                plant.typecheck()
+            raise
+    build.run_members(group_fn, len(groups), groups, *args)
+
+
+@contextlib.contextmanager
+def _slp_on() -> Iterator[None]:
+    """Compile with LLVM's SLP vectorizer, which numba leaves off by default.
+
+    A loop over 8 lanes is short enough that LLVM unrolls it completely before its loop
+    vectorizer runs; the SLP (straight-line) vectorizer then packs the 8 unrolled copies
+    into vector instructions.  numba reads ``config.SLP_VECTORIZE`` each time it builds the
+    optimisation pipeline of a library: it is switched on while the lane kernel compiles
+    (holding numba's compiler lock, so no other compilation sees it) and restored after.
+    """
+    from numba.core import config
+    from numba.core.compiler_lock import global_compiler_lock
+
+    with global_compiler_lock:
+        old = config.SLP_VECTORIZE
+        config.SLP_VECTORIZE = 1
+        try:
+            yield
+        finally:
+            config.SLP_VECTORIZE = old
