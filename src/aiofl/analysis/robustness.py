@@ -137,7 +137,6 @@ def simulate_draws(
     :data:`CALL_TRAJECTORY_BYTES`.
     With a ``distributed.Client``: ``chunks`` tasks (default: the number of workers).
     """
-    from aiofl.engine.build import kernel_for
     from aiofl.limits import check_run_size
 
     k = len(draws)
@@ -146,7 +145,8 @@ def simulate_draws(
     # the stored trajectory and the engine's per-scenario noise table (every draw is its
     # own scenario, so simulate_batch holds one held-noise row per member)
     n_noise = math.ceil(cfg.scenario.t_final / cfg.scenario.noise_hold) + 2
-    per_member = (n_pts * kernel_for(cfg.plant).n_cols + n_noise) * 8
+    n_cols = len(L.trajectory_columns(cfg.plant.n_states))
+    per_member = (n_pts * n_cols + n_noise) * 8
     per_call = max(1, CALL_TRAJECTORY_BYTES // per_member)
     if client is not None:
         if chunks is None:
