@@ -1,29 +1,32 @@
 r"""The lane kernel: a group of members advanced together, one member per SIMD lane.
 
 The members of a batch are independent copies of one program, so the engine runs them in
-groups of :data:`WIDTH` (8 doubles = one AVX-512 register): every quantity of a member
-becomes a column of a (rows, W) array (structure of arrays) and every formula is applied in
-a loop over the W lanes that LLVM vectorizes.  This module holds the *templates* of that
-time loop, compiled per plant like those of :mod:`aiofl.engine.kernel` (whose closed loop,
-layout, switching and divergence semantics it follows exactly) by
-:mod:`aiofl.engine.lanes_build`.
+groups of W members (:data:`WIDTH` = 16 doubles, two AVX-512 registers; 1 for the few
+members of a kind in a small batch): every quantity of a member becomes a column of a
+(rows, W) array (structure of arrays) and every formula is applied in a loop over the W
+lanes that LLVM vectorizes (:mod:`aiofl.engine.lane_blocks`).  This module holds the
+*templates* of the time loop, the right-hand side and the reference, compiled per plant and
+width like those of :mod:`aiofl.engine.kernel` (whose closed loop, layout, switching and
+divergence semantics they follow exactly) by :mod:`aiofl.engine.lanes_build`.
 
 **What makes it vectorize.**  A loop over lanes vectorizes only if its body is one basic
-block of arithmetic after inlining: so every component function, the plant's f, g, h,
-b_d and the reference are inlined (numba IR inlining) into the lane loops; component kinds
-are uniform within a group (a mixed batch is grouped by kinds), so the branches on kinds
-are taken outside the lane loops; per-lane branches of the formulas (fal's linear zone,
-the signs, the reference's derivative quadrant) become selects; loops over the order ρ or
-the feedback length m run *outside* the lane loops (LLVM vectorizes innermost loops only),
-and the transcendental functions are the branch-free ones of
-:mod:`aiofl.components.vecmath` (the plant functions and the components are compiled with
-``exp``, ``log``, ``sin`` and ``cos`` rebound to them).
+block of arithmetic after inlining: so each formula is a block (its own compiled function,
+:mod:`aiofl.engine.lane_blocks`) with the component functions and the plant's f, g, h, b_d
+inlined into its lane loop; component kinds are uniform within a group (a mixed batch is
+grouped by kinds), so the branches on kinds are taken here, outside the lane loops;
+per-lane branches of the formulas (fal's linear zone, the signs, saturation) become
+selects; loops over the order ρ or the feedback length m run *outside* the lane loops, and
+the transcendental functions are the branch-free ones of :mod:`aiofl.components.vecmath`
+(the plant functions and the components are compiled with ``exp``, ``log``, ``sin`` and
+``cos`` rebound to them).
 
 **Numbers.**  A member's results depend only on its own data: lanes never mix, a partial
 group is padded with copies of one of its members (the same code runs for every lane, so a
-member's numbers are the same in any lane of any group: bitwise, checked by the tests), and
-a pad's results are discarded.  Against the scalar kernel the results differ by the
-rounding of the vector math functions (≤ 2 ulp each, see the tests for the metrics).
+member's numbers are the same in any lane of any group: bitwise, checked by the tests), a
+pad's results are discarded, and the kernel is compiled without fast-math flags so that the
+width-1 and width-16 instances round alike (:data:`LANE_FASTMATH`).  Against the scalar
+kernel the results differ by the rounding of the vector math functions and of the
+fast-math flags the scalar kernel has (see ``tests/test_lanes.py`` for the metrics).
 
 **Divergence is per lane.**  A member whose state leaves the threshold is reported as
 diverged at that step (status, time, its integrals at that point, as the scalar kernel
