@@ -14,19 +14,16 @@ J_l, K_s, R_m, J_h, each uniform within ±20 % (``[uncertainty]``, seed 1).  A g
 is 64 × 17 = 1088 members in one batched engine call (numba ``prange`` over members).
 
 What makes it fast is the engine, not a shortcut in the tuner: every member is an
-independent compiled loop, the 1088 members of a generation keep both cores busy in one
-call, and a member that diverges stops at that step (``engine.kernel``), so the unstable
-candidates a GA tries early cost only their time to divergence.  No member is stopped on a
-partial ITAE: the kernel has no per-member early-stop column, and adding one would touch
-the integrator loop another branch is changing.
+independent compiled loop, the 1088 members of a generation run 16 at a time in SIMD lanes
+(:mod:`aiofl.engine.lanes`) on both cores in one call, and a member that diverges stops at
+that step, so the unstable candidates a GA tries early cost only their time to divergence.
+No member is stopped on a partial ITAE.
 
 The goal is under 5 minutes on 2 cores.  The machine is shared: the load average is
-printed with the result.  Measured (2 cores, shared): the full run took 871 s (62 members/s,
-42 of 3200 candidates infeasible) with a load average of 2.3-4.7 from other jobs; a
-2-generation run at load 1.5 did 2176 members in 17.4 s (125 members/s), i.e. about 435 s
-for the full run on a quieter machine.  The goal is not met: 54 400 members x 60 000 RK4
-steps is the cost, and cutting it needs a coarser tuning step (``tune.dt``) or a per-member
-early stop in the kernel.
+printed with the result.  Measured: 141 s (385 members/s, 38 of 3200 candidates
+infeasible, load 1.7-2.0) with the lane engine; with the scalar engine
+(``AIOFL_ENGINE=scalar``) the full run took 871 s under load 2.3-4.7 and a 2-generation run
+at load 1.5 did 125 members/s (about 435 s for the full run).
 """
 
 from __future__ import annotations
