@@ -269,6 +269,39 @@ def test_kernel_links_no_component_from_numbas_per_function_cache(slfjm):
         )
 
 
+def test_no_public_component_that_calls_another_module_is_disk_cached():
+    """The analysis, the C export and the sampled kernel call the public component functions;
+    one cached by numba would keep an edited callee's old code (numba keys its cache on the
+    caller's file only).  Every public component function that names a compiled function of
+    another module is uncached; the leaves may be cached."""
+    import importlib
+    import pkgutil
+
+    from numba.core.dispatcher import Dispatcher
+
+    import aiofl.components as comp
+
+    callers, leaves = [], []
+    for info in pkgutil.iter_modules(comp.__path__):
+        mod = importlib.import_module(f"aiofl.components.{info.name}")
+        for obj in vars(mod).values():
+            if not isinstance(obj, Dispatcher) or obj.py_func.__module__ != mod.__name__:
+                continue
+            names = obj.py_func.__code__.co_names
+            foreign = [
+                n
+                for n in names
+                if isinstance(g := obj.py_func.__globals__.get(n), Dispatcher)
+                and g.py_func.__module__ != mod.__name__
+            ]
+            (callers if foreign else leaves).append(obj)
+            if foreign:
+                assert type(obj._cache).__name__ == "NullCache", obj.py_func.__qualname__
+    names = {d.py_func.__name__ for d in callers}
+    assert {"fal_scaled", "inlsef_term", "linear_sef_gain", "improved_td_rhs_scaled"} <= names
+    assert any(type(d._cache).__name__ != "NullCache" for d in leaves)  # the check can fail
+
+
 def test_a_source_edited_after_loading_is_not_cached_under_the_new_fingerprint(monkeypatch):
     """The fingerprint digests the files on disk, numba compiles the code this process
     loaded: when another process edits kernel.py (or a component) in between, the kernel

@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from aiofl.components.fastmath import JIT_OPTIONS, binomial_power, fast_tanh
+from aiofl.components.fastmath import CALLER_JIT_OPTIONS, binomial_power, fast_tanh
 
 __all__ = [
     "han_td_rhs",
@@ -57,7 +57,7 @@ def han_td_rhs(r1: float, r2: float, r: float, big_r: float) -> tuple[float, flo
     return r2, -big_r * sgn
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def improved_td_rhs_scaled(
     r1: float, r2: float, r: float, b_over_c: float, gain: float, rho: float
 ) -> tuple[float, float]:
@@ -73,13 +73,13 @@ def improved_td_rhs_scaled(
     return r2, -rho * rho * fast_tanh(b_over_c * r1 - gain * r) - rho * r2
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def improved_td_constants(a: float, b: float, c: float) -> tuple[float, float]:
     r"""The ITD's constants :math:`(b/c,\ (1-a)/c)` for :func:`improved_td_rhs_scaled`."""
     return b / c, (1.0 - a) / c
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def improved_td_rhs(
     r1: float, r2: float, r: float, a: float, b: float, c: float, rho: float
 ) -> tuple[float, float]:
@@ -99,7 +99,7 @@ def itd_steady_state(r: float, a: float, b: float) -> float:
     return (1.0 - a) * r / b
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def linear_prefilter_coefficient(rho: int, i: int, omega: float) -> float:
     r"""Coefficient :math:`c_i = \binom{\rho}{i-1}\omega^{\rho-i+1}` (i = 1..ρ) of
     :math:`(s+\omega)^\rho` (:func:`aiofl.components.fastmath.binomial_power`)."""
@@ -112,7 +112,7 @@ def linear_prefilter_coefficients(rho: int, omega: float) -> NDArray[np.float64]
     return np.array([linear_prefilter_coefficient(rho, i, float(omega)) for i in range(1, rho + 1)])
 
 
-@njit(inline="always", **JIT_OPTIONS)  # inlined where called: no array arguments
+@njit(inline="always", **CALLER_JIT_OPTIONS)  # inlined where called: no array arguments
 def linear_prefilter_update(
     state: NDArray[np.float64],
     d_state: NDArray[np.float64],
@@ -140,7 +140,7 @@ def linear_prefilter_update(
     return acc
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def linear_prefilter_rhs(
     state: NDArray[np.float64], d_state: NDArray[np.float64], rho: int, r: float, omega: float
 ) -> float:

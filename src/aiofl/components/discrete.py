@@ -64,7 +64,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from aiofl.components.fastmath import JIT_OPTIONS, sign
+from aiofl.components.fastmath import CALLER_JIT_OPTIONS, sign
 from aiofl.components.observers import binomial_alphas
 
 __all__ = [
@@ -272,7 +272,7 @@ def linear_prefilter_zoh(
 
 
 # ------------------------------------------------------------------ updates (compiled)
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def fhan(x1: float, x2: float, r: float, h: float) -> float:
     r"""Han's time-optimal synthesis function fhan (Han 2009, Sec. III-A).
 
@@ -305,7 +305,7 @@ def fhan(x1: float, x2: float, r: float, h: float) -> float:
     return -r * a / d
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def fhan_td_step(
     r1: float, r2: float, r: float, big_r: float, ts: float, h0: float
 ) -> tuple[float, float]:
@@ -315,7 +315,7 @@ def fhan_td_step(
     return r1 + ts * r2, r2 + ts * fh
 
 
-@njit(inline="always", **JIT_OPTIONS)  # inlined where called: no array arguments
+@njit(inline="always", **CALLER_JIT_OPTIONS)  # inlined where called: no array arguments
 def observer_innovation(state: NDArray[np.float64], o_p: int, o_y: int, y: float) -> float:
     r"""The innovation :math:`e_k = y_k - p_{1,k}` in increment form,
     :math:`e_k = (y_k - y_{k-1}) - q_k` with :math:`q_k = p_{1,k} - y_{k-1}` at
@@ -323,7 +323,7 @@ def observer_innovation(state: NDArray[np.float64], o_p: int, o_y: int, y: float
     return (y - state[o_y]) - state[o_p]
 
 
-@njit(inline="always", **JIT_OPTIONS)  # inlined where called: no array arguments
+@njit(inline="always", **CALLER_JIT_OPTIONS)  # inlined where called: no array arguments
 def observer_correct(
     state: NDArray[np.float64],
     o_p: int,
@@ -346,7 +346,7 @@ def observer_correct(
     return d
 
 
-@njit(inline="always", **JIT_OPTIONS)  # inlined where called: no array arguments
+@njit(inline="always", **CALLER_JIT_OPTIONS)  # inlined where called: no array arguments
 def observer_predict(
     state: NDArray[np.float64],
     o_p: int,
@@ -384,7 +384,7 @@ def observer_predict(
     state[o_y] = y
 
 
-@njit(inline="always", **JIT_OPTIONS)  # inlined where called: no array arguments
+@njit(inline="always", **CALLER_JIT_OPTIONS)  # inlined where called: no array arguments
 def linear_discrete_update(
     state: NDArray[np.float64],
     o: int,

@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from aiofl.components.fastmath import JIT_OPTIONS, abspow, binomial_power, fast_tanh, sign
+from aiofl.components.fastmath import CALLER_JIT_OPTIONS, abspow, binomial_power, fast_tanh, sign
 
 __all__ = [
     "fal",
@@ -45,7 +45,7 @@ __all__ = [
 ]
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def fal_scaled(e: float, alpha: float, delta: float, inner_slope: float) -> float:
     r"""Han's fal, eq. (17), given its inner slope :math:`\delta^{\alpha-1}`.
 
@@ -64,14 +64,14 @@ def fal_scaled(e: float, alpha: float, delta: float, inner_slope: float) -> floa
     return abspow(ae, alpha, np.log(ae)) * sign(e)
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def fal_inner_slope(alpha: float, delta: float) -> float:
     r"""The slope :math:`\delta^{\alpha-1} = 1/\delta^{1-\alpha}` of fal's linear inner
     branch (eq. 17, continuous form), for :func:`fal_scaled`."""
     return delta ** (alpha - 1.0)
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def fal(e: float, alpha: float, delta: float) -> float:
     r"""Han's fal function, eq. (17), in its continuous form.
 
@@ -87,7 +87,7 @@ def fal(e: float, alpha: float, delta: float) -> float:
     return fal_scaled(e, alpha, delta, fal_inner_slope(alpha, delta))
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def nonlinear_sef(
     e: NDArray[np.float64],
     m: int,
@@ -102,7 +102,7 @@ def nonlinear_sef(
     return v
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def inlsef_term(e: float, k1: float, k2: float, mu: float, alpha: float) -> float:
     r"""One error's term of the INLSEF, eq. (20):
 
@@ -118,7 +118,7 @@ def inlsef_term(e: float, k1: float, k2: float, mu: float, alpha: float) -> floa
     return gain * abspow(ae, alpha, np.log(ae)) * sign(e)
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def inlsef_limit(s: float, v_limit: float) -> float:
     r"""The INLSEF's smooth limit, eq. (20): :math:`v = \delta\tanh(s/\delta)` of the sum
     :math:`s = v_1 + \dots + v_m` of :func:`inlsef_term`, with :math:`\delta` =
@@ -126,7 +126,7 @@ def inlsef_limit(s: float, v_limit: float) -> float:
     return v_limit * fast_tanh(s / v_limit)
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def improved_sef(
     e: NDArray[np.float64],
     m: int,
@@ -144,7 +144,7 @@ def improved_sef(
     return inlsef_limit(s, delta)
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def linear_sef(weighted_errors: float, r_rho: float, b0: float) -> float:
     r"""Linear full-state feedback for the chain (14),
     :math:`v = \big(\sum_{i=1}^m k_i e_i + r^{(\rho)}\big)/b_0`, given the weighted sum
@@ -153,7 +153,7 @@ def linear_sef(weighted_errors: float, r_rho: float, b0: float) -> float:
     return (weighted_errors + r_rho) / b0
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def linear_sef_gain(rho: int, i: int, omega_c: float) -> float:
     r"""Gain :math:`k_i = \binom{\rho}{i-1}\omega_c^{\rho-i+1}` (i = 1..ρ) of the linear SEF:
     the coefficient of :math:`s^{i-1}` in :math:`(s+\omega_c)^\rho`

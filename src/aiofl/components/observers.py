@@ -29,7 +29,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import ArrayLike, NDArray
 
-from aiofl.components.fastmath import JIT_OPTIONS, abspow, sign
+from aiofl.components.fastmath import CALLER_JIT_OPTIONS, abspow, sign
 
 __all__ = [
     "binomial_alphas",
@@ -42,7 +42,7 @@ __all__ = [
 ]
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def eso_gain(alpha_i: float, omega0: float, i: int) -> float:
     r"""Observer gain :math:`\beta_i = \alpha_i\,\omega_0^i` (text after eq. 16)."""
     return alpha_i * omega0**i
@@ -79,7 +79,7 @@ def eso_error_matrix(betas: ArrayLike) -> NDArray[np.float64]:
     return a
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def inleso_injection(e: float, k_alpha: float, k_beta: float, a: float, b: float) -> float:
     r"""Nonlinear error injection of the INLESO, eq. (19).
 
@@ -96,7 +96,7 @@ def inleso_injection(e: float, k_alpha: float, k_beta: float, a: float, b: float
     return g
 
 
-@njit(inline="always", **JIT_OPTIONS)  # inlined where called: no array arguments
+@njit(inline="always", **CALLER_JIT_OPTIONS)  # inlined where called: no array arguments
 def eso_update(
     xi_hat: NDArray[np.float64],
     d_xi_hat: NDArray[np.float64],
@@ -127,7 +127,7 @@ def eso_update(
     d_xi_hat[o + rho] = betas[ob + rho] * phi
 
 
-@njit(**JIT_OPTIONS)
+@njit(**CALLER_JIT_OPTIONS)
 def eso_rhs(
     xi_hat: NDArray[np.float64],
     d_xi_hat: NDArray[np.float64],
