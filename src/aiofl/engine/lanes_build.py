@@ -77,6 +77,20 @@ def _noalias_option() -> dict[str, Any]:
     return {"_noalias": True}
 
 
+_HEAVY = frozenset(
+    {"_IOFL_COMMAND", "_SIN", "_COS", "_HAN_TD", "_ITD", "_FAL", "_INLSEF_TERM"}
+    | {"_INLSEF_LIMIT", "_LINEAR_SEF", "_INLESO", "_AIOFL_LAW", "_SATURATE"}
+)
+"""The component functions whose lane blocks stay calls in the width-1 instance.
+
+With one lane there is no loop to vectorize and a call per formula cost ~40 % of a lone
+member's time, so the width-1 instance inlines its blocks into the step, all but those
+calling one of these (inlining them too gained another ~5 % and doubled the compile time,
+12 -> 25 s).  Strict IEEE arithmetic rounds alike inlined or not: the numbers stay those
+of the width-16 instance."""
+_LIGHT = {"inline": "always"}
+
+
 def _lane_sources() -> list[str]:
     """Source files of the lane kernel besides the scalar kernel's (fingerprint)."""
     import sys
@@ -132,14 +146,10 @@ def _build(plant: Plant, width: int, *, cache: bool | None = None) -> Any:
         **build._component_functions("lanes"),
     )
     block_opts = {**opts, **_noalias_option()}
-    if width == 1:
-        # one lane: no loop to vectorize, so the blocks are inlined into the step (a call
-        # per formula cost ~40 % of a lone member's time); strict IEEE arithmetic rounds
-        # alike inlined or not, so the numbers stay those of the width-16 instance
-        block_opts["inline"] = "always"
     for name, fn in vars(lane_blocks).items():  # each block its own function
         if name.startswith("_blk_"):
-            ns[name.upper()] = inst(fn, ns, suffix, **block_opts)
+            light = width == 1 and not set(fn.__code__.co_names) & _HEAVY
+            ns[name.upper()] = inst(fn, ns, suffix, **block_opts, **_LIGHT if light else {})
     ns["_KEEP_ALIVE"] = inst(lanes._tpl_keep_alive, ns, suffix)
     ns["_GROUP_SETUP"] = inst(lanes._tpl_group_setup, ns, suffix, **opts)
     ns["_REFERENCE"] = inst(lanes._tpl_reference, ns, suffix, inline="always", **opts)
