@@ -5,8 +5,8 @@ The paper's formulas are implemented once, as small compiled scalar functions in
 :mod:`aiofl.components.differentiators` and :mod:`aiofl.components.law`; the engine's time loop
 calls exactly those functions.  This module holds what they share:
 
-* :data:`FASTMATH` and :data:`JIT_OPTIONS` (:data:`CALLER_JIT_OPTIONS` for the functions
-  that call one of this module's), the numba options every one of them (and the
+* :data:`FASTMATH` and :data:`JIT_OPTIONS` (:data:`CALLER_JIT_OPTIONS` in the modules
+  whose functions call one of this module's), the numba options every one of them (and the
   engine's time loop) is compiled with: LLVM fast-math without ``nnan``/``ninf`` (NaN and
   infinity keep their IEEE 754 meaning, divergence detection relies on it) and numpy's
   error model (a division by zero gives inf or NaN instead of raising);
@@ -46,12 +46,12 @@ JIT_OPTIONS = {"cache": True, "fastmath": FASTMATH, "error_model": "numpy"}
 ``fastmath`` and ``error_model``)."""
 
 CALLER_JIT_OPTIONS = {**JIT_OPTIONS, "cache": False}
-"""numba options of the component functions that call a compiled function of another module
-(this one's): as :data:`JIT_OPTIONS` but never cached on disk.  numba keys a function's
-disk cache on its own source file only, so a cached caller loaded after an edit of its
-callee's module would run the callee's old code (numbers stale by ~1e-8 in the analysis
-after editing this file).  Compiling them in each process costs a fraction of a second on
-first call; the engine's kernels link their own uncached copies anyway
+"""numba options of the component modules whose functions call a compiled function of
+another module (this one's): as :data:`JIT_OPTIONS` but never cached on disk.  numba keys
+a function's disk cache on its own source file only, so a cached caller loaded after an
+edit of its callee's module would run the callee's old code (numbers stale by ~1e-8 in the
+analysis after editing this file).  Compiling them in each process costs a fraction of a
+second on first call; the engine's kernels link their own uncached copies anyway
 (:func:`aiofl.engine.build._private_components`) and are cached under a fingerprint of
 every source they use."""
 
