@@ -11,6 +11,7 @@ The paper's three scenarios (Section V) are instances of :class:`Scenario`:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -108,6 +109,12 @@ class Scenario:
         object.__setattr__(self, "plant_scale", MappingProxyType(dict(self.plant_scale)))
         object.__setattr__(self, "plant_overrides", MappingProxyType(dict(self.plant_overrides)))
         object.__setattr__(self, "x0", tuple(float(v) for v in self.x0))
+
+    @property
+    def noise_samples(self) -> int:
+        """Held noise samples the engine stores over the horizon: one per ``noise_hold``
+        interval, plus the last partial interval and the sample at ``t_final``."""
+        return math.ceil(self.t_final / self.noise_hold) + 2
 
     def row(self) -> NDArray[np.float64]:
         """The engine's scenario row (:mod:`aiofl.layout` ``S_*`` columns)."""

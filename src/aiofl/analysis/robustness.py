@@ -144,9 +144,8 @@ def simulate_draws(
     dec, n_pts = _points(k, n_steps)
     # the stored trajectory and the engine's per-scenario noise table (every draw is its
     # own scenario, so simulate_batch holds one held-noise row per member)
-    n_noise = math.ceil(cfg.scenario.t_final / cfg.scenario.noise_hold) + 2
     n_cols = len(L.trajectory_columns(cfg.plant.n_states))
-    per_member = (n_pts * n_cols + n_noise) * 8
+    per_member = (n_pts * n_cols + cfg.scenario.noise_samples) * 8
     per_call = max(1, CALL_TRAJECTORY_BYTES // per_member)
     if client is not None:
         if chunks is None:
@@ -179,8 +178,25 @@ def _num(x: float) -> float | None:
     return float(x) if math.isfinite(x) else None
 
 
+class _DrawStatistics:
+    """Statistics over the K draws of a result with ``diverged`` (K,) and metric arrays."""
+
+    diverged: NDArray[np.bool_]
+
+    @property
+    def stable_fraction(self) -> float:
+        """Fraction of draws that did not diverge."""
+        return float(np.mean(~self.diverged))
+
+    def quantiles(self, values: NDArray[np.float64]) -> dict[str, float | None]:
+        """q05, q50, q95 (empirical, ``inverted_cdf``) and max; None where +inf."""
+        out = {k: _num(np.quantile(values, q, method="inverted_cdf")) for k, q in QUANTILES.items()}
+        out["max"] = _num(np.max(values))
+        return out
+
+
 @dataclass(frozen=True)
-class RobustnessResult:
+class RobustnessResult(_DrawStatistics):
     """The outcome of :func:`run_robustness` (arrays over the K draws)."""
 
     name: str
@@ -196,15 +212,6 @@ class RobustnessResult:
     engine_calls: int
     seconds: float
     uncertainty: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def stable_fraction(self) -> float:
-        """Fraction of draws that did not diverge."""
-        return float(np.mean(~self.diverged))
-
-    def quantiles(self, values: NDArray[np.float64]) -> dict[str, float | None]:
-        """q05, q50, q95 (empirical, ``inverted_cdf``) and max; None where +inf."""
-        return _quantiles(values)
 
     def worst_index(self) -> int:
         """The worst draw: largest ITAE; a diverged draw (earliest first) beats any finite."""
@@ -322,7 +329,7 @@ def run_robustness(
 
 # ---------------------------------------------------------- several designs, one call
 @dataclass(frozen=True)
-class DesignDraws:
+class DesignDraws(_DrawStatistics):
     """One design's results over the K draws of :func:`simulate_designs` (no trajectories,
     no nominal run); the statistics are those of :class:`RobustnessResult`."""
 
@@ -333,15 +340,6 @@ class DesignDraws:
     diverged_at: NDArray[np.float64]
     group: int  # designs of one group ran in the same engine call(s)
     engine_calls: int  # the calls of its group
-
-    @property
-    def stable_fraction(self) -> float:
-        """Fraction of draws that did not diverge."""
-        return float(np.mean(~self.diverged))
-
-    def quantiles(self, values: NDArray[np.float64]) -> dict[str, float | None]:
-        """q05, q50, q95 (empirical, ``inverted_cdf``) and max; None where +inf."""
-        return _quantiles(values)
 
     def to_dict(self) -> dict[str, Any]:
         """``{"draws", "seed", "stable_fraction", "diverged", "itae": {q05, q50, q95, max},
@@ -354,12 +352,6 @@ class DesignDraws:
             "itae": self.quantiles(self.itae),
             "isu": self.quantiles(self.isu),
         }
-
-
-def _quantiles(values: NDArray[np.float64]) -> dict[str, float | None]:
-    out = {k: _num(np.quantile(values, q, method="inverted_cdf")) for k, q in QUANTILES.items()}
-    out["max"] = _num(np.max(values))
-    return out
 
 
 def _design_key(cfg: Any) -> tuple[Any, ...]:
@@ -406,8 +398,7 @@ def simulate_designs(cfgs: Sequence[Any], draws: Draws) -> list[DesignDraws]:
     out: dict[int, DesignDraws] = {}
     for g, (first, idx) in enumerate(groups):
         base = cfgs[first]
-        n_noise = math.ceil(base.scenario.t_final / base.scenario.noise_hold) + 2
-        per_call = max(1, CALL_TRAJECTORY_BYTES // (n_noise * 8))
+        per_call = max(1, CALL_TRAJECTORY_BYTES // (base.scenario.noise_samples * 8))
         bounds = [*range(0, k, per_call), k]
         parts = []
         for a, b in itertools.pairwise(bounds):

@@ -39,11 +39,15 @@ import sys
 import threading
 import types
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from aiofl import layout as L
 from aiofl.engine import kernel
 from aiofl.plants.base import Plant, PlantError
+
+if TYPE_CHECKING:  # pragma: no cover
+    import numpy as np
+    from numpy.typing import NDArray
 
 __all__ = ["Kernel", "PlantFailure", "kernel_for", "run_members"]
 
@@ -212,6 +216,8 @@ def _private_components(variant: str = "scalar") -> dict[str, types.ModuleType]:
         from numba import njit
         from numba.core.dispatcher import Dispatcher
 
+        from aiofl.engine.lanes import LANE_FASTMATH
+
         lanes = variant == "lanes"
         mods = _component_modules()
         copies: dict[int, Any] = {}  # id(original dispatcher) -> uncached copy
@@ -226,10 +232,7 @@ def _private_components(variant: str = "scalar") -> dict[str, types.ModuleType]:
                     py.__qualname__, py.__doc__ = fn.__qualname__, fn.__doc__
                     opts = {k: v for k, v in obj.targetoptions.items() if k != "nopython"}
                     if lanes:
-                        from aiofl.engine.lanes import LANE_FASTMATH
-
-                        opts["inline"] = "always"
-                        opts["fastmath"] = LANE_FASTMATH
+                        opts.update(inline="always", fastmath=LANE_FASTMATH)
                     copies[id(obj)] = njit(locals=dict(obj.locals), **opts)(py)
         for space in spaces:  # calls between components go to the copies too
             for name, obj in list(space.items()):
@@ -457,8 +460,11 @@ def kernel_for(plant: Plant) -> Kernel:
         return _KERNELS[key][1]
 
 
-def run_members(member: Any, n_members: int, *args: Any) -> None:
-    """Run ``member(i, *args)`` for every member, on ``numba.get_num_threads()`` threads.
+def run_members(
+    member: Any, n_members: int, *args: Any, indices: NDArray[np.int64] | None = None
+) -> None:
+    """Run ``member(i, *args)`` for every member, on ``numba.get_num_threads()`` threads:
+    ``i`` in ``range(n_members)``, or in ``indices`` (``n_members`` of them) when given.
 
     The compiled member function releases the GIL, so Python threads run members truly in
     parallel; each thread takes the next unclaimed member (dynamic scheduling, so members
@@ -478,6 +484,8 @@ def run_members(member: Any, n_members: int, *args: Any) -> None:
                 i = next(claim)
                 if i >= n_members:
                     return
+                if indices is not None:
+                    i = int(indices[i])
                 member(i, *args)
         except BaseException as exc:  # re-raised below
             errors.append((i, exc))

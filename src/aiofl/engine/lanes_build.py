@@ -171,6 +171,17 @@ def lane_kernel_for(plant: Plant, width: int = lanes.WIDTH) -> Any:
         return _LANE_KERNELS[key][1]
 
 
+def _by_kind(
+    ints: NDArray[np.int64], ref_kind: NDArray[np.float64], members: NDArray[np.int64]
+) -> list[list[int]]:
+    """``members`` split by component kinds (the integer row and the reference kind), each
+    list in batch order, the kinds in order of first appearance."""
+    by_kind: dict[tuple[int, ...], list[int]] = {}
+    for i in members.tolist():
+        by_kind.setdefault((*(int(v) for v in ints[i]), int(ref_kind[i])), []).append(i)
+    return list(by_kind.values())
+
+
 def group_members(
     ints: NDArray[np.int64],
     ref_kind: NDArray[np.float64],
@@ -196,12 +207,8 @@ def group_members(
         Member indices per group, -1 for the pads of a group's last lanes.
     """
     w = width
-    by_kind: dict[tuple[int, ...], list[int]] = {}
-    for i in members.tolist():
-        key = (*(int(v) for v in ints[i]), int(ref_kind[i]))
-        by_kind.setdefault(key, []).append(i)
     rows: list[list[int]] = []
-    for group in by_kind.values():
+    for group in _by_kind(ints, ref_kind, members):
         for start in range(0, len(group), w):
             chunk = group[start : start + w]
             rows.append(chunk + [-1] * (w - len(chunk)))
@@ -215,11 +222,9 @@ def plan_groups(
     of :data:`~aiofl.engine.lanes.WIDTH` run in such groups (the last one padded), the
     others in groups of one lane.  Either way a member's numbers are the same (bitwise)."""
     w = lanes.WIDTH
-    by_kind: dict[tuple[int, ...], list[int]] = {}
-    for i in members.tolist():
-        by_kind.setdefault((*(int(v) for v in ints[i]), int(ref_kind[i])), []).append(i)
-    wide = [i for group in by_kind.values() if 2 * len(group) >= w for i in group]
-    narrow = [i for group in by_kind.values() if 2 * len(group) < w for i in group]
+    kinds = _by_kind(ints, ref_kind, members)
+    wide = [i for group in kinds if 2 * len(group) >= w for i in group]
+    narrow = [i for group in kinds if 2 * len(group) < w for i in group]
     plan = {}
     if wide:
         plan[w] = group_members(ints, ref_kind, np.array(wide, dtype=np.int64), w)

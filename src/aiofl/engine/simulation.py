@@ -15,7 +15,6 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from math import ceil
 from typing import Any
 
 import numpy as np
@@ -155,7 +154,7 @@ def simulate_batch(
         multiples of ``dt`` (:mod:`aiofl.engine.sampled`).  Continuous members are
         unaffected.
     engine
-        ``"lanes"`` (default): continuous members run in groups of 8, one per SIMD lane
+        ``"lanes"`` (default): continuous members run in groups of 16, one per SIMD lane
         (:mod:`aiofl.engine.lanes`); ``"scalar"``: every member runs the one-member
         kernel (:mod:`aiofl.engine.kernel`), the reference the lane kernel is checked
         against.  Default: the environment variable ``AIOFL_ENGINE``, else ``"lanes"``.
@@ -212,7 +211,7 @@ def simulate_batch(
             if len(s.x0) != n:
                 raise ValueError(f"scenario.x0 has {len(s.x0)} entries; plant has {n} states")
             x0_d[j] = s.x0
-    n_noise = max(ceil(t_final / s.noise_hold) + 2 for s in distinct)
+    n_noise = max(s.noise_samples for s in distinct)
     noise_d = np.stack(
         [
             noise_sequence(s.noise_seed, n_noise) if s.noise_variance > 0 else np.zeros(n_noise)
@@ -271,10 +270,8 @@ def simulate_batch(
             from aiofl.engine.sampled import member_dispatch
 
             member = member_dispatch(plant, member, disc)
-        if scalar_members.size == b:
-            run_members(member, b, *args)
-        else:
-            _run_subset(member, scalar_members, args)
+        subset = None if scalar_members.size == b else scalar_members
+        run_members(member, scalar_members.size, *args, indices=subset)
     return BatchResult(
         metrics=metrics,
         diverged=status == L.STATUS_DIVERGED,
@@ -296,15 +293,6 @@ def _engine_choice(engine: str | None) -> str:
     if choice not in ENGINES:
         raise ValueError(f"engine = {choice!r}; allowed: {', '.join(ENGINES)}")
     return choice
-
-
-def _run_subset(member: Any, subset: NDArray[np.int64], args: tuple[Any, ...]) -> None:
-    """Run ``member`` for the batch members ``subset`` only."""
-
-    def one(i: int, *rest: Any) -> None:
-        member(int(subset[i]), *rest)
-
-    run_members(one, int(subset.size), *args)
 
 
 def simulate(

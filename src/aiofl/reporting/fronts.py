@@ -23,7 +23,7 @@ import io
 import math
 import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -213,7 +213,7 @@ def parse_robust(text: str, front: ShippedFront, *, name: str) -> ShippedFront:
         for i in hit:
             for h, v in zip(header[k:], nums[k:], strict=True):
                 stats[h][i] = v
-    return ShippedFront(**{**front.__dict__, "robust": stats, "robust_path": name})
+    return replace(front, robust=stats, robust_path=name)
 
 
 def load_fronts(folder: str | Path | None = None) -> ShippedFronts:
