@@ -11,7 +11,7 @@ starting point, ω0, b0, R, δ1, δ2 tuned (the search space of ``bench_tuning.p
 ``ITAE + 0.1·ISU`` over t_f = 6 s (RK4, the preset's dt = 1e-4: 60 000 steps per member),
 robust with ``aggregate = "cvar"`` (α = 0.9) over the nominal plant and 16 draws of
 J_l, K_s, R_m, J_h, each uniform within ±20 % (``[uncertainty]``, seed 1).  A generation
-is 64 × 17 = 1088 members in one batched engine call (numba ``prange`` over members).
+is 64 × 17 = 1088 members in one batched engine call (on all numba threads).
 
 What makes it fast is the engine, not a shortcut in the tuner: every member is an
 independent compiled loop, the 1088 members of a generation run 16 at a time in SIMD lanes
@@ -20,8 +20,8 @@ that step, so the unstable candidates a GA tries early cost only their time to d
 No member is stopped on a partial ITAE.
 
 The goal is under 5 minutes on 2 cores.  The machine is shared: the load average is
-printed with the result.  Measured: 141 s (385 members/s, 38 of 3200 candidates
-infeasible, load 1.7-2.0) with the lane engine; with the scalar engine
+printed with the result.  Measured: 121 s (448 members/s, 38 of 3200 candidates
+infeasible; 141 s at load 1.7-2.0) with the lane engine; with the scalar engine
 (``AIOFL_ENGINE=scalar``) the full run took 871 s under load 2.3-4.7 and a 2-generation run
 at load 1.5 did 125 members/s (about 435 s for the full run).
 """
