@@ -28,7 +28,7 @@ from aiofl.engine.kernel import (
 _W = 16
 _N = 1
 _PF = _PG = _PH = _PBD = _PNF = None  # the plant's functions, inlined, vector math
-_IOFL_COMMAND = _UNMANAGED = _SIN = _COS = None
+_IOFL_COMMAND = _UNMANAGED = _COLUMN = _SIN = _COS = None
 _HAN_TD = _ITD = _FAL = _INLSEF_TERM = _INLSEF_LIMIT = _LINEAR_SEF = None
 _INLESO = _AIOFL_LAW = _SATURATE = None
 
@@ -120,10 +120,8 @@ def _blk_fill(dst, value):  # pragma: no cover - compiled
 
 def _blk_output(z, p, noise, y, ym):  # pragma: no cover - compiled
     """y = h(x) and y_meas = y + noise, every lane."""
-    zu = _UNMANAGED(z)
-    pu = _UNMANAGED(p)
     for l in range(_W):
-        yl = _PH(zu[:, l], pu[:, l])
+        yl = _PH(_COLUMN(z, l), _COLUMN(p, l))
         y[l] = yl
         ym[l] = yl + noise[l]
 
@@ -211,21 +209,17 @@ def _blk_eso_last(beta, e, dxi):  # pragma: no cover - compiled
 def _blk_plant(z, p, u, dx):  # pragma: no cover - compiled
     """dx = f(x) + g(x) u, every lane (``dx`` flat: state i of lane l at i W + l, so LLVM
     sees that the rows do not overlap)."""
-    zu = _UNMANAGED(z)
-    pu = _UNMANAGED(p)
     for l in range(_W):
-        fx = _PF(zu[:, l], pu[:, l])
-        gx = _PG(zu[:, l], pu[:, l])
+        fx = _PF(_COLUMN(z, l), _COLUMN(p, l))
+        gx = _PG(_COLUMN(z, l), _COLUMN(p, l))
         for i in range(_N):
             dx[i * _W + l] = fx[i] + gx[i] * u[l]
 
 
 def _blk_disturbance(z, p, d, dx):  # pragma: no cover - compiled
     """dx += b_d(x) d where the lane's disturbance is on (``dx`` flat, as in _blk_plant)."""
-    zu = _UNMANAGED(z)
-    pu = _UNMANAGED(p)
     for l in range(_W):
-        bdx = _PBD(zu[:, l], pu[:, l])
+        bdx = _PBD(_COLUMN(z, l), _COLUMN(p, l))
         for i in range(_N):
             k = i * _W + l
             dx[k] = dx[k] + bdx[i] * d[l] if d[l] != 0.0 else dx[k]

@@ -141,6 +141,7 @@ def _build(plant: Plant, width: int, *, cache: bool | None = None) -> Any:
         _SETUP=setup,
         _IOFL_COMMAND=ns_setup["_iofl_command"],
         _UNMANAGED=build._unmanaged_intrinsic(),
+        _COLUMN=build._lane_column_intrinsic(),
         _SIN=vecmath.vsin,
         _COS=vecmath.vcos,
         **build._component_functions("lanes"),
