@@ -34,6 +34,8 @@ from aiofl.components.fastmath import CALLER_JIT_OPTIONS, abspow, binomial_power
 __all__ = [
     "fal",
     "fal_inner_slope",
+    "fal_linear",
+    "fal_power_needed",
     "fal_scaled",
     "improved_sef",
     "inlsef_limit",
@@ -56,12 +58,29 @@ def fal_scaled(e: float, alpha: float, delta: float, inner_slope: float) -> floa
     ``inner_slope`` must be :math:`\delta^{\alpha-1}` (:func:`fal_inner_slope`); the engine
     computes it once per member.  :func:`fal` is this function with the slope computed from α and δ.
     """
+    if not fal_power_needed(e, alpha, delta):
+        return fal_linear(e, delta, inner_slope)
     ae = abs(e)
-    if ae <= delta:
-        return e * inner_slope
-    if alpha == 1.0:
-        return e
     return abspow(ae, alpha, np.log(ae)) * sign(e)
+
+
+@njit(**CALLER_JIT_OPTIONS)
+def fal_power_needed(e: float, alpha: float, delta: float) -> bool:
+    r"""Whether :math:`\mathrm{fal}(e,lpha,\delta)` needs the power :math:`|e|^lpha`:
+        outside the linear zone (:math:`|e| > \delta`, or e NaN) with :math:`lpha
+    e 1`.
+        Otherwise :func:`fal_scaled` is :func:`fal_linear`."""
+    return not abs(e) <= delta and alpha != 1.0
+
+
+@njit(**CALLER_JIT_OPTIONS)
+def fal_linear(e: float, delta: float, inner_slope: float) -> float:
+    r"""fal where it needs no power (:func:`fal_power_needed` false): the inner branch
+    :math:`e\,\delta^{lpha-1}` for :math:`|e| \le \delta`, else :math:`e` (α = 1).
+
+    The engine's SIMD lanes evaluate fal as this alone when no lane of a group needs the
+    power (the same value, bit for bit, as :func:`fal_scaled`)."""
+    return e * inner_slope if abs(e) <= delta else e
 
 
 @njit(**CALLER_JIT_OPTIONS)

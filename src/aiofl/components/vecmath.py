@@ -41,7 +41,7 @@ from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
 
-__all__ = ["VECMATH_OPTIONS", "vcos", "vexp", "vlog", "vsin"]
+__all__ = ["VECMATH_OPTIONS", "fma", "vcos", "vexp", "vlog", "vsin"]
 
 VECMATH_OPTIONS = {
     "fastmath": False,
@@ -77,6 +77,19 @@ def _as_float(typingctx: Any, k: Any) -> Any:
     return types.float64(k), codegen
 
 
+@intrinsic
+def fma(typingctx: Any, a: Any, b: Any, c: Any) -> Any:
+    """:math:`a b + c` rounded once (LLVM's ``llvm.fma``: one instruction on a CPU with
+    FMA, scalar or vector, the same bits either way)."""
+    if not all(isinstance(t, types.Float) and t.bitwidth == 64 for t in (a, b, c)):
+        return None
+
+    def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+        return builder.fma(*args)
+
+    return types.float64(types.float64, types.float64, types.float64), codegen
+
+
 _LOG2E = 1.4426950408889634
 _LN2_HI = 6.93147180369123816490e-01  # fdlibm: ln 2 split, the high part has 32 bits
 _LN2_LO = 1.90821492927058770002e-10
@@ -102,14 +115,14 @@ def vexp(x: float) -> float:
     r2 = r * r
     r4 = r2 * r2
     r8 = r4 * r4
-    a0 = 0.5 + r * (1.0 / 6.0)
-    a1 = 1.0 / 24.0 + r * (1.0 / 120.0)
-    a2 = 1.0 / 720.0 + r * (1.0 / 5040.0)
-    a3 = 1.0 / 40320.0 + r * (1.0 / 362880.0)
-    a4 = 1.0 / 3628800.0 + r * (1.0 / 39916800.0)
-    a5 = 1.0 / 479001600.0 + r * (1.0 / 6227020800.0)
-    q = (a0 + r2 * a1) + r4 * (a2 + r2 * a3) + r8 * (a4 + r2 * a5)
-    p = 1.0 + (r + r2 * q)
+    a0 = fma(r, 1.0 / 6.0, 0.5)
+    a1 = fma(r, 1.0 / 120.0, 1.0 / 24.0)
+    a2 = fma(r, 1.0 / 5040.0, 1.0 / 720.0)
+    a3 = fma(r, 1.0 / 362880.0, 1.0 / 40320.0)
+    a4 = fma(r, 1.0 / 39916800.0, 1.0 / 3628800.0)
+    a5 = fma(r, 1.0 / 6227020800.0, 1.0 / 479001600.0)
+    q = fma(r8, fma(r2, a5, a4), fma(r4, fma(r2, a3, a2), fma(r2, a1, a0)))
+    p = 1.0 + fma(r2, q, r)
     k = 0.0 if k != k else k  # NaN: any k, the NaN is carried by p
     k1 = np.floor(0.5 * k)  # 2^k = 2^k1 2^(k-k1): both factors stay normal
     y = p * _pow2(k1) * _pow2(k - k1)
@@ -145,9 +158,9 @@ def vlog(x: float) -> float:
     s = f / (2.0 + f)
     z = s * s
     w = z * z
-    t1 = w * (_LG2 + w * (_LG4 + w * _LG6))
-    t2 = z * (_LG1 + w * (_LG3 + w * (_LG5 + w * _LG7)))
-    y = dk * _LN2_HI - ((hfsq - (s * (hfsq + t1 + t2) + dk * _LN2_LO)) - f)
+    t1 = w * fma(w, fma(w, _LG6, _LG4), _LG2)
+    t2 = z * fma(w, fma(w, fma(w, _LG7, _LG5), _LG3), _LG1)
+    y = dk * _LN2_HI - ((hfsq - fma(s, hfsq + t1 + t2, dk * _LN2_LO)) - f)
     y = x if x == np.inf else y
     y = -np.inf if x == 0.0 else y
     return np.nan if (x < 0.0 or x != x) else y
@@ -179,9 +192,9 @@ def _sincos_reduced(x: float) -> tuple[float, float, int]:
     k = 0.0 if big else k
     r = ((x - k * _PIO2_1) - k * _PIO2_2) - k * _PIO2_3
     z = r * r
-    sp = _S2 + z * (_S3 + z * (_S4 + z * (_S5 + z * _S6)))
-    sn = r + r * z * (_S1 + z * sp)
-    cp = z * (_C1 + z * (_C2 + z * (_C3 + z * (_C4 + z * (_C5 + z * _C6)))))
+    sp = fma(z, fma(z, fma(z, fma(z, _S6, _S5), _S4), _S3), _S2)
+    sn = fma(r * z, fma(z, sp, _S1), r)
+    cp = z * fma(z, fma(z, fma(z, fma(z, fma(z, _C6, _C5), _C4), _C3), _C2), _C1)
     hz = 0.5 * z
     w = 1.0 - hz
     cs = w + (((1.0 - w) - hz) + z * cp)

@@ -174,6 +174,8 @@ def _component_functions(variant: str = "scalar") -> dict[str, Any]:
         "_PREFILTER_COEF": td.linear_prefilter_coefficient,
         "_FAL": fb.fal_scaled,
         "_FAL_SLOPE": fb.fal_inner_slope,
+        "_FAL_POWER_NEEDED": fb.fal_power_needed,
+        "_FAL_LINEAR": fb.fal_linear,
         "_INLSEF_TERM": fb.inlsef_term,
         "_INLSEF_LIMIT": fb.inlsef_limit,
         "_LINEAR_SEF": fb.linear_sef,

@@ -29,7 +29,9 @@ _W = 16
 _N = 1
 _PF = _PG = _PH = _PBD = _PNF = None  # the plant's functions, inlined, vector math
 _IOFL_COMMAND = _UNMANAGED = _COLUMN = _SIN = _COS = None
-_HAN_TD = _ITD = _FAL = _INLSEF_TERM = _INLSEF_LIMIT = _LINEAR_SEF = None
+_HAN_TD = _ITD = _FAL = _FAL_POWER_NEEDED = _FAL_LINEAR = _INLSEF_TERM = _INLSEF_LIMIT = (
+    _LINEAR_SEF
+) = None
 _INLESO = _AIOFL_LAW = _SATURATE = None
 
 
@@ -133,9 +135,17 @@ def _blk_error(ri, xi, e):  # pragma: no cover - compiled
 
 
 def _blk_fal(k, alpha, delta, slope, e, v):  # pragma: no cover - compiled
-    """v += k_i fal(e_i, α_i, δ_i), eq. (17)."""
+    """v += k_i fal(e_i, α_i, δ_i), eq. (17); the power |e_i|^α_i (a log and an exp) only
+    when a lane of the group needs it (the same values: fal_linear is fal there)."""
+    n_power = 0
     for l in range(_W):
-        v[l] += k[l] * _FAL(e[l], alpha[l], delta[l], slope[l])
+        n_power += 1 if _FAL_POWER_NEEDED(e[l], alpha[l], delta[l]) else 0
+    if n_power == 0:
+        for l in range(_W):
+            v[l] += k[l] * _FAL_LINEAR(e[l], delta[l], slope[l])
+    else:
+        for l in range(_W):
+            v[l] += k[l] * _FAL(e[l], alpha[l], delta[l], slope[l])
 
 
 def _blk_inlsef(k, kb, mu, alpha, e, v):  # pragma: no cover - compiled
