@@ -10,7 +10,7 @@ For each structure (LESO: ``retuned-s1-leso``; INLESO: ``paper-s1-inleso``; LADR
 ``retuned-s1-ladrc``; all on the paper's scenario 1, RK4, dt = 1e-4, metrics only, every
 member stable) and batch size (1, 8, 64, 256, 1024 copies of the design), the time of one
 ``simulate_batch`` call with ``engine="scalar"`` (one member at a time,
-:mod:`aiofl.engine.kernel`) and ``engine="lanes"`` (groups of 16 members in SIMD lanes,
+:mod:`aiofl.engine.kernel`) and ``engine="lanes"`` (groups of 32 members in SIMD lanes,
 :mod:`aiofl.engine.lanes`), on ``numba.get_num_threads()`` threads, after a warm-up call
 (compilation excluded), best of ``--repeat``.  Printed as member-steps per second (members
 × RK4 steps / wall time) and the ratio.  The load average at the start is printed: the

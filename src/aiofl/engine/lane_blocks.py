@@ -25,7 +25,7 @@ from aiofl.engine.kernel import (
 )
 
 # Placeholders for what a lane-kernel instance binds (see aiofl.engine.lanes_build).
-_W = 16
+_W = 32
 _N = 1
 _PF = _PG = _PH = _PBD = _PNF = None  # the plant's functions, inlined, vector math
 _IOFL_COMMAND = _UNMANAGED = _COLUMN = _SIN = _COS = None

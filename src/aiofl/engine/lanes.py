@@ -1,7 +1,7 @@
 r"""The lane kernel: a group of members advanced together, one member per SIMD lane.
 
 The members of a batch are independent copies of one program, so the engine runs them in
-groups of W members (:data:`WIDTH` = 16 doubles, two AVX-512 registers; 1 for the few
+groups of W members (:data:`WIDTH` = 32 doubles, four AVX-512 registers; 1 for the few
 members of a kind in a small batch): every quantity of a member becomes a column of a
 (rows, W) array (structure of arrays) and every formula is applied in a loop over the W
 lanes that LLVM vectorizes (:mod:`aiofl.engine.lane_blocks`).  This module holds the
@@ -24,7 +24,7 @@ the transcendental functions are the branch-free ones of :mod:`aiofl.components.
 group is padded with copies of one of its members (the same code runs for every lane, so a
 member's numbers are the same in any lane of any group: bitwise, checked by the tests), a
 pad's results are discarded, and the kernel is compiled without fast-math flags so that the
-width-1 and width-16 instances round alike (:data:`LANE_FASTMATH`).  Against the scalar
+width-1 and width-32 instances round alike (:data:`LANE_FASTMATH`).  Against the scalar
 kernel the results differ by the rounding of the vector math functions and of the
 fast-math flags the scalar kernel has (see ``tests/test_lanes.py`` for the metrics).
 
@@ -67,11 +67,13 @@ from aiofl.engine.kernel import (
     SWITCH_RTOL,
 )
 
-WIDTH = 16
-"""Members per group in a batch: 16 float64 lanes, two AVX-512 registers per quantity
-(measured: the scalar work of a step, shared by the group, is half the cost at 8 lanes and
-a fifth at 16; 32 gains little more).  Small batches run groups of 1 (the same code,
-compiled for one lane; the numbers are bitwise the same, see lanes_build)."""
+WIDTH = 32
+"""Members per group in a batch: 32 float64 lanes, four AVX-512 registers per quantity.
+Measured (20-s S1, one thread, batch 64, ``benchmarks/bench_lanes.py``'s cases): 32 lanes
+run 14-28 % more member-steps per second than 16 (more independent work to hide the
+latency of each formula's dependency chain), 64 lanes fewer (registers spill).  Small
+batches run groups of 1 (the same code, compiled for one lane; the numbers are bitwise the
+same, see lanes_build)."""
 
 LANE_FASTMATH: set[str] = set()
 """LLVM fast-math flags of the lane kernel: none, strict IEEE 754.  With any of them
@@ -85,7 +87,7 @@ _N = 1
 _N_P = 1
 _NZ = 1
 _PF = _PG = _PH = _PBD = _PNF = None  # the plant's functions, inlined, vector math
-_SETUP = _IOFL_COMMAND = _UNMANAGED = _KEEP_ALIVE = None
+_SETUP = _IOFL_COMMAND = _UNMANAGED = _LEADING_ROWS = _KEEP_ALIVE = None
 _REFERENCE = _DERIV = _GROUP_SETUP = None
 # the lane blocks (see _BLOCKS)
 _BLK_HAN = _BLK_ITD = _BLK_PREFILTER_START = _BLK_PREFILTER_TERM = _BLK_COPY = None
@@ -204,7 +206,7 @@ def _tpl_deriv(t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - c
     _BLK_ESO_INPUT(q[L.F_B0], u, dz[o_eso + rho - 1])
     _BLK_ESO_LAST(q[Q_BETA + rho], e, dz[o_eso + rho])
 
-    dx = dz[:_N].reshape(_N * _W)
+    dx = _LEADING_ROWS(dz, _N)
     _BLK_PLANT(z, p, u, dx)
     if dany:
         _BLK_DISTURBANCE(z, p, s[S_D], dx)

@@ -87,7 +87,7 @@ With one lane there is no loop to vectorize and a call per formula cost ~40 % of
 member's time, so the width-1 instance inlines its blocks into the step, all but those
 calling one of these (inlining them too gained another ~5 % and doubled the compile time,
 12 -> 25 s).  Strict IEEE arithmetic rounds alike inlined or not: the numbers stay those
-of the width-16 instance."""
+of the width-32 instance."""
 _LIGHT = {"inline": "always"}
 
 
@@ -142,6 +142,7 @@ def _build(plant: Plant, width: int, *, cache: bool | None = None) -> Any:
         _IOFL_COMMAND=ns_setup["_iofl_command"],
         _UNMANAGED=build._unmanaged_intrinsic(),
         _COLUMN=build._lane_column_intrinsic(),
+        _LEADING_ROWS=build._leading_rows_intrinsic(),
         _SIN=vecmath.vsin,
         _COS=vecmath.vcos,
         **build._component_functions("lanes"),

@@ -154,7 +154,7 @@ def simulate_batch(
         multiples of ``dt`` (:mod:`aiofl.engine.sampled`).  Continuous members are
         unaffected.
     engine
-        ``"lanes"`` (default): continuous members run in groups of 16, one per SIMD lane
+        ``"lanes"`` (default): continuous members run in groups of 32, one per SIMD lane
         (:mod:`aiofl.engine.lanes`); ``"scalar"``: every member runs the one-member
         kernel (:mod:`aiofl.engine.kernel`), the reference the lane kernel is checked
         against.  Default: the environment variable ``AIOFL_ENGINE``, else ``"lanes"``.
