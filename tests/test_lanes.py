@@ -11,6 +11,7 @@ from numba import njit
 
 from aiofl.components.vecmath import vcos, vexp, vlog, vsin
 from aiofl.config import load_config
+from aiofl.controller import Controller
 from aiofl.engine.discrete import Sampling
 from aiofl.engine.lanes import WIDTH
 from aiofl.engine.simulation import simulate_batch
@@ -215,22 +216,93 @@ def test_lanes_agree_with_the_scalar_engine_on_every_input_and_setting() -> None
         assert np.nanmax(np.abs(a - b) / np.maximum(scale, 1e-300)) <= 1e-10
 
 
-def test_sampled_members_in_a_lane_batch() -> None:
-    """Sampled members run the sampled kernel, continuous ones the lanes: a mixed batch gives
-    every member the numbers it has alone."""
+# ------------------------------------------------------------------ sampled members
+def _sampled_cases() -> list[tuple[Controller, Scenario, Sampling]]:
+    """Sampled LESO (Han's TD by fhan and by Euler), INLESO (ITD, Euler ESO), LADRC (ZOH
+    ESO, delay, quanta, exact derivatives) and IOFL members, on the features the sampled
+    kernel handles (sine, step and tabulated references, disturbance, parameter change,
+    noise)."""
+    base = load_config("retuned-s1-ladrc").scenario
+    sine = replace(base, t_final=1.0)
+    step, table, dist, change, noisy = _feature_scenarios(base)
+    leso, inleso, ladrc, iofl = (
+        load_config(p).controller
+        for p in ("retuned-s1-leso", "paper-s1-inleso", "frontier-s1-ladrc", "iofl-s1")
+    )
+    return [
+        (leso, sine, Sampling(5e-4)),
+        (leso, noisy, Sampling(5e-4, td="euler", delay=1)),
+        (inleso, step, Sampling(2e-4)),
+        (inleso, table, Sampling(5e-4, eso="euler")),
+        (inleso, dist, Sampling(2e-4, y_quantum=1e-5)),
+        (ladrc, sine, Sampling(1e-3)),
+        (ladrc, change, Sampling(1e-3, delay=1, u_quantum=1e-3)),
+        (replace(ladrc, td="exact"), noisy, Sampling(2e-4, eso="euler")),
+        (iofl, step, Sampling(5e-4)),
+    ]
+
+
+def test_sampled_members_in_lanes_agree_with_the_sampled_kernel() -> None:
+    """The sampled loop in lanes (plant in SIMD lanes, controller lane by lane) against
+    the one-member sampled kernel: metrics within 1e-10 relative, stored signals within
+    1e-10 of each column's scale; RK4 and Euler."""
     rc = load_config("retuned-s1-ladrc")
-    scen = replace(rc.scenario, t_final=0.5)
-    ctrls = _population(12, seed=3)
-    sampling = [Sampling(ts=1e-3) if i % 3 == 0 else None for i in range(len(ctrls))]
-    mixed = simulate_batch(rc.plant, ctrls, scen, dt=rc.dt, sampling=sampling, engine="lanes")
-    ref = simulate_batch(rc.plant, ctrls, scen, dt=rc.dt, sampling=sampling, engine="scalar")
-    for i, s in enumerate(sampling):
-        if s is not None:  # the same sampled kernel either way
-            np.testing.assert_array_equal(mixed.metrics[i], ref.metrics[i])
-        else:
-            assert _rel(mixed.metrics[i], ref.metrics[i]) <= 1e-10
-            alone = simulate_batch(rc.plant, ctrls[i], scen, dt=rc.dt, engine="lanes")
-            np.testing.assert_array_equal(alone.metrics[0], mixed.metrics[i])
+    cases = _sampled_cases()
+    ctrls, scens, samplings = (list(v) for v in zip(*cases, strict=True))
+    for method in ("rk4", "euler"):
+        kw = {"dt": 1e-4, "method": method, "store": True, "decimation": 20}
+        kw["sampling"] = samplings
+        lanes = simulate_batch(rc.plant, ctrls, scens, engine="lanes", **kw)
+        scalar = simulate_batch(rc.plant, ctrls, scens, engine="scalar", **kw)
+        assert not scalar.diverged.any()
+        np.testing.assert_array_equal(lanes.diverged, scalar.diverged)
+        assert _rel(lanes.metrics, scalar.metrics) <= 1e-10
+        a, b = lanes.trajectories, scalar.trajectories
+        assert a is not None and b is not None
+        scale = np.nanmax(np.abs(b), axis=(0, 1))
+        assert np.nanmax(np.abs(a - b) / np.maximum(scale, 1e-300)) <= 1e-10
+
+
+def test_a_sampled_members_numbers_do_not_depend_on_its_batch_or_lane() -> None:
+    """Bitwise: sampled members alone, in a batch of 2 W + 5 mixed with continuous members
+    and other sample times (several groups, padded), and in a permuted batch."""
+    rc = load_config("retuned-s1-ladrc")
+    scen = replace(rc.scenario, t_final=0.3)
+    ctrls = _population(2 * WIDTH + 5, seed=4)
+    sampling = [
+        None if i % 5 == 0 else Sampling(1e-3 if i % 2 else 5e-4, delay=i % 3 == 0)
+        for i in range(len(ctrls))
+    ]
+    kw = {"dt": rc.dt, "engine": "lanes", "store": True, "decimation": 25}
+    full = simulate_batch(rc.plant, ctrls, scen, sampling=sampling, **kw)
+    perm = np.random.default_rng(2).permutation(len(ctrls))
+    shuffled = simulate_batch(
+        rc.plant, [ctrls[i] for i in perm], scen, sampling=[sampling[i] for i in perm], **kw
+    )
+    np.testing.assert_array_equal(shuffled.metrics, full.metrics[perm])
+    np.testing.assert_array_equal(shuffled.trajectories, full.trajectories[perm])
+    for i in (1, 2, 3, WIDTH + 1, len(ctrls) - 1):
+        alone = simulate_batch(rc.plant, ctrls[i], scen, sampling=sampling[i], **kw)
+        np.testing.assert_array_equal(alone.metrics[0], full.metrics[i])
+        np.testing.assert_array_equal(alone.trajectories[0], full.trajectories[i])
+
+
+def test_sampled_divergence_is_per_lane() -> None:
+    """Forward-Euler observers beyond their stability limit (ω0 Ts large) diverge at the
+    sampled kernel's time; their lane mates run on, as they do alone."""
+    rc = load_config("retuned-s1-ladrc")
+    scen = replace(rc.scenario, t_final=1.0)
+    c = rc.controller
+    ctrls = [c.with_values(**{"eso.omega0": w}) for w in np.linspace(200.0, 3000.0, 20)]
+    kw = {"dt": rc.dt, "sampling": Sampling(1e-3, eso="euler")}
+    res = simulate_batch(rc.plant, ctrls, scen, engine="lanes", **kw)
+    ref = simulate_batch(rc.plant, ctrls, scen, engine="scalar", **kw)
+    assert res.diverged.any() and not res.diverged.all()
+    np.testing.assert_array_equal(res.diverged, ref.diverged)
+    np.testing.assert_allclose(res.diverged_at, ref.diverged_at, rtol=0, atol=1e-12)
+    for i in np.flatnonzero(~res.diverged)[:2]:
+        alone = simulate_batch(rc.plant, ctrls[i], scen, engine="lanes", **kw)
+        np.testing.assert_array_equal(alone.metrics[0], res.metrics[i])
 
 
 def test_engine_choice_is_validated(monkeypatch: pytest.MonkeyPatch) -> None:

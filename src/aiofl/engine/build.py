@@ -42,7 +42,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from aiofl import layout as L
-from aiofl.engine import kernel
+from aiofl.engine import kernel, views
 from aiofl.plants.base import Plant, PlantError
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -143,7 +143,8 @@ def _kernel_fingerprint(plant: Plant) -> str | None:
 def _engine_sources() -> list[str]:
     """The files of the modules the kernel's code comes from (besides the plant's)."""
     base = sys.modules[Plant.__module__]
-    return [m.__file__ for m in (L, kernel, sys.modules[__name__], base, *_component_modules())]
+    here = sys.modules[__name__]
+    return [m.__file__ for m in (L, kernel, here, views, base, *_component_modules())]
 
 
 def _engine_sources_changed() -> bool:
@@ -156,9 +157,9 @@ def _engine_sources_changed() -> bool:
 def _component_modules() -> tuple[Any, ...]:
     """The modules whose compiled functions the kernel calls (their sources are part of the
     kernel's cache fingerprint)."""
-    from aiofl.components import differentiators, fastmath, feedback, law, observers
+    from aiofl.components import differentiators, discrete, fastmath, feedback, law, observers
 
-    return fastmath, feedback, observers, differentiators, law
+    return fastmath, feedback, observers, differentiators, law, discrete
 
 
 def _component_functions(variant: str = "scalar") -> dict[str, Any]:
@@ -304,7 +305,7 @@ def _build_kernel(plant: Plant, *, cache: bool | None = None, guarded: bool = Fa
 
     # the time loop is compiled with the components' fast-math flags and error model
     opts = {"fastmath": FASTMATH, "error_model": "numpy"}
-    ns["_UNMANAGED"] = _unmanaged_intrinsic()
+    ns["_UNMANAGED"] = views.unmanaged_intrinsic()
     ns["_KEEP_ALIVE"] = _instantiate(kernel._tpl_keep_alive, ns, suffix)
     ns["_SETUP"] = _instantiate(kernel._tpl_setup, ns, suffix, **opts)
     ns["_REFERENCE"] = _instantiate(kernel._tpl_reference, ns, suffix, **opts)
@@ -392,136 +393,6 @@ def _guarded(fn: Any, index: int, n: int) -> Any:
     ns: dict[str, Any] = {"fn": fn, "PlantFailure": PlantFailure}
     exec(compile(src, "<aiofl.engine.build guard>", "exec"), ns)  # fixed source, no input
     return njit(error_model="numpy")(ns["guarded"])
-
-
-def _unmanaged_intrinsic() -> Any:
-    """A numba intrinsic returning a view of an array without a memory-info pointer.
-
-    numba reference-counts arrays with atomic increments whenever an array is passed to a
-    compiled function or bound to a new name; in a loop that calls the plant's f, g and h
-    four times per step this dominated the run time, and on a *shared* input array the
-    atomics made parallel members contend for one cache line.  A view whose meminfo is
-    NULL is never counted (numba's incref/decref return at once on NULL and LLVM removes
-    them).  The caller must keep the owning array alive while the view is used (the
-    kernel passes the owners to ``_KEEP_ALIVE`` after its loop).
-    """
-    from numba.core import cgutils
-    from numba.core import types as nbtypes
-    from numba.extending import intrinsic
-
-    @intrinsic
-    def unmanaged(typingctx: Any, arr: Any) -> Any:
-        if not isinstance(arr, nbtypes.Array):
-            return None
-
-        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
-            src = context.make_array(sig.args[0])(context, builder, value=args[0])
-            dst = context.make_array(sig.return_type)(context, builder)
-            for name in ("nitems", "itemsize", "data", "shape", "strides"):
-                setattr(dst, name, getattr(src, name))
-            dst.meminfo = cgutils.get_null_value(dst.meminfo.type)
-            dst.parent = cgutils.get_null_value(dst.parent.type)
-            return dst._getvalue()
-
-        return arr(arr), codegen
-
-    return unmanaged
-
-
-def _lane_column_intrinsic() -> Any:
-    """A numba intrinsic ``column(a, l)``: the unmanaged 1-D view ``a[:, l]`` of a 2-D
-    C-contiguous array, its data pointer ``&a[0, l]`` computed by a plain GEP.
-
-    numba's own ``a[:, l]`` computes the view's start in branches (negative and empty
-    slices) and by integer arithmetic on the pointer; inside a loop over ``l`` LLVM then
-    cannot see that lane l + 1's ``x[i]`` lies next to lane l's, and its loop vectorizer
-    loads every plant state and parameter with a gather (on AMD Zen 4, ~20 cycles per 8
-    doubles).  With the GEP the loads are plain vector loads.  No bounds check (``l`` is
-    a lane index, ``0 <= l < a.shape[1]``) and no reference count (see
-    :func:`_unmanaged_intrinsic`).
-    """
-    from numba.core import cgutils
-    from numba.core import types as nbtypes
-    from numba.extending import intrinsic
-
-    @intrinsic
-    def column(typingctx: Any, arr: Any, lane: Any) -> Any:
-        if not (
-            isinstance(arr, nbtypes.Array)
-            and arr.ndim == 2
-            and arr.layout == "C"
-            and isinstance(lane, nbtypes.Integer)
-        ):
-            return None
-        out = arr.copy(ndim=1, layout="A")
-
-        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
-            src = context.make_array(sig.args[0])(context, builder, value=args[0])
-            dst = context.make_array(sig.return_type)(context, builder)
-            idx = context.cast(builder, args[1], sig.args[1], nbtypes.intp)
-            shape0, shape1 = cgutils.unpack_tuple(builder, src.shape, 2)
-            intp = context.get_value_type(nbtypes.intp)
-            stride = builder.mul(shape1, src.itemsize)
-            context.populate_array(
-                dst,
-                data=builder.gep(src.data, [idx], inbounds=True),
-                shape=cgutils.pack_array(builder, [shape0], ty=intp),
-                strides=cgutils.pack_array(builder, [stride], ty=intp),
-                itemsize=src.itemsize,
-                meminfo=cgutils.get_null_value(dst.meminfo.type),
-                parent=cgutils.get_null_value(dst.parent.type),
-            )
-            return dst._getvalue()
-
-        return out(arr, lane), codegen
-
-    return column
-
-
-def _leading_rows_intrinsic() -> Any:
-    """A numba intrinsic ``leading_rows(a, n)``: the unmanaged 1-D view of the first ``n``
-    rows of a 2-D C-contiguous array, flat (row i, column l at ``i * a.shape[1] + l``).
-
-    The same view as ``a[:n].reshape(n * a.shape[1])`` without numba's run-time reshape
-    (a library call per use, ~2 % of a lane kernel's time).  No bounds check
-    (``0 <= n <= a.shape[0]``) and no reference count (see :func:`_unmanaged_intrinsic`).
-    """
-    from numba.core import cgutils
-    from numba.core import types as nbtypes
-    from numba.extending import intrinsic
-
-    @intrinsic
-    def leading_rows(typingctx: Any, arr: Any, n: Any) -> Any:
-        if not (
-            isinstance(arr, nbtypes.Array)
-            and arr.ndim == 2
-            and arr.layout == "C"
-            and isinstance(n, nbtypes.Integer)
-        ):
-            return None
-        out = arr.copy(ndim=1, layout="C")
-
-        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
-            src = context.make_array(sig.args[0])(context, builder, value=args[0])
-            dst = context.make_array(sig.return_type)(context, builder)
-            rows = context.cast(builder, args[1], sig.args[1], nbtypes.intp)
-            _, shape1 = cgutils.unpack_tuple(builder, src.shape, 2)
-            intp = context.get_value_type(nbtypes.intp)
-            size = builder.mul(rows, shape1)
-            context.populate_array(
-                dst,
-                data=src.data,
-                shape=cgutils.pack_array(builder, [size], ty=intp),
-                strides=cgutils.pack_array(builder, [src.itemsize], ty=intp),
-                itemsize=src.itemsize,
-                meminfo=cgutils.get_null_value(dst.meminfo.type),
-                parent=cgutils.get_null_value(dst.parent.type),
-            )
-            return dst._getvalue()
-
-        return out(arr, n), codegen
-
-    return leading_rows
 
 
 def _prune_stale_cache(member: Any, plant_key: str, suffix: str, template: Any = None) -> None:

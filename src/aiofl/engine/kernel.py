@@ -38,7 +38,7 @@ scalar functions.  The dispatch over the SEF kinds and the laws is written once,
 (:mod:`aiofl.engine.sampled`) calls too.
 
 Speed notes.  The time loop touches only thread-local memory reached through *unmanaged*
-array views (no reference counting, see :func:`aiofl.engine.build._unmanaged_intrinsic`),
+array views (no reference counting, see :func:`aiofl.engine.views.unmanaged_intrinsic`),
 evaluates r(t) once per distinct stage time, and passes scalars (or a whole array and an
 offset) to the component functions, never slices.  The components skip the power function
 for exponents 0 and 1 and use cheaper forms of tanh and :math:`|e|^a` that agree with libm to
@@ -87,7 +87,7 @@ _N_P = 1  # plant parameters
 _NZ = 1  # longest member state
 _PF = _PG = _PH = _PBD = _PNF = None  # the plant's compiled f, g, h, b_d, normal form
 _SETUP = _REFERENCE = _DERIV = None  # sibling compiled functions
-_UNMANAGED = _KEEP_ALIVE = None  # see _unmanaged_intrinsic
+_UNMANAGED = _KEEP_ALIVE = None  # see aiofl.engine.views
 # the controller's component functions (see _component_functions)
 _HAN_TD = _ITD = _ITD_CONSTANTS = _PREFILTER = _PREFILTER_COEF = None
 _FAL = _FAL_SLOPE = _INLSEF_TERM = _INLSEF_LIMIT = _LINEAR_SEF = _LINEAR_SEF_GAIN = None

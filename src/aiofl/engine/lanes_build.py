@@ -27,12 +27,12 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
-from aiofl.engine import build, kernel, lane_blocks, lanes
+from aiofl.engine import build, kernel, lane_blocks, lanes, lanes_sampled, sampled, views
 from aiofl.plants.base import Plant
 
 __all__ = ["group_members", "lane_kernel_for", "plan_groups", "run_groups"]
 
-_LANE_KERNELS: dict[tuple[int, int], tuple[Plant, Any]] = {}
+_LANE_KERNELS: dict[tuple[int, int, bool], tuple[Plant, Any]] = {}
 _LOCK = threading.Lock()
 
 
@@ -100,12 +100,20 @@ def _lane_sources() -> list[str]:
     import sys
 
     from aiofl.components import vecmath
+    from aiofl.engine import discrete
 
-    return [m.__file__ for m in (lanes, lane_blocks, sys.modules[__name__], vecmath)]
+    here = sys.modules[__name__]
+    return [
+        m.__file__ for m in (lanes, lane_blocks, lanes_sampled, sampled, discrete, here, vecmath)
+    ]
 
 
-def _build(plant: Plant, width: int, *, cache: bool | None = None) -> Any:
-    """Compile the lane kernel of ``plant`` for groups of ``width`` (see the module notes)."""
+def _build(
+    plant: Plant, width: int, *, sampled_data: bool = False, cache: bool | None = None
+) -> Any:
+    """Compile the lane kernel of ``plant`` for groups of ``width`` (see the module notes):
+    the continuous time loop, or with ``sampled_data`` the sampled-data one
+    (:mod:`aiofl.engine.lanes_sampled`)."""
     import hashlib
 
     from aiofl.components import vecmath
@@ -117,7 +125,7 @@ def _build(plant: Plant, width: int, *, cache: bool | None = None) -> Any:
     use_cache = build._cache_enabled() if cache is None else cache
     use_cache = use_cache and fingerprint is not None and not build._engine_sources_changed()
     suffix = f"{plant_key}_{fingerprint}" if fingerprint else f"nocache{id(plant):x}"
-    suffix = f"w{width}_{suffix}"
+    suffix = f"{'s' if sampled_data else 'w'}{width}_{suffix}"
     opts = {"fastmath": lanes.LANE_FASTMATH, "error_model": "numpy"}
     inst = build._instantiate
     # the per-member setup and the IOFL law are the scalar kernel's templates, compiled
@@ -131,7 +139,7 @@ def _build(plant: Plant, width: int, *, cache: bool | None = None) -> Any:
     ns_setup.update(_N=plant.n_states, **build._component_functions("lanes"))
     setup = inst(kernel._tpl_setup, ns_setup, suffix, **opts)
 
-    ns = {**vars(lane_blocks), **vars(lanes)}
+    ns = {**vars(lane_blocks), **vars(lanes), **vars(lanes_sampled)}
     ns.update(
         _W=width,
         _N=plant.n_states,
@@ -144,9 +152,9 @@ def _build(plant: Plant, width: int, *, cache: bool | None = None) -> Any:
         _PNF=_lane_plant_function(nf, inline=False),
         _SETUP=setup,
         _IOFL_COMMAND=ns_setup["_iofl_command"],
-        _UNMANAGED=build._unmanaged_intrinsic(),
-        _COLUMN=build._lane_column_intrinsic(),
-        _LEADING_ROWS=build._leading_rows_intrinsic(),
+        _UNMANAGED=views.unmanaged_intrinsic(),
+        _COLUMN=views.lane_column_intrinsic(),
+        _LEADING_ROWS=views.leading_rows_intrinsic(),
         _SIN=vecmath.vsin,
         _COS=vecmath.vcos,
         **build._component_functions("lanes"),
@@ -159,32 +167,49 @@ def _build(plant: Plant, width: int, *, cache: bool | None = None) -> Any:
     ns["_KEEP_ALIVE"] = inst(lanes._tpl_keep_alive, ns, suffix)
     ns["_GROUP_SETUP"] = inst(lanes._tpl_group_setup, ns, suffix, **opts)
     ns["_REFERENCE"] = inst(lanes._tpl_reference, ns, suffix, inline="always", **opts)
-    ns["_DERIV"] = inst(lanes._tpl_deriv, ns, suffix, inline="always", **opts)
-    group = inst(lanes._tpl_group, ns, suffix, nogil=True, cache=use_cache, **opts)
+    if sampled_data:
+        # the controller's update: the sampled kernel's, compiled as the lane blocks are
+        ns_ctrl = dict(ns_setup)
+        sampled._bind(ns_ctrl, build._private_components("lanes")["discrete"])
+        ns["_CTRL_INIT"] = inst(sampled._tpl_ctrl_init, ns_ctrl, suffix, **opts)
+        ns["_CTRL_STEP"] = inst(sampled._tpl_ctrl_step, ns_ctrl, suffix, **opts)
+        tpl = lanes_sampled._tpl_group_sampled
+        deriv = lanes_sampled._tpl_plant_deriv
+        ns["_PLANT_DERIV"] = inst(deriv, ns, suffix, inline="always", **opts)
+    else:
+        tpl = lanes._tpl_group
+        ns["_DERIV"] = inst(lanes._tpl_deriv, ns, suffix, inline="always", **opts)
+    group = inst(tpl, ns, suffix, nogil=True, cache=use_cache, **opts)
     if use_cache:
-        build._prune_stale_cache(group, plant_key, suffix, lanes._tpl_group)
+        build._prune_stale_cache(group, plant_key, suffix, tpl)
     build.register_group_function(group, plant)
     return group
 
 
-def lane_kernel_for(plant: Plant, width: int = lanes.WIDTH) -> Any:
+def lane_kernel_for(plant: Plant, width: int = lanes.WIDTH, *, sampled_data: bool = False) -> Any:
     """The compiled lane kernel (group function) of ``plant`` for groups of ``width``,
-    built on first use."""
-    key = (id(plant), width)
+    built on first use: the continuous time loop, or with ``sampled_data`` the sampled-data
+    one (called with the batch's discrete rows as its last argument)."""
+    key = (id(plant), width, sampled_data)
     with _LOCK:
         if key not in _LANE_KERNELS or _LANE_KERNELS[key][0] is not plant:
-            _LANE_KERNELS[key] = (plant, _build(plant, width))
+            _LANE_KERNELS[key] = (plant, _build(plant, width, sampled_data=sampled_data))
         return _LANE_KERNELS[key][1]
 
 
 def _by_kind(
-    ints: NDArray[np.int64], ref_kind: NDArray[np.float64], members: NDArray[np.int64]
+    ints: NDArray[np.int64],
+    ref_kind: NDArray[np.float64],
+    members: NDArray[np.int64],
+    steps: NDArray[np.float64] | None = None,
 ) -> list[list[int]]:
-    """``members`` split by component kinds (the integer row and the reference kind), each
-    list in batch order, the kinds in order of first appearance."""
+    """``members`` split by component kinds (the integer row, the reference kind and, for
+    sampled members, the steps per sample ``steps``), each list in batch order, the kinds
+    in order of first appearance."""
     by_kind: dict[tuple[int, ...], list[int]] = {}
     for i in members.tolist():
-        by_kind.setdefault((*(int(v) for v in ints[i]), int(ref_kind[i])), []).append(i)
+        n_per = int(steps[i]) if steps is not None else 0
+        by_kind.setdefault((*(int(v) for v in ints[i]), int(ref_kind[i]), n_per), []).append(i)
     return list(by_kind.values())
 
 
@@ -193,6 +218,7 @@ def group_members(
     ref_kind: NDArray[np.float64],
     members: NDArray[np.int64],
     width: int = lanes.WIDTH,
+    steps: NDArray[np.float64] | None = None,
 ) -> NDArray[np.int64]:
     """Groups of :data:`~aiofl.engine.lanes.WIDTH` members with uniform kinds.
 
@@ -206,6 +232,8 @@ def group_members(
         The members to group (indices into the batch), in the order to keep.
     width
         Lanes per group.
+    steps
+        Sampled members: each member's engine steps per sample (uniform within a group).
 
     Returns
     -------
@@ -214,7 +242,7 @@ def group_members(
     """
     w = width
     rows: list[list[int]] = []
-    for group in _by_kind(ints, ref_kind, members):
+    for group in _by_kind(ints, ref_kind, members, steps):
         for start in range(0, len(group), w):
             chunk = group[start : start + w]
             rows.append(chunk + [-1] * (w - len(chunk)))
@@ -222,18 +250,22 @@ def group_members(
 
 
 def plan_groups(
-    ints: NDArray[np.int64], ref_kind: NDArray[np.float64], members: NDArray[np.int64]
+    ints: NDArray[np.int64],
+    ref_kind: NDArray[np.float64],
+    members: NDArray[np.int64],
+    steps: NDArray[np.float64] | None = None,
 ) -> dict[int, NDArray[np.int64]]:
     """The groups to run, by lane width: members of a kind that fill at least half a group
     of :data:`~aiofl.engine.lanes.WIDTH` run in such groups (the last one padded), the
-    others in groups of one lane.  Either way a member's numbers are the same (bitwise)."""
+    others in groups of one lane.  Either way a member's numbers are the same (bitwise).
+    ``steps``: as for :func:`group_members` (sampled members)."""
     w = lanes.WIDTH
-    kinds = _by_kind(ints, ref_kind, members)
+    kinds = _by_kind(ints, ref_kind, members, steps)
     wide = [i for group in kinds if 2 * len(group) >= w for i in group]
     narrow = [i for group in kinds if 2 * len(group) < w for i in group]
     plan = {}
     if wide:
-        plan[w] = group_members(ints, ref_kind, np.array(wide, dtype=np.int64), w)
+        plan[w] = group_members(ints, ref_kind, np.array(wide, dtype=np.int64), w, steps)
     if narrow:
         plan[1] = np.array(narrow, dtype=np.int64).reshape(-1, 1)
     return plan

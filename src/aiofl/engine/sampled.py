@@ -45,7 +45,7 @@ from numpy.typing import NDArray
 
 from aiofl import layout as L
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine import build, kernel
+from aiofl.engine import build, kernel, views
 from aiofl.engine import discrete as DS
 from aiofl.engine.discrete import (
     D_DELAY,
@@ -427,9 +427,12 @@ def _tpl_member_sampled(  # pragma: no cover - compiled
 
 
 # ------------------------------------------------------------------------------ building
-def _bind(ns: dict[str, Any]) -> None:
-    """Add this module's layout constants and the discrete component functions to ``ns``."""
-    from aiofl.components import discrete as cd
+def _bind(ns: dict[str, Any], cd: Any = None) -> None:
+    """Add this module's layout constants and the discrete component functions to ``ns``
+    (those of ``cd``, default :mod:`aiofl.components.discrete`; the lane kernel passes its
+    private copies, see :func:`aiofl.engine.build._private_components`)."""
+    if cd is None:
+        from aiofl.components import discrete as cd
 
     ns.update({k: v for k, v in vars(DS).items() if k.isupper() and isinstance(v, int)})
     ns.update({k: v for k, v in globals().items() if k.startswith("C_") or k == "N_CS"})
@@ -466,7 +469,7 @@ def _build_sampled(plant: Plant) -> Any:
     suffix = f"{plant_key}_{fp}" if fp else f"nocache{id(plant):x}"
     opts = _opts()
     inst = build._instantiate
-    ns["_UNMANAGED"] = build._unmanaged_intrinsic()
+    ns["_UNMANAGED"] = views.unmanaged_intrinsic()
     ns["_KEEP_ALIVE"] = inst(kernel._tpl_keep_alive, ns, suffix)
     ns["_SETUP"] = inst(kernel._tpl_setup, ns, suffix, **opts)
     ns["_REFERENCE"] = inst(kernel._tpl_reference, ns, suffix, **opts)

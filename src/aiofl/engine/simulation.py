@@ -158,7 +158,9 @@ def simulate_batch(
         (:mod:`aiofl.engine.lanes`); ``"scalar"``: every member runs the one-member
         kernel (:mod:`aiofl.engine.kernel`), the reference the lane kernel is checked
         against.  Default: the environment variable ``AIOFL_ENGINE``, else ``"lanes"``.
-        Sampled members run the sampled kernel (:mod:`aiofl.engine.sampled`) either way.
+        Sampled members run in lanes too (:mod:`aiofl.engine.lanes_sampled`: the plant in
+        SIMD lanes, the controller lane by lane at the samples), or with ``"scalar"`` the
+        one-member sampled kernel (:mod:`aiofl.engine.sampled`).
 
     Returns
     -------
@@ -232,9 +234,11 @@ def simulate_batch(
     status = np.zeros(b, dtype=np.int64)
     t_div = np.zeros(b)
     lane_members = np.arange(b) if engine == "lanes" else np.zeros(0, dtype=np.int64)
+    sampled_lanes = np.zeros(0, dtype=np.int64)
     if disc is not None:
-        lane_members = lane_members[disc[lane_members, D_STEPS] <= 0]  # continuous only
-    scalar_members = np.setdiff1d(np.arange(b), lane_members)
+        sampled_lanes = lane_members[disc[lane_members, D_STEPS] > 0]
+        lane_members = lane_members[disc[lane_members, D_STEPS] <= 0]
+    scalar_members = np.setdiff1d(np.arange(b), np.union1d(lane_members, sampled_lanes))
     args = (
         batch.ints,
         batch.floats,
@@ -258,13 +262,19 @@ def simulate_batch(
         t_div,
         traj,
     )
-    if lane_members.size:
+    if lane_members.size or sampled_lanes.size:
         from aiofl.engine.lanes_build import lane_kernel_for, plan_groups, run_groups
 
-        plan = plan_groups(batch.ints, scen_d[rows, L.S_REF_KIND], lane_members)
-        for width, groups in plan.items():
+        ref_kind = scen_d[rows, L.S_REF_KIND]
+        for width, groups in plan_groups(batch.ints, ref_kind, lane_members).items():
             run_groups(lane_kernel_for(plant, width), groups, *args)
-    if scalar_members.size:  # the scalar engine, and sampled members
+        if disc is not None and sampled_lanes.size:
+            steps = disc[:, D_STEPS]
+            plan = plan_groups(batch.ints, ref_kind, sampled_lanes, steps)
+            for width, groups in plan.items():
+                group_fn = lane_kernel_for(plant, width, sampled_data=True)
+                run_groups(group_fn, groups, *args, disc)
+    if scalar_members.size:  # the scalar engine
         member = kernel_for(plant).member
         if disc is not None:
             from aiofl.engine.sampled import member_dispatch
