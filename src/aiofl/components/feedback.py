@@ -66,17 +66,16 @@ def fal_scaled(e: float, alpha: float, delta: float, inner_slope: float) -> floa
 
 @njit(**CALLER_JIT_OPTIONS)
 def fal_power_needed(e: float, alpha: float, delta: float) -> bool:
-    r"""Whether :math:`\mathrm{fal}(e,lpha,\delta)` needs the power :math:`|e|^lpha`:
-        outside the linear zone (:math:`|e| > \delta`, or e NaN) with :math:`lpha
-    e 1`.
-        Otherwise :func:`fal_scaled` is :func:`fal_linear`."""
+    r"""Whether :math:`\mathrm{fal}(e,\alpha,\delta)` needs the power :math:`|e|^\alpha`:
+    outside the linear zone (:math:`|e| > \delta`, or e NaN) with :math:`\alpha \ne 1`.
+    Otherwise :func:`fal_scaled` is :func:`fal_linear`."""
     return not abs(e) <= delta and alpha != 1.0
 
 
 @njit(**CALLER_JIT_OPTIONS)
 def fal_linear(e: float, delta: float, inner_slope: float) -> float:
     r"""fal where it needs no power (:func:`fal_power_needed` false): the inner branch
-    :math:`e\,\delta^{lpha-1}` for :math:`|e| \le \delta`, else :math:`e` (α = 1).
+    :math:`e\,\delta^{\alpha-1}` for :math:`|e| \le \delta`, else :math:`e` (α = 1).
 
     The engine's SIMD lanes evaluate fal as this alone when no lane of a group needs the
     power (the same value, bit for bit, as :func:`fal_scaled`)."""

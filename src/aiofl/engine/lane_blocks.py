@@ -29,10 +29,8 @@ _W = 32
 _N = 1
 _PF = _PG = _PH = _PBD = _PNF = None  # the plant's functions, inlined, vector math
 _IOFL_COMMAND = _UNMANAGED = _COLUMN = _SIN = _COS = None
-_HAN_TD = _ITD = _FAL = _FAL_POWER_NEEDED = _FAL_LINEAR = _INLSEF_TERM = _INLSEF_LIMIT = (
-    _LINEAR_SEF
-) = None
-_INLESO = _AIOFL_LAW = _SATURATE = None
+_HAN_TD = _ITD = _FAL = _FAL_POWER_NEEDED = _FAL_LINEAR = None
+_INLSEF_TERM = _INLSEF_LIMIT = _LINEAR_SEF = _INLESO = _AIOFL_LAW = _SATURATE = None
 
 
 def _blk_sine(t, a, w, phase, offset, with_cos, r, sn, cs, amp):  # pragma: no cover
