@@ -89,6 +89,7 @@ _NZ = 1
 _PF = _PG = _PH = _PBD = _PNF = None  # the plant's functions, inlined, vector math
 _SETUP = _IOFL_COMMAND = _UNMANAGED = _LEADING_ROWS = _KEEP_ALIVE = None
 _REFERENCE = _DERIV = _GROUP_SETUP = None
+_ASSIGN_LANES = _LOAD_LANES = _START_MEMBERS = _STOP_LANE = _FINISH_LANES = None
 # the lane blocks (see _BLOCKS)
 _BLK_HAN = _BLK_ITD = _BLK_PREFILTER_START = _BLK_PREFILTER_TERM = _BLK_COPY = None
 _BLK_FILL = _BLK_OUTPUT = _BLK_ERROR = _BLK_FAL = _BLK_INLSEF = _BLK_LINEAR_TERM = None
@@ -224,6 +225,78 @@ def _tpl_group_setup(lanes, ints, floats, q, iq, qt):  # pragma: no cover - comp
     _SETUP(ints[lanes[0]], floats[lanes[0]], qt, iq)
 
 
+def _tpl_assign_lanes(g, groups, lanes, real, live):  # pragma: no cover - compiled
+    """Lane l runs member ``groups[g, l]``; a pad (-1) repeats the group's first member
+    (``real[l]`` false, its results discarded).  Returns the number of real lanes."""
+    first = groups[g, 0]
+    n_real = 0
+    for l in range(_W):
+        mi = groups[g, l]
+        real[l] = mi >= 0
+        live[l] = mi >= 0
+        lanes[l] = mi if mi >= 0 else first
+        n_real += 1 if mi >= 0 else 0
+    return n_real
+
+
+def _tpl_load_lanes(  # pragma: no cover - compiled
+    lanes, p_before, p_after, p_nom, scen, x0, ref_row, noise_row, pp, sc, rrow, nrow, zz
+):
+    """Each lane's member data into the group's columns: plant parameters (before and
+    after the change, nominal, now = before: ``pp[0..3]``), scenario row, table rows and
+    the initial plant state (``zz[0]`` and the stage state ``zz[1]``)."""
+    for l in range(_W):
+        mi = lanes[l]
+        for j in range(_N_P):
+            pp[0, j, l] = p_before[mi, j]
+            pp[1, j, l] = p_after[mi, j]
+            pp[2, j, l] = p_nom[mi, j]
+            pp[3, j, l] = p_before[mi, j]
+        for j in range(L.N_SCEN):
+            sc[j, l] = scen[mi, j]
+        rrow[l] = ref_row[mi]
+        nrow[l] = noise_row[mi]
+        for i in range(_N):
+            zz[0, i, l] = x0[mi, i]
+            zz[1, i, l] = x0[mi, i]
+
+
+def _tpl_start_members(lanes, real, status, t_div):  # pragma: no cover - compiled
+    """The real lanes' members: status OK, no divergence time (yet)."""
+    for l in range(_W):
+        if real[l]:
+            status[lanes[l]] = L.STATUS_OK
+            t_div[lanes[l]] = np.nan
+
+
+def _tpl_stop_lane(l, t, lanes, live, z, status, t_div, metrics):  # pragma: no cover
+    """Lane l's member diverged at t: reported with its integrals so far, lane masked."""
+    live[l] = False
+    mi = lanes[l]
+    status[mi] = L.STATUS_DIVERGED
+    t_div[mi] = t
+    for j in range(L.N_METRIC):
+        metrics[mi, j] = z[_N + j, l]
+
+
+def _tpl_finish_lanes(lanes, real, live, rows, row, z, metrics, tr, store):  # pragma: no cover
+    """After the horizon: the live lanes' integrals; stored rows after each member's last
+    one (its divergence) set to NaN."""
+    for l in range(_W):
+        if live[l]:
+            mi = lanes[l]
+            for j in range(L.N_METRIC):
+                metrics[mi, j] = z[_N + j, l]
+            rows[l] = row
+    if store:
+        for l in range(_W):
+            if real[l]:
+                mi = lanes[l]
+                for rw in range(rows[l], tr.shape[1]):
+                    for j in range(tr.shape[2]):
+                        tr[mi, rw, j] = np.nan
+
+
 def _tpl_group(  # pragma: no cover - compiled
     g,
     groups,
@@ -290,16 +363,10 @@ def _tpl_group(  # pragma: no cover - compiled
     zt = zz[1]
     kd = zz[2]
     acc = zz[3]
-    pb = pp[0]
     pa = pp[1]
     pn = pp[2]
     p = pp[3]
-    first = groups[g, 0]
-    for l in range(_W):
-        mi = groups[g, l]
-        real[l] = mi >= 0
-        live[l] = mi >= 0
-        lanes[l] = mi if mi >= 0 else first
+    n_live = _ASSIGN_LANES(g, groups, lanes, real, live)
     _GROUP_SETUP(lanes, ints, floats, q, iq, qt)
     rho = iq[IQ_RHO]
     nza = iq[IQ_NZ]
@@ -309,23 +376,10 @@ def _tpl_group(  # pragma: no cover - compiled
     exact = iq[IQ_TD] == L.TD_EXACT
     nd = rho if exact else 0
     init_output = iq[IQ_EINIT] == L.ESO_INIT_OUTPUT
-    for l in range(_W):
-        mi = lanes[l]
-        for j in range(_N_P):
-            pb[j, l] = p_before[mi, j]
-            pa[j, l] = p_after[mi, j]
-            pn[j, l] = p_nom[mi, j]
-            p[j, l] = pb[j, l]
-        for j in range(L.N_SCEN):
-            sc[j, l] = scen[mi, j]
-        rrow[l] = ref_row[mi]
-        nrow[l] = noise_row[mi]
-        for i in range(_N):
-            z[i, l] = x0[mi, i]
-            zt[i, l] = z[i, l]
-        if real[l]:
-            status[mi] = L.STATUS_OK
-            t_div[mi] = np.nan
+    _LOAD_LANES(
+        lanes, p_before, p_after, p_nom, scen, x0, ref_row, noise_row, pp, sc, rrow, nrow, zz
+    )
+    _START_MEMBERS(lanes, real, status, t_div)
     ref_kind = int(sc[L.S_REF_KIND, 0])  # uniform within a group
     n_stages = 4 if method == L.METHOD_RK4 else 1
     hdt = 0.5 * dt
@@ -333,9 +387,6 @@ def _tpl_group(  # pragma: no cover - compiled
     row = 0
     save_in = 0
     step_ref = ref_kind == L.REF_STEP
-    n_live = 0
-    for l in range(_W):
-        n_live += 1 if real[l] else 0
     for k in range(n_steps + 1):
         t = k * dt
         if k == 0 or n_stages == 1 or step_ref:
@@ -427,28 +478,11 @@ def _tpl_group(  # pragma: no cover - compiled
         _BLK_OUT_OF_RANGE(z, nza, threshold, s[S_ERR])
         for l in range(_W):
             if live[l] and s[S_ERR, l] != 0.0:
-                live[l] = False
+                _STOP_LANE(l, (k + 1) * dt, lanes, live, z, status, t_div, metrics)
                 n_live -= 1
-                mi = lanes[l]
-                status[mi] = L.STATUS_DIVERGED
-                t_div[mi] = (k + 1) * dt
-                for j in range(L.N_METRIC):
-                    metrics[mi, j] = z[_N + j, l]
         if n_live == 0:
             break
-    for l in range(_W):
-        if live[l]:
-            mi = lanes[l]
-            for j in range(L.N_METRIC):
-                metrics[mi, j] = z[_N + j, l]
-            rows[l] = row
-    if store:
-        for l in range(_W):
-            if real[l]:
-                mi = lanes[l]
-                for rw in range(rows[l], tr.shape[1]):
-                    for j in range(tr.shape[2]):
-                        tr[mi, rw, j] = np.nan
+    _FINISH_LANES(lanes, real, live, rows, row, z, metrics, tr, store)
     _KEEP_ALIVE(lane_owner, real_owner, live_owner, rows_owner, switched_owner, iq_owner)
     _KEEP_ALIVE(qt_owner, q_owner, z_owner, p_owner, sc_owner, s_owner)
     _KEEP_ALIVE(rr_owner, rrow_owner, nrow_owner, nrow_owner, nrow_owner, nrow_owner)

@@ -165,6 +165,8 @@ def _build(
             light = width == 1 and not set(fn.__code__.co_names) & _HEAVY
             ns[name.upper()] = inst(fn, ns, suffix, **block_opts, **_LIGHT if light else {})
     ns["_KEEP_ALIVE"] = inst(lanes._tpl_keep_alive, ns, suffix)
+    for name in ("assign_lanes", "load_lanes", "start_members", "stop_lane", "finish_lanes"):
+        ns[f"_{name.upper()}"] = inst(getattr(lanes, f"_tpl_{name}"), ns, suffix, **opts)
     ns["_GROUP_SETUP"] = inst(lanes._tpl_group_setup, ns, suffix, **opts)
     ns["_REFERENCE"] = inst(lanes._tpl_reference, ns, suffix, inline="always", **opts)
     if sampled_data:

@@ -46,6 +46,7 @@ _N = 1
 _N_P = 1
 _PNF = _SETUP = _IOFL_COMMAND = _SATURATE = _UNMANAGED = _LEADING_ROWS = None
 _KEEP_ALIVE = _REFERENCE = _CTRL_INIT = _CTRL_STEP = _PLANT_DERIV = None
+_ASSIGN_LANES = _LOAD_LANES = _START_MEMBERS = _STOP_LANE = _FINISH_LANES = None
 _BLK_OUTPUT = _BLK_PLANT = _BLK_DISTURBANCE = _BLK_METRICS = _BLK_INPUTS = None
 _BLK_RK_FIRST = _BLK_RK_MID = _BLK_RK_LAST = _BLK_OUT_OF_RANGE = None
 
@@ -137,36 +138,19 @@ def _tpl_group_sampled(  # pragma: no cover - compiled
     zt = zz[1]
     kd = zz[2]
     acc = zz[3]
-    pb = pp[0]
     pa = pp[1]
     pn = pp[2]
     p = pp[3]
-    first = groups[g, 0]
-    for l in range(_W):
-        mi = groups[g, l]
-        real[l] = mi >= 0
-        live[l] = mi >= 0
-        lanes[l] = mi if mi >= 0 else first
+    n_live = _ASSIGN_LANES(g, groups, lanes, real, live)
     for l in range(_W):
         mi = lanes[l]
         _SETUP(ints[mi], floats[mi], q[l], iq)
         for j in range(N_DISC):
             dsc[l, j] = disc[mi, j]
-        for j in range(_N_P):
-            pb[j, l] = p_before[mi, j]
-            pa[j, l] = p_after[mi, j]
-            pn[j, l] = p_nom[mi, j]
-            p[j, l] = pb[j, l]
-        for j in range(L.N_SCEN):
-            sc[j, l] = scen[mi, j]
-        rrow[l] = ref_row[mi]
-        nrow[l] = noise_row[mi]
-        for i in range(_N):
-            z[i, l] = x0[mi, i]
-            zt[i, l] = z[i, l]
-        if real[l]:
-            status[mi] = L.STATUS_OK
-            t_div[mi] = np.nan
+    _LOAD_LANES(
+        lanes, p_before, p_after, p_nom, scen, x0, ref_row, noise_row, pp, sc, rrow, nrow, zz
+    )
+    _START_MEMBERS(lanes, real, status, t_div)
     _SETUP(ints[lanes[0]], floats[lanes[0]], q[0], iq)  # kinds: uniform within a group
     n_per = int(dsc[0, D_STEPS])  # uniform within a group
     rho = iq[IQ_RHO]
@@ -180,9 +164,7 @@ def _tpl_group_sampled(  # pragma: no cover - compiled
     sixth = dt / 6.0
     row = 0
     save_in = 0
-    n_live = 0
     for l in range(_W):
-        n_live += 1 if real[l] else 0
         s[S_U, l] = 0.0  # the command the plant gets over the current sample interval
     for k in range(n_steps + 1):
         t = k * dt
@@ -280,28 +262,11 @@ def _tpl_group_sampled(  # pragma: no cover - compiled
             for j in range(ntd):
                 bad = bad or not abs(cs[l, C_TD + j]) < threshold
             if live[l] and bad:
-                live[l] = False
+                _STOP_LANE(l, (k + 1) * dt, lanes, live, z, status, t_div, metrics)
                 n_live -= 1
-                mi = lanes[l]
-                status[mi] = L.STATUS_DIVERGED
-                t_div[mi] = (k + 1) * dt
-                for j in range(L.N_METRIC):
-                    metrics[mi, j] = z[_N + j, l]
         if n_live == 0:
             break
-    for l in range(_W):
-        if live[l]:
-            mi = lanes[l]
-            for j in range(L.N_METRIC):
-                metrics[mi, j] = z[_N + j, l]
-            rows[l] = row
-    if store:
-        for l in range(_W):
-            if real[l]:
-                mi = lanes[l]
-                for rw in range(rows[l], tr.shape[1]):
-                    for j in range(tr.shape[2]):
-                        tr[mi, rw, j] = np.nan
+    _FINISH_LANES(lanes, real, live, rows, row, z, metrics, tr, store)
     _KEEP_ALIVE(lane_owner, real_owner, live_owner, rows_owner, switched_owner, iq_owner)
     _KEEP_ALIVE(q_owner, dsc_owner, cs_owner, scr_owner, rl_owner, ym_owner)
     _KEEP_ALIVE(z_owner, p_owner, sc_owner, s_owner, rr_owner, rrow_owner)

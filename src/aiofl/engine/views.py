@@ -48,6 +48,47 @@ def unmanaged_intrinsic() -> Any:
     return unmanaged
 
 
+def _row_major_view_intrinsic(layout: str, view: Any) -> Any:
+    """A numba intrinsic ``f(a, k)`` returning an unmanaged 1-D view of the 2-D C-contiguous
+    array ``a``: ``view(builder, data, shape0, shape1, itemsize, k)`` gives the view's data
+    pointer, length and stride (bytes); ``layout`` is its numba layout."""
+    from numba.core import cgutils
+    from numba.core import types as nbtypes
+    from numba.extending import intrinsic
+
+    @intrinsic
+    def row_major_view(typingctx: Any, arr: Any, k: Any) -> Any:
+        if not (
+            isinstance(arr, nbtypes.Array)
+            and arr.ndim == 2
+            and arr.layout == "C"
+            and isinstance(k, nbtypes.Integer)
+        ):
+            return None
+
+        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
+            src = context.make_array(sig.args[0])(context, builder, value=args[0])
+            dst = context.make_array(sig.return_type)(context, builder)
+            kk = context.cast(builder, args[1], sig.args[1], nbtypes.intp)
+            shape0, shape1 = cgutils.unpack_tuple(builder, src.shape, 2)
+            data, size, stride = view(builder, src.data, shape0, shape1, src.itemsize, kk)
+            intp = context.get_value_type(nbtypes.intp)
+            context.populate_array(
+                dst,
+                data=data,
+                shape=cgutils.pack_array(builder, [size], ty=intp),
+                strides=cgutils.pack_array(builder, [stride], ty=intp),
+                itemsize=src.itemsize,
+                meminfo=cgutils.get_null_value(dst.meminfo.type),
+                parent=cgutils.get_null_value(dst.parent.type),
+            )
+            return dst._getvalue()
+
+        return arr.copy(ndim=1, layout=layout)(arr, k), codegen
+
+    return row_major_view
+
+
 def lane_column_intrinsic() -> Any:
     """A numba intrinsic ``column(a, l)``: the unmanaged 1-D view ``a[:, l]`` of a 2-D
     C-contiguous array, its data pointer ``&a[0, l]`` computed by a plain GEP.
@@ -60,42 +101,11 @@ def lane_column_intrinsic() -> Any:
     a lane index, ``0 <= l < a.shape[1]``) and no reference count (see
     :func:`unmanaged_intrinsic`).
     """
-    from numba.core import cgutils
-    from numba.core import types as nbtypes
-    from numba.extending import intrinsic
 
-    @intrinsic
-    def column(typingctx: Any, arr: Any, lane: Any) -> Any:
-        if not (
-            isinstance(arr, nbtypes.Array)
-            and arr.ndim == 2
-            and arr.layout == "C"
-            and isinstance(lane, nbtypes.Integer)
-        ):
-            return None
-        out = arr.copy(ndim=1, layout="A")
+    def column(builder: Any, data: Any, n_rows: Any, n_cols: Any, item: Any, lane: Any) -> Any:
+        return builder.gep(data, [lane], inbounds=True), n_rows, builder.mul(n_cols, item)
 
-        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
-            src = context.make_array(sig.args[0])(context, builder, value=args[0])
-            dst = context.make_array(sig.return_type)(context, builder)
-            idx = context.cast(builder, args[1], sig.args[1], nbtypes.intp)
-            shape0, shape1 = cgutils.unpack_tuple(builder, src.shape, 2)
-            intp = context.get_value_type(nbtypes.intp)
-            stride = builder.mul(shape1, src.itemsize)
-            context.populate_array(
-                dst,
-                data=builder.gep(src.data, [idx], inbounds=True),
-                shape=cgutils.pack_array(builder, [shape0], ty=intp),
-                strides=cgutils.pack_array(builder, [stride], ty=intp),
-                itemsize=src.itemsize,
-                meminfo=cgutils.get_null_value(dst.meminfo.type),
-                parent=cgutils.get_null_value(dst.parent.type),
-            )
-            return dst._getvalue()
-
-        return out(arr, lane), codegen
-
-    return column
+    return _row_major_view_intrinsic("A", column)
 
 
 def leading_rows_intrinsic() -> Any:
@@ -106,39 +116,8 @@ def leading_rows_intrinsic() -> Any:
     (a library call per use, ~2 % of a lane kernel's time).  No bounds check
     (``0 <= n <= a.shape[0]``) and no reference count (see :func:`unmanaged_intrinsic`).
     """
-    from numba.core import cgutils
-    from numba.core import types as nbtypes
-    from numba.extending import intrinsic
 
-    @intrinsic
-    def leading_rows(typingctx: Any, arr: Any, n: Any) -> Any:
-        if not (
-            isinstance(arr, nbtypes.Array)
-            and arr.ndim == 2
-            and arr.layout == "C"
-            and isinstance(n, nbtypes.Integer)
-        ):
-            return None
-        out = arr.copy(ndim=1, layout="C")
+    def rows(builder: Any, data: Any, n_rows: Any, n_cols: Any, item: Any, n: Any) -> Any:
+        return data, builder.mul(n, n_cols), item
 
-        def codegen(context: Any, builder: Any, sig: Any, args: Any) -> Any:
-            src = context.make_array(sig.args[0])(context, builder, value=args[0])
-            dst = context.make_array(sig.return_type)(context, builder)
-            rows = context.cast(builder, args[1], sig.args[1], nbtypes.intp)
-            _, shape1 = cgutils.unpack_tuple(builder, src.shape, 2)
-            intp = context.get_value_type(nbtypes.intp)
-            size = builder.mul(rows, shape1)
-            context.populate_array(
-                dst,
-                data=src.data,
-                shape=cgutils.pack_array(builder, [size], ty=intp),
-                strides=cgutils.pack_array(builder, [src.itemsize], ty=intp),
-                itemsize=src.itemsize,
-                meminfo=cgutils.get_null_value(dst.meminfo.type),
-                parent=cgutils.get_null_value(dst.parent.type),
-            )
-            return dst._getvalue()
-
-        return out(arr, n), codegen
-
-    return leading_rows
+    return _row_major_view_intrinsic("C", rows)
