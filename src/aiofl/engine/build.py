@@ -155,8 +155,8 @@ def _engine_sources_changed() -> bool:
 
 
 def _component_modules() -> tuple[Any, ...]:
-    """The modules whose compiled functions the kernel calls (their sources are part of the
-    kernel's cache fingerprint)."""
+    """The modules whose compiled functions the kernels call (their sources are part of the
+    kernels' cache fingerprint; ``discrete``'s are called by the sampled loops)."""
     from aiofl.components import differentiators, discrete, fastmath, feedback, law, observers
 
     return fastmath, feedback, observers, differentiators, law, discrete
