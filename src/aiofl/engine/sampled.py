@@ -9,6 +9,9 @@ step, at :math:`t_k = kT_s`, the controller reads the measurement, runs
 of :mod:`aiofl.engine.kernel`, these functions are plain Python compiled per plant by
 :func:`sampled_member_for` with the same mechanism (:func:`aiofl.engine.build.plant_namespace`);
 members of one batch may mix continuous members and any sample times, and run in parallel.
+This is the one-member sampled loop (``engine="scalar"``, the reference); the default engine
+runs sampled members in SIMD lanes (:mod:`aiofl.engine.lanes_sampled`), calling this
+module's controller update lane by lane.
 
 The controller's update calls the same component functions as the continuous loop (the
 INLESO injection, Han's TD (18), the ITD, saturation), the same compiled SEF-and-law
