@@ -1,18 +1,19 @@
 """A plant's lane kernel: compiling the templates of :mod:`aiofl.engine.lanes`, grouping a
 batch by component kinds and running the groups.
 
-:func:`lane_kernel_for` compiles the lane templates for one plant with the mechanism of
-:mod:`aiofl.engine.build` (a namespace that binds the plant; the on-disk cache under a
-fingerprint of every source involved), with two differences that make the lane loops
-vectorize: the plant's f, g, h and b_d and the controller's component functions are
-compiled *inlined* (numba IR inlining) and with ``exp``/``log``/``sin``/``cos`` rebound to
-:mod:`aiofl.components.vecmath` (:func:`aiofl.engine.build.vector_math_globals`).
+:func:`lane_kernel_for` compiles the lane templates for one plant (the continuous time loop
+of :mod:`aiofl.engine.lanes`, or the sampled-data one of :mod:`aiofl.engine.lanes_sampled`)
+with the mechanism of :mod:`aiofl.engine.build` (a namespace that binds the plant; the
+on-disk cache under a fingerprint of every source involved), with two differences that make
+the lane loops vectorize: the plant's f, g, h and b_d and the controller's component
+functions are compiled *inlined* (numba IR inlining) and with ``exp``/``log``/``sin``/``cos``
+rebound to :mod:`aiofl.components.vecmath` (:func:`aiofl.engine.build.vector_math_globals`).
 
 :func:`group_members` splits a batch into groups of :data:`aiofl.engine.lanes.WIDTH`
 members with uniform component kinds (ESO, TD, SEF and law kinds, ρ, the feedback length,
-the ESO start and the reference kind), in batch order, padding the last group of each kind
-with -1; :func:`run_groups` runs them on ``numba.get_num_threads()`` threads through
-:func:`aiofl.engine.build.run_members`.
+the ESO start, the reference kind and, for sampled members, the steps per sample), in batch
+order, padding the last group of each kind with -1; :func:`run_groups` runs them on
+``numba.get_num_threads()`` threads through :func:`aiofl.engine.build.run_members`.
 """
 
 from __future__ import annotations
