@@ -90,6 +90,7 @@ _PF = _PG = _PH = _PBD = _PNF = None  # the plant's functions, inlined, vector m
 _SETUP = _IOFL_COMMAND = _UNMANAGED = _LEADING_ROWS = _KEEP_ALIVE = None
 _REFERENCE = _DERIV = _GROUP_SETUP = None
 _ASSIGN_LANES = _LOAD_LANES = _START_MEMBERS = _STOP_LANE = _FINISH_LANES = None
+_STEP_INPUTS = None
 # the lane blocks (see _BLOCKS)
 _BLK_HAN = _BLK_ITD = _BLK_PREFILTER_START = _BLK_PREFILTER_TERM = _BLK_COPY = None
 _BLK_FILL = _BLK_OUTPUT = _BLK_ERROR = _BLK_FAL = _BLK_INLSEF = _BLK_LINEAR_TERM = None
@@ -261,6 +262,32 @@ def _tpl_load_lanes(  # pragma: no cover - compiled
             zz[1, i, l] = x0[mi, i]
 
 
+def _tpl_step_inputs(t, sc, noise_t, nrow, s, switched, pp):  # pragma: no cover - compiled
+    """The piecewise-constant inputs of every lane at step start t, held over the step:
+    measurement noise and disturbance into ``s[S_NOISE]``, ``s[S_D]``, and the plant
+    parameters now (``pp[3]``) switched to the changed ones (``pp[1]``) at the lane's
+    change time.  Returns whether any lane's disturbance is on."""
+    _BLK_INPUTS(
+        t,
+        sc[L.S_NOISE_STD],
+        sc[L.S_NOISE_HOLD],
+        noise_t,
+        nrow,
+        sc[L.S_DIST_TIME],
+        sc[L.S_DIST_AMP],
+        s[S_NOISE],
+        s[S_D],
+    )
+    dany = False
+    for l in range(_W):
+        dany = dany or s[S_D, l] != 0.0
+        if not switched[l] and t >= sc[L.S_PCHANGE_TIME, l] * (1.0 - SWITCH_RTOL):
+            switched[l] = True
+            for j in range(_N_P):
+                pp[3, j, l] = pp[1, j, l]
+    return dany
+
+
 def _tpl_start_members(lanes, real, status, t_div):  # pragma: no cover - compiled
     """The real lanes' members: status OK, no divergence time (yet)."""
     for l in range(_W):
@@ -363,7 +390,6 @@ def _tpl_group(  # pragma: no cover - compiled
     zt = zz[1]
     kd = zz[2]
     acc = zz[3]
-    pa = pp[1]
     pn = pp[2]
     p = pp[3]
     n_live = _ASSIGN_LANES(g, groups, lanes, real, live)
@@ -391,25 +417,7 @@ def _tpl_group(  # pragma: no cover - compiled
         t = k * dt
         if k == 0 or n_stages == 1 or step_ref:
             _REFERENCE(t, t, sc, ref_t, rrow, rrs, 0, nd, ref_kind, s)
-        # piecewise-constant inputs, held over the step, switching at its start
-        _BLK_INPUTS(
-            t,
-            sc[L.S_NOISE_STD],
-            sc[L.S_NOISE_HOLD],
-            noise_t,
-            nrow,
-            sc[L.S_DIST_TIME],
-            sc[L.S_DIST_AMP],
-            s[S_NOISE],
-            s[S_D],
-        )
-        dany = False
-        for l in range(_W):
-            dany = dany or s[S_D, l] != 0.0
-            if not switched[l] and t >= sc[L.S_PCHANGE_TIME, l] * (1.0 - SWITCH_RTOL):
-                switched[l] = True
-                for j in range(_N_P):
-                    p[j, l] = pa[j, l]
+        dany = _STEP_INPUTS(t, sc, noise_t, nrow, s, switched, pp)
         if k == 0 and init_output:
             # ξ̂_1(0) = y_meas(0) = h(x(0)) + n(0), the first measurement; ξ̂_2.. stay 0
             for l in range(_W):

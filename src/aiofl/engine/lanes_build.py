@@ -168,6 +168,7 @@ def _build(
     ns["_KEEP_ALIVE"] = inst(lanes._tpl_keep_alive, ns, suffix)
     for name in ("assign_lanes", "load_lanes", "start_members", "stop_lane", "finish_lanes"):
         ns[f"_{name.upper()}"] = inst(getattr(lanes, f"_tpl_{name}"), ns, suffix, **opts)
+    ns["_STEP_INPUTS"] = inst(lanes._tpl_step_inputs, ns, suffix, inline="always", **opts)
     ns["_GROUP_SETUP"] = inst(lanes._tpl_group_setup, ns, suffix, **opts)
     ns["_REFERENCE"] = inst(lanes._tpl_reference, ns, suffix, inline="always", **opts)
     if sampled_data:

@@ -35,7 +35,6 @@ from aiofl.engine.kernel import (
     N_IQ,
     N_Q,
     N_SIG,
-    SWITCH_RTOL,
 )
 from aiofl.engine.lanes import N_S, S_D, S_ERR, S_NOISE, S_U, S_Y
 from aiofl.engine.sampled import C_P, C_PROF, C_TD, C_UPREV, C_X, N_CS
@@ -47,8 +46,9 @@ _N_P = 1
 _PNF = _SETUP = _IOFL_COMMAND = _SATURATE = _UNMANAGED = _LEADING_ROWS = None
 _KEEP_ALIVE = _REFERENCE = _CTRL_INIT = _CTRL_STEP = _PLANT_DERIV = None
 _ASSIGN_LANES = _LOAD_LANES = _START_MEMBERS = _STOP_LANE = _FINISH_LANES = None
+_STEP_INPUTS = None
 _BLK_OUTPUT = _BLK_PLANT = _BLK_DISTURBANCE = _BLK_METRICS = _BLK_INPUTS = None
-_BLK_RK_FIRST = _BLK_RK_MID = _BLK_RK_LAST = _BLK_OUT_OF_RANGE = None
+_BLK_RK_FIRST = _BLK_RK_MID = _BLK_RK_LAST = _BLK_OUT_OF_RANGE = _BLK_COPY = None
 
 
 def _tpl_plant_deriv(t, z, dz, p, s, r, dany):  # pragma: no cover - compiled
@@ -138,7 +138,6 @@ def _tpl_group_sampled(  # pragma: no cover - compiled
     zt = zz[1]
     kd = zz[2]
     acc = zz[3]
-    pa = pp[1]
     pn = pp[2]
     p = pp[3]
     n_live = _ASSIGN_LANES(g, groups, lanes, real, live)
@@ -159,6 +158,7 @@ def _tpl_group_sampled(  # pragma: no cover - compiled
     iofl = iq[IQ_LAW] == L.LAW_IOFL
     nd = rho if exact else 0
     ref_kind = int(sc[L.S_REF_KIND, 0])
+    step_ref = ref_kind == L.REF_STEP
     rk4 = method == L.METHOD_RK4
     hdt = 0.5 * dt
     sixth = dt / 6.0
@@ -168,24 +168,7 @@ def _tpl_group_sampled(  # pragma: no cover - compiled
         s[S_U, l] = 0.0  # the command the plant gets over the current sample interval
     for k in range(n_steps + 1):
         t = k * dt
-        _BLK_INPUTS(
-            t,
-            sc[L.S_NOISE_STD],
-            sc[L.S_NOISE_HOLD],
-            noise_t,
-            nrow,
-            sc[L.S_DIST_TIME],
-            sc[L.S_DIST_AMP],
-            s[S_NOISE],
-            s[S_D],
-        )
-        dany = False
-        for l in range(_W):
-            dany = dany or s[S_D, l] != 0.0
-            if not switched[l] and t >= sc[L.S_PCHANGE_TIME, l] * (1.0 - SWITCH_RTOL):
-                switched[l] = True
-                for j in range(_N_P):
-                    p[j, l] = pa[j, l]
+        dany = _STEP_INPUTS(t, sc, noise_t, nrow, s, switched, pp)
         if k % n_per == 0 and k < n_steps:  # a sample: ADC, controller, DAC, lane by lane
             _BLK_OUTPUT(z, p, s[S_NOISE], s[S_Y], ym)
             _REFERENCE(t, t, sc, ref_t, rrow, rrs, 3, nd, ref_kind, s)
@@ -208,7 +191,8 @@ def _tpl_group_sampled(  # pragma: no cover - compiled
                 ua = u_before if dsc[l, D_DELAY] > 0.0 else uc
                 uq = dsc[l, D_UQ]
                 s[S_U, l] = uq * np.floor(ua / uq + 0.5) if uq > 0.0 else ua
-        _REFERENCE(t, t, sc, ref_t, rrow, rrs, 0, 0, ref_kind, s)
+        if k == 0 or not rk4 or step_ref:  # else r(t) is the last step's r(t + dt)
+            _REFERENCE(t, t, sc, ref_t, rrow, rrs, 0, 0, ref_kind, s)
         if rk4:
             _REFERENCE((k + 0.5) * dt, t, sc, ref_t, rrow, rrs, 1, 0, ref_kind, s)
             _REFERENCE((k + 1) * dt, t, sc, ref_t, rrow, rrs, 2, 0, ref_kind, s)
@@ -253,6 +237,7 @@ def _tpl_group_sampled(  # pragma: no cover - compiled
             _BLK_RK_MID(z, zt, kd, acc, nza, dt)
             _PLANT_DERIV((k + 1) * dt, zt, kd, p, s, rrs[2, 0], dany)
             _BLK_RK_LAST(z, zt, kd, acc, nza, sixth)
+            _BLK_COPY(rrs[2, 0], rrs[0, 0])
         # divergence, lane by lane: the command, the plant, the ESO prediction, the TD
         _BLK_OUT_OF_RANGE(z, nza, threshold, s[S_ERR])
         for l in range(_W):
