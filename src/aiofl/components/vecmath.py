@@ -10,15 +10,22 @@ calls them compiles to vector code.
 
 Accuracy (checked in ``tests/test_lanes.py`` against numpy/libm):
 
-* :func:`vexp`: Cody–Waite reduction :math:`x = k\ln 2 + r`, :math:`|r| \le \ln 2/2`, a
-  degree-13 Taylor polynomial (:math:`1 + r + r^2 q(r)`, q by Estrin's scheme: a short
-  dependency chain, for a lone member's latency), scaling by :math:`2^k` split in two
-  factors (correct into the subnormal range); within 1 ulp of libm; ``exp(x > 709.78) = inf``,
+* :func:`vexp`: :math:`x = k\ln 2/4 + r`, :math:`|r| \le \ln 2/8` (Cody–Waite, two parts),
+  :math:`2^{j/4}` (:math:`j = k \bmod 4`) in a high and a low part chosen by selects,
+  :math:`e^r - 1 = r + r^2 q(r)` with q of degree 7 by Estrin's scheme (a short dependency
+  chain, for a lone member's latency), and :math:`2^{\lfloor k/4\rfloor}` in two factors,
+  so that overflow to inf, underflow to 0 and subnormal results come out of the product
+  without a select; within 1 ulp of libm; ``exp(x > 709.78) = inf``,
   ``exp(x < -745.2) = 0``, NaN propagates.
-* :func:`vlog`: fdlibm's ``__ieee754_log`` (reduction to :math:`[\sqrt2/2, \sqrt2)`,
-  :math:`\log(1+f) = f - f^2/2 + s(f^2/2 + R(s^2))`, Sun Microsystems 1993), subnormal
-  inputs rescaled first; within 1 ulp; ``log 0 = -inf``, ``log(x < 0) = NaN``,
-  ``log inf = inf``.
+* :func:`vlog`: ARM optimized-routines' ``log.c`` (2018) with FMA: :math:`x = 2^k z`,
+  :math:`\log x = k\ln 2 + \log c_i + \log(1 + r)`, :math:`r = z/c_i - 1`, from a
+  128-entry table (:mod:`aiofl.components.vecmath_tables`: :math:`1/c_i` chosen so that
+  :math:`\log c_i` rounds to within :math:`2^{-68}`), with the rounding errors of
+  :math:`z/c_i - 1` and of the sums carried in a low part instead of the reference's
+  special polynomial near 1, and :math:`\log(1+r) - r` by a degree-7 polynomial;
+  subnormal inputs rescaled first; within 1 ulp; ``log 0 = -inf``, ``log(x < 0) = NaN``,
+  ``log inf = inf``.  The table is read by a scalar load in a lone member's code and a
+  vector gather in a lane group's.
 * :func:`vsin`, :func:`vcos`: reduction by :math:`\pi/2` in three Cody–Waite parts
   (fdlibm's ``__ieee754_rem_pio2`` medium case, exact for :math:`|x| < 2^{20}\pi/2
   \approx 1.6\cdot10^6`), fdlibm's ``__kernel_sin``/``__kernel_cos`` polynomials and the
@@ -40,6 +47,8 @@ import numpy as np
 from llvmlite import ir
 from numba import njit, types
 from numba.extending import intrinsic
+
+from aiofl.components import vecmath_tables as _T
 
 __all__ = ["VECMATH_OPTIONS", "fma", "vcos", "vexp", "vlog", "vsin"]
 
@@ -90,17 +99,16 @@ def fma(typingctx: Any, a: Any, b: Any, c: Any) -> Any:
     return types.float64(types.float64, types.float64, types.float64), codegen
 
 
-_LOG2E = 1.4426950408889634
 _LN2_HI = 6.93147180369123816490e-01  # fdlibm: ln 2 split, the high part has 32 bits
 _LN2_LO = 1.90821492927058770002e-10
-_EXP_MAX = 709.782712893384  # exp overflows above
-_EXP_MIN = -745.1332191019412  # exp underflows to 0 below
-
-
-@njit(**VECMATH_OPTIONS)
-def _pow2(k: float) -> float:
-    """:math:`2^k` for an integral float k in [-1022, 1023]."""
-    return _as_float((np.int64(k) + 1023) << 52)
+_SHIFT = 6755399441055744.0  # 1.5 2^52: adding it rounds to an integer, kept in the low bits
+_SHIFT_BITS = 0x4338000000000000  # its bits
+_EXP_INV_STEP = 5.7707801635558535  # 4/ln 2
+_EXP_STEP_HI = _T.EXP_STEP_HI
+_EXP_STEP_LO = _T.EXP_STEP_LO
+_SB0, _SB1, _SB2, _SB3 = _T.EXP_SCALE_BITS
+_TL0, _TL1, _TL2, _TL3 = _T.EXP_SCALE_TAIL
+_Q0, _Q1, _Q2, _Q3, _Q4, _Q5, _Q6, _Q7 = _T.EXP_POLY
 
 
 @njit(**VECMATH_OPTIONS)
@@ -108,62 +116,72 @@ def vexp(x: float) -> float:
     """:math:`e^x`, branch-free (see the module notes for accuracy and special values)."""
     xc = -746.0 if x < -746.0 else x  # keeps k in range; NaN stays NaN
     xc = 710.0 if xc > 710.0 else xc
-    k = np.rint(xc * _LOG2E)
-    r = (xc - k * _LN2_HI) - k * _LN2_LO
-    # e^r = 1 + r + r^2 q(r), the Taylor polynomial q to r^11 by Estrin's scheme (a short
-    # dependency chain, which a lone member's step waits on; 1 + r added last, exactly)
+    kd = fma(xc, _EXP_INV_STEP, _SHIFT)  # k = round(4x/ln 2) in the low bits
+    # k, |k| <= 4304, kept in [-2^17, 2^17) so that a NaN's bits overflow nothing below
+    k = ((_as_int(kd) - _SHIFT_BITS + 0x20000) & 0x3FFFF) - 0x20000
+    kd = kd - _SHIFT
+    r = fma(kd, -_EXP_STEP_LO, fma(kd, -_EXP_STEP_HI, xc))  # x - k ln2/4, |r| <= ln2/8
+    # 2^(j/4) = h_j (1 + t_j), j = k mod 4, chosen by selects (no table load: a vector
+    # gather costs more than the polynomial it would save)
+    odd = (k & 1) != 0
+    sbits = (_SB3 if odd else _SB2) if (k & 2) != 0 else (_SB1 if odd else _SB0)
+    tail = (_TL3 if odd else _TL2) if (k & 2) != 0 else (_TL1 if odd else _TL0)
+    # e^r - 1 = r + r^2 q(r), q by Estrin's scheme (a short dependency chain)
     r2 = r * r
     r4 = r2 * r2
-    r8 = r4 * r4
-    a0 = fma(r, 1.0 / 6.0, 0.5)
-    a1 = fma(r, 1.0 / 120.0, 1.0 / 24.0)
-    a2 = fma(r, 1.0 / 5040.0, 1.0 / 720.0)
-    a3 = fma(r, 1.0 / 362880.0, 1.0 / 40320.0)
-    a4 = fma(r, 1.0 / 39916800.0, 1.0 / 3628800.0)
-    a5 = fma(r, 1.0 / 6227020800.0, 1.0 / 479001600.0)
-    q = fma(r8, fma(r2, a5, a4), fma(r4, fma(r2, a3, a2), fma(r2, a1, a0)))
-    p = 1.0 + fma(r2, q, r)
-    k = 0.0 if k != k else k  # NaN: any k, the NaN is carried by p
-    k1 = np.floor(0.5 * k)  # 2^k = 2^k1 2^(k-k1): both factors stay normal
-    y = p * _pow2(k1) * _pow2(k - k1)
-    y = np.inf if x > _EXP_MAX else y
-    return 0.0 if x < _EXP_MIN else y
+    q = fma(
+        r4,
+        fma(r2, fma(r, _Q7, _Q6), fma(r, _Q5, _Q4)),
+        fma(r2, fma(r, _Q3, _Q2), fma(r, _Q1, _Q0)),
+    )
+    tmp = fma(r2, q, r + tail)  # 2^(j/4) e^r = h_j (1 + tmp)
+    # 2^(k div 4) in two factors, both normal for every clamped x: the product overflows
+    # to inf, underflows to 0 or rounds into the subnormals by itself (no select)
+    e = k >> 2
+    e1 = e >> 1
+    s = _as_float(sbits + ((e - e1) << 52))
+    return fma(s, tmp, s) * _as_float((e1 + 1023) << 52)
 
 
-_LG1 = 6.666666666666735130e-01  # fdlibm e_log.c
-_LG2 = 3.999999999940941908e-01
-_LG3 = 2.857142874366239149e-01
-_LG4 = 2.222219843214978396e-01
-_LG5 = 1.818357216161805012e-01
-_LG6 = 1.531383769920937332e-01
-_LG7 = 1.479819860511658591e-01
 _TWO54 = 1.80143985094819840000e16
-_MANT = (1 << 52) - 1
+_LOG_OFF = _T.LOG_OFF
+_LOG_MASK = _T.LOG_N - 1
+_LOG_INVC = _T.LOG_INVC
+_LOG_LOGC = _T.LOG_LOGC
+_A0, _A1, _A2, _A3, _A4, _A5 = _T.LOG_POLY
 
 
 @njit(**VECMATH_OPTIONS)
 def vlog(x: float) -> float:
-    r""":math:`\ln x`, branch-free (fdlibm's algorithm; see the module notes)."""
-    tiny = x < 2.2250738585072014e-308
-    xs = x * _TWO54 if tiny else x  # subnormals: scale into the normal range
-    bits = _as_int(xs)
-    e = ((bits >> 52) & 0x7FF) - 1023
-    m = _as_float((bits & _MANT) | 0x3FF0000000000000)  # in [1, 2)
-    big = m > 1.4142135623730951
-    m = 0.5 * m if big else m
-    e = e + 1 if big else e
-    dk = float(e) - (54.0 if tiny else 0.0)
-    f = m - 1.0
-    hfsq = 0.5 * f * f
-    s = f / (2.0 + f)
-    z = s * s
-    w = z * z
-    t1 = w * fma(w, fma(w, _LG6, _LG4), _LG2)
-    t2 = z * fma(w, fma(w, fma(w, _LG7, _LG5), _LG3), _LG1)
-    y = dk * _LN2_HI - ((hfsq - fma(s, hfsq + t1 + t2, dk * _LN2_LO)) - f)
-    y = x if x == np.inf else y
-    y = -np.inf if x == 0.0 else y
-    return np.nan if (x < 0.0 or x != x) else y
+    r""":math:`\ln x`, branch-free (table-driven; see the module notes)."""
+    xa = abs(x)  # x < 0 gives NaN below; the bits of |x| overflow no integer operation
+    ix = _as_int(xa)
+    ixs = _as_int(xa * _TWO54)  # a subnormal x, scaled into the normal range
+    tiny = ix < 0x0010000000000000
+    ix = ixs if tiny else ix
+    tmp = ix - _LOG_OFF
+    i = (tmp >> 45) & _LOG_MASK
+    k = (tmp >> 52) - (54 if tiny else 0)
+    z = _as_float(ix - (tmp & (0xFFF << 52)))  # x = 2^k z
+    invc = _LOG_INVC[i]
+    logc = _LOG_LOGC[i]
+    r = fma(z, invc, -1.0)  # z/c - 1, rounded once ...
+    p = z * invc
+    r_lo = ((p - 1.0) - r) + fma(z, invc, -p)  # ... and what the rounding dropped
+    kd = float(k)
+    w = fma(kd, _LN2_HI, logc)  # k ln2_hi + log c, and its rounding error (Fast2Sum)
+    w_lo = (kd * _LN2_HI - w) + logc
+    hi = w + r
+    hi_lo = (w - hi) + r  # exact: |w| >= |r| or w = 0
+    r2 = r * r
+    poly = fma(r2, fma(r2, fma(r, _A5, _A4), fma(r, _A3, _A2)), fma(r, _A1, _A0))
+    lo = hi_lo + (w_lo + fma(kd, _LN2_LO, r_lo))
+    y = hi + fma(r2, poly, lo)
+    # the special values by an addition (a select here would lengthen a lone member's
+    # dependency chain): the main path is finite for |x| = 0 and inf
+    finite = x > 0.0 and x < np.inf
+    special = np.inf if x == np.inf else (-np.inf if x == 0.0 else np.nan)
+    return y + (0.0 if finite else special)
 
 
 _INVPIO2 = 6.36619772367581382433e-01  # fdlibm e_rem_pio2.c
