@@ -100,13 +100,12 @@ def _lane_sources() -> list[str]:
     """Source files of the lane kernel besides the scalar kernel's (fingerprint)."""
     import sys
 
-    from aiofl.components import vecmath
+    from aiofl.components import vecmath, vecmath_tables
     from aiofl.engine import discrete
 
     here = sys.modules[__name__]
-    return [
-        m.__file__ for m in (lanes, lane_blocks, lanes_sampled, sampled, discrete, here, vecmath)
-    ]
+    mods = (lanes, lane_blocks, lanes_sampled, sampled, discrete, here, vecmath, vecmath_tables)
+    return [m.__file__ for m in mods]
 
 
 def _build(
