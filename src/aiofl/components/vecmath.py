@@ -117,7 +117,7 @@ def vexp(x: float) -> float:
     xc = -746.0 if x < -746.0 else x  # keeps k in range; NaN stays NaN
     xc = 710.0 if xc > 710.0 else xc
     kd = fma(xc, _EXP_INV_STEP, _SHIFT)  # k = round(4x/ln 2) in the low bits
-    # k, |k| <= 4304, kept in [-2^17, 2^17) so that a NaN's bits overflow nothing below
+    # k, |k| <= 4305, kept in [-2^17, 2^17) so that a NaN's bits overflow nothing below
     k = ((_as_int(kd) - _SHIFT_BITS + 0x20000) & 0x3FFFF) - 0x20000
     kd = kd - _SHIFT
     r = fma(kd, -_EXP_STEP_LO, fma(kd, -_EXP_STEP_HI, xc))  # x - k ln2/4, |r| <= ln2/8

@@ -18,9 +18,9 @@ search below is seeded, so the output is the same every time) and checked by
 **log** (:func:`aiofl.components.vecmath.vlog`), after ARM's optimized-routines
 ``log.c`` (Szabolcs Nagy, 2018): :math:`x = 2^k z` with z in
 :math:`[0.6875 - 2^{-9}, 1.375 - 2^{-8})`, split in :data:`LOG_N` = 128 subintervals
-by the top 7 bits of z's significand (from :data:`LOG_OFF`; 1.0 is the middle of the one
-that holds it), and :math:`\log x = k\ln 2 + \log c_i + \log(z/c_i)` with
-:math:`r = z/c_i - 1` small:
+by the top 7 bits of z's significand (from :data:`LOG_OFF`; 1.0 is, in bits, the middle
+of the one that holds it: :math:`[1 - 2^{-9}, 1 + 2^{-8})`), and
+:math:`\log x = k\ln 2 + \log c_i + \log(z/c_i)` with :math:`r = z/c_i - 1` small:
 
 * :data:`LOG_INVC`: :math:`1/c_i`, a double near the reciprocal of the subinterval's
   middle (exactly 1 for the subinterval of 1.0), chosen such that
