@@ -340,27 +340,27 @@ def exp_constants() -> dict[str, object]:
     """The exp constants, computed (see the module notes)."""
     import mpmath as mp
 
-    mp.mp.prec = _PREC
-    bits, tails = [], []
-    for j in range(4):
-        v = mp.mpf(2) ** (mp.mpf(j) / 4)
-        hi = float(v)
-        bits.append(int(np.float64(hi).view(np.int64)))
-        tails.append(float((v - hi) / hi))
-    step = mp.log(2) / 4
-    scale = mp.mpf(2) ** (39 - int(mp.floor(mp.log(step, 2))))
-    hi = mp.nint(step * scale) / scale  # 40 significant bits
-    radius = mp.log(2) / 8 * mp.mpf(1.0001)
-    poly = mp.chebyfit(
-        lambda r: (mp.expm1(r) - r) / r**2 if r else mp.mpf(0.5), [-radius, radius], 8
-    )
-    return {
-        "EXP_SCALE_BITS": tuple(bits),
-        "EXP_SCALE_TAIL": tuple(tails),
-        "EXP_STEP_HI": float(hi),
-        "EXP_STEP_LO": float(step - hi),
-        "EXP_POLY": tuple(float(c) for c in reversed(poly)),
-    }
+    with mp.workprec(_PREC):
+        bits, tails = [], []
+        for j in range(4):
+            v = mp.mpf(2) ** (mp.mpf(j) / 4)
+            hi = float(v)
+            bits.append(int(np.float64(hi).view(np.int64)))
+            tails.append(float((v - hi) / hi))
+        step = mp.log(2) / 4
+        scale = mp.mpf(2) ** (39 - int(mp.floor(mp.log(step, 2))))
+        hi = mp.nint(step * scale) / scale  # 40 significant bits
+        radius = mp.log(2) / 8 * mp.mpf(1.0001)
+        poly = mp.chebyfit(
+            lambda r: (mp.expm1(r) - r) / r**2 if r else mp.mpf(0.5), [-radius, radius], 8
+        )
+        return {
+            "EXP_SCALE_BITS": tuple(bits),
+            "EXP_SCALE_TAIL": tuple(tails),
+            "EXP_STEP_HI": float(hi),
+            "EXP_STEP_LO": float(step - hi),
+            "EXP_POLY": tuple(float(c) for c in reversed(poly)),
+        }
 
 
 def log_interval(i: int) -> tuple[float, float]:
@@ -376,32 +376,32 @@ def log_entry(i: int, tries: int = 1 << 22) -> tuple[float, float]:
 
     import mpmath as mp
 
-    mp.mp.prec = _PREC
-    lo, hi = log_interval(i)
-    if lo <= 1.0 < hi:
-        return 1.0, 0.0
-    start = int(np.float64(1 / ((mp.mpf(lo) + mp.mpf(hi)) / 2)).view(np.int64))
-    rng = random.Random(i)
-    bound = mp.mpf(2) ** -68
-    for attempt in range(tries):
-        bits = start if attempt == 0 else start + rng.randrange(-(1 << 30), 1 << 30)
-        invc = float(np.int64(bits).view(np.float64))
-        exact = -mp.log(invc)
-        if abs((exact - float(exact)) / exact) < bound:
-            return invc, float(exact)
-    raise RuntimeError(f"no table entry {i} within {tries} tries")  # pragma: no cover
+    with mp.workprec(_PREC):
+        lo, hi = log_interval(i)
+        if lo <= 1.0 < hi:
+            return 1.0, 0.0
+        start = int(np.float64(1 / ((mp.mpf(lo) + mp.mpf(hi)) / 2)).view(np.int64))
+        rng = random.Random(i)
+        bound = mp.mpf(2) ** -68
+        for attempt in range(tries):
+            bits = start if attempt == 0 else start + rng.randrange(-(1 << 30), 1 << 30)
+            invc = float(np.int64(bits).view(np.float64))
+            exact = -mp.log(invc)
+            if abs((exact - float(exact)) / exact) < bound:
+                return invc, float(exact)
+        raise RuntimeError(f"no table entry {i} within {tries} tries")  # pragma: no cover
 
 
 def log_poly() -> tuple[float, ...]:
     """The log polynomial's coefficients (see the module notes)."""
     import mpmath as mp
 
-    mp.mp.prec = _PREC
-    radius = mp.mpf(2) ** -8 * mp.mpf(1.01)
-    poly = mp.chebyfit(
-        lambda r: (mp.log1p(r) - r) / r**2 if r else mp.mpf(-0.5), [-radius, radius], 6
-    )
-    return tuple(float(c) for c in reversed(poly))
+    with mp.workprec(_PREC):
+        radius = mp.mpf(2) ** -8 * mp.mpf(1.01)
+        poly = mp.chebyfit(
+            lambda r: (mp.log1p(r) - r) / r**2 if r else mp.mpf(-0.5), [-radius, radius], 6
+        )
+        return tuple(float(c) for c in reversed(poly))
 
 
 def _source() -> str:  # pragma: no cover - run by hand
