@@ -123,9 +123,9 @@ def vexp(x: float) -> float:
     r = fma(kd, -_EXP_STEP_LO, fma(kd, -_EXP_STEP_HI, xc))  # x - k ln2/4, |r| <= ln2/8
     # 2^(j/4) = h_j (1 + t_j), j = k mod 4, chosen by selects (no table load: a vector
     # gather costs more than the polynomial it would save)
-    odd = (k & 1) != 0
-    sbits = (_SB3 if odd else _SB2) if (k & 2) != 0 else (_SB1 if odd else _SB0)
-    tail = (_TL3 if odd else _TL2) if (k & 2) != 0 else (_TL1 if odd else _TL0)
+    odd, upper = (k & 1) != 0, (k & 2) != 0
+    sbits = (_SB3 if odd else _SB2) if upper else (_SB1 if odd else _SB0)
+    tail = (_TL3 if odd else _TL2) if upper else (_TL1 if odd else _TL0)
     # e^r - 1 = r + r^2 q(r), q by Estrin's scheme (a short dependency chain)
     r2 = r * r
     r4 = r2 * r2
