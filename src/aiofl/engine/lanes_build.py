@@ -78,19 +78,18 @@ def _noalias_option() -> dict[str, Any]:
     return {"_noalias": True}
 
 
-_HEAVY = frozenset(
-    {"_IOFL_COMMAND", "_SIN", "_COS", "_HAN_TD", "_ITD", "_INLSEF_TERM", "_INLSEF_LIMIT"}
-    | {"_INLESO"}
-)
+_HEAVY = frozenset({"_IOFL_COMMAND", "_SIN", "_COS", "_HAN_TD", "_ITD"})
 """The component functions whose lane blocks stay calls in the width-1 instance.
 
 With one lane there is no loop to vectorize and a call per formula cost ~40 % of a lone
 member's time, so the width-1 instance inlines its blocks into the step, all but those
-calling one of these: the IOFL law (large), the reference's sine and Han's TD (once per
-step or cheap) and the INLESO structure's components, each holding several exp/log
-(inlining those too took the first compile of paper-s1-inleso from 19 to 30 s for 10 %
-of its lone-member time).  Inlining fal, the linear SEF, the law and the saturation took
-a lone LESO member from 65 to 40 ms (20-s S1; the scalar engine: 37-41 ms).  Strict IEEE
+calling one of these: the IOFL law (large), the reference's sine and cosine and the
+tracking differentiators (once per step or cheap: inlining them too took the first compile
+of paper-s1-inleso from 20 to 26 s and gave no measurable gain).  Inlining fal, the linear
+SEF, the law and the saturation took a lone LESO member from 65 to 40 ms (20-s S1; the
+scalar engine: 37-41 ms); inlining the INLESO structure's components (INLESO, the INLSEF
+terms and limit, each holding several exp/log) took a lone INLESO member from 0.75 to
+0.96 of the scalar engine's speed, for a first compile of 15 -> 20 s.  Strict IEEE
 arithmetic rounds alike inlined or not: the numbers stay those of the width-32
 instance."""
 _LIGHT = {"inline": "always"}
