@@ -190,8 +190,8 @@ def _rel(a: np.ndarray, b: np.ndarray) -> float:
 def test_lanes_agree_with_the_scalar_engine_on_every_preset(name: str) -> None:
     """Metrics within 1e-10 relative, or, where the loop itself amplifies rounding more
     than that, within 10x of what a 1-ulp change of one gain (ω0, b0, k1, k2) does to the
-    scalar engine's own result.  Measured: retuned-s1-inleso 5.9e-8 (ω0: 4.4e-8, k2:
-    4.6e-8; its linearisation is unstable), frontier-s2-inleso 7.0e-10 (ω0: 1.1e-9, b0:
+    scalar engine's own result.  Measured: retuned-s1-inleso 2.4e-8 (ω0: 4.4e-8, k2:
+    4.6e-8; its linearisation is unstable), frontier-s2-inleso 1.9e-10 (ω0: 1.1e-9, b0:
     4.4e-6); every other preset <= 1e-10 (``benchmarks/lanes_vs_scalar.py`` prints them)."""
     rc = load_config(name)
     kw = {"dt": rc.dt, "method": rc.method, "divergence_threshold": rc.divergence_threshold}
