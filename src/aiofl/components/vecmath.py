@@ -212,8 +212,8 @@ def _sincos_reduced(x: float) -> tuple[float, float, int]:
     # k pio2_1 is exact for |k| < 2^20, so the FMA rounds x - k pio2_1 as fdlibm's
     # subtraction does, one rounding shorter in the dependency chain
     r = (fma(-k, _PIO2_1, x) - k * _PIO2_2) - k * _PIO2_3
-    # fdlibm's polynomials by Estrin's scheme (Horner's chain of fifteen operations was
-    # twice libm's latency for a lone member)
+    # fdlibm's polynomials by Estrin's scheme: from z, four dependent operations to sin and
+    # six to cos (Horner's: six and nine, 20 ns of latency against libm's 12)
     z = r * r
     z2 = z * z
     z4 = z2 * z2
