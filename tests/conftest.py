@@ -1,11 +1,20 @@
-"""Shared fixtures: one ``aiofl reproduce`` run per test session (it compiles a kernel)."""
+"""Shared fixtures: one ``aiofl reproduce`` run per test session (it compiles a kernel).
+
+Every test (and every subprocess a test starts) shares one kernel cache,
+``<repository>/.aiofl-cache`` unless ``AIOFL_CACHE_DIR`` is set: a kernel one test
+compiled is loaded by the next test that needs it, in this run and the next ones, and the
+user's own cache (:func:`aiofl.cache.cache_root`) is left alone.
+"""
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
+
+os.environ.setdefault("AIOFL_CACHE_DIR", str(Path(__file__).resolve().parents[1] / ".aiofl-cache"))
 
 
 @dataclass(frozen=True)

@@ -18,8 +18,8 @@ PACKAGE = SRC / "aiofl"
 
 LAYERS: tuple[tuple[str, ...], ...] = (
     # lowest first; a module may import from its own layer (without a cycle) or below
-    # the paper's pieces; atomic file output; the bounds on every input size
-    ("aiofl.components", "aiofl.outputs", "aiofl.limits"),
+    # the paper's pieces; atomic file output; the bounds on every input size; the disk cache
+    ("aiofl.components", "aiofl.outputs", "aiofl.limits", "aiofl.cache"),
     ("aiofl.layout",),  # the member vocabulary: component kinds, parameter columns
     # plain descriptions of a design, a test and the model error (uncertainty)
     ("aiofl.controller", "aiofl.scenario", "aiofl.uncertainty"),

@@ -196,24 +196,6 @@ def test_engine_fal_is_continuous_at_delta(slfjm):
         assert us[-1] == pytest.approx(side * delta1 ** rc.controller.value("sef.alpha1"))
 
 
-def test_kernel_fingerprint_covers_the_component_modules(slfjm, monkeypatch):
-    """The kernel runs the component functions, so editing a component module must change
-    the on-disk cache fingerprint (a stale kernel would otherwise be loaded)."""
-    from aiofl.components import differentiators, fastmath, feedback, law, observers
-
-    before = engine._kernel_fingerprint(slfjm)
-    real = engine._source_digest
-    for mod in (fastmath, feedback, observers, differentiators, law):
-        monkeypatch.setattr(
-            engine,
-            "_source_digest",
-            lambda path, f=mod.__file__: "edited" if path == f else real(path),
-        )
-        assert engine._kernel_fingerprint(slfjm) != before, mod.__name__
-    monkeypatch.setattr(engine, "_source_digest", real)
-    assert engine._kernel_fingerprint(slfjm) == before
-
-
 def _reachable_dispatchers(ns: dict) -> list:
     """Every numba dispatcher a kernel compiled from the globals ``ns`` can call: those in
     ``ns``, in the modules it names, and, transitively, in their functions' globals."""
@@ -246,7 +228,7 @@ def test_kernel_links_no_component_from_numbas_per_function_cache(slfjm):
     private copies it calls compute bitwise what the public components do."""
     from aiofl.components import differentiators, fastmath, feedback, law, observers
 
-    ns, _, _ = engine.plant_namespace(slfjm)
+    ns = engine.plant_namespace(slfjm)
     found = _reachable_dispatchers(ns)
     component = [d for d in found if d.py_func.__module__.startswith("aiofl.components.")]
     names = {d.py_func.__name__ for d in component}
@@ -300,22 +282,6 @@ def test_no_public_component_that_calls_another_module_is_disk_cached():
     names = {d.py_func.__name__ for d in callers}
     assert {"fal_scaled", "inlsef_term", "linear_sef_gain", "improved_td_rhs_scaled"} <= names
     assert any(type(d._cache).__name__ != "NullCache" for d in leaves)  # the check can fail
-
-
-def test_a_source_edited_after_loading_is_not_cached_under_the_new_fingerprint(monkeypatch):
-    """The fingerprint digests the files on disk, numba compiles the code this process
-    loaded: when another process edits kernel.py (or a component) in between, the kernel
-    must be compiled uncached rather than stored as the new source's."""
-    from aiofl.components import fastmath
-
-    assert set(engine._LOADED) == set(engine._engine_sources())
-    assert not engine._engine_sources_changed()
-    real = engine._source_digest
-    for path in (engine.kernel.__file__, fastmath.__file__):
-        monkeypatch.setattr(
-            engine, "_source_digest", lambda p, f=path: "edited" if p == f else real(p)
-        )
-        assert engine._engine_sources_changed(), path
 
 
 # ------------------------------------------------------------------ convergence order

@@ -298,8 +298,8 @@ def resolve_plant(name_or_file: str, base_dir: str | Path | None = None) -> Plan
     """A registered plant by name, or a symbolic-plant TOML file compiled to a :class:`Plant`.
 
     A relative file path is taken relative to ``base_dir`` (the config's folder).  A file
-    plant is built once per process (per path and modification time), so its kernel
-    compiles once.  See :meth:`aiofl.plants.symbolic.SymbolicPlant.from_dict` for the format.
+    plant is built once per process (per path and modification time) and cached on disk
+    across processes with its compiled kernel (:mod:`aiofl.plants.plant_cache`).  See :meth:`aiofl.plants.symbolic.SymbolicPlant.from_dict` for the format.
     """
     from aiofl.plants.registry import get_plant
 
@@ -312,13 +312,16 @@ def resolve_plant(name_or_file: str, base_dir: str | Path | None = None) -> Plan
         raise ConfigError(f"plant: file {str(path)!r} does not exist")
     key = (str(path.resolve()), path.stat().st_mtime_ns)
     if key not in _FILE_PLANTS:
-        from aiofl.plants.expressions import SymbolicPlantError
-        from aiofl.plants.symbolic import SymbolicPlant
+        from aiofl.plants.plant_cache import plant_from_file
 
-        try:
-            _FILE_PLANTS[key] = SymbolicPlant.from_toml(path).to_plant()
-        except SymbolicPlantError as exc:
-            raise ConfigError(f"plant: {exc}") from None
+        try:  # a cached plant file needs no sympy: its error class is imported only here
+            _FILE_PLANTS[key] = plant_from_file(path)
+        except Exception as exc:
+            from aiofl.plants.expressions import SymbolicPlantError
+
+            if isinstance(exc, SymbolicPlantError):
+                raise ConfigError(f"plant: {exc}") from None
+            raise
     return _FILE_PLANTS[key]
 
 

@@ -1,14 +1,15 @@
 """A plant's compiled kernel: building it from the templates, caching it, running its members.
 
-:func:`kernel_for` compiles the templates of :mod:`aiofl.engine.kernel` for one plant: their
-code is copied into a namespace (a copy of that module's globals) that binds the plant's
-compiled f, g, h, b_d and normal form, its sizes and the controller's component functions,
-and numba compiles the copy.  When every plant function comes from a source file (built-in
-plants, user plants defined in a module or script), the compiled kernel is cached on disk by
-numba under a name that carries a fingerprint of those files and of the sources of the kernel
-templates, of this module and of the component modules, so later processes load it instead
-of compiling (about 6 s).  Set ``AIOFL_NO_CACHE=1`` to disable the cache.  A plant whose
-functions are generated at run time (no source file) is compiled in every process.
+:func:`kernel_for` builds the one-member kernel of a plant (:func:`scalar_recipe`, compiled
+by the factory of :mod:`aiofl.engine.compile`): the templates of :mod:`aiofl.engine.kernel`
+compiled in a namespace (a copy of that module's globals) that binds the plant's compiled
+f, g, h, b_d and normal form, its sizes and private copies of the controller's component
+functions (:func:`private_components`); this module also provides those bindings to the
+lane kernels (:mod:`aiofl.engine.lanes_build`).  Every kernel whose plant functions come
+from a source file (built-in plants, plant files, user plants defined in a module or
+script) is cached on disk under a fingerprint of all the code it is compiled from, so later
+processes load it instead of compiling; ``AIOFL_NO_CACHE=1`` disables the cache
+(:mod:`aiofl.cache`).
 
 :func:`run_members` runs a batch on ``numba.get_num_threads()`` threads: the compiled member
 function releases the GIL and each thread claims the next unclaimed member, so a member that
@@ -31,10 +32,7 @@ raised and at which state (:class:`PlantFailure`), and raises a PlantError
 
 from __future__ import annotations
 
-import contextlib
-import hashlib
 import itertools
-import os
 import sys
 import threading
 import types
@@ -42,7 +40,10 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
 from aiofl import layout as L
+from aiofl.cache import cache_enabled
+from aiofl.engine import compile as compile_
 from aiofl.engine import kernel, views
+from aiofl.engine.compile import PLANT_FUNCTIONS
 from aiofl.plants.base import Plant, PlantError
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -51,12 +52,10 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = ["Kernel", "PlantFailure", "kernel_for", "run_members"]
 
-_PLANT_FUNCTIONS = ("f", "g", "h", "bd", "normal_form")
-
 
 class PlantFailure(Exception):
     """Raised inside a diagnostic kernel by a plant function that raised:
-    ``(index into _PLANT_FUNCTIONS, x_1, ..., x_n)``."""
+    ``(index into PLANT_FUNCTIONS, x_1, ..., x_n)``."""
 
 
 @dataclass(frozen=True)
@@ -86,7 +85,7 @@ def register_group_function(group: Any, plant: Plant) -> None:
 
 def _user_functions(plant: Plant) -> bool:
     """Whether any plant function is defined outside aiofl (aiofl's own are tested)."""
-    for fname in _PLANT_FUNCTIONS:
+    for fname in PLANT_FUNCTIONS:
         fn = getattr(plant, fname)
         mod = getattr(getattr(fn, "py_func", fn), "__module__", None) or ""
         if fn is not None and not mod.startswith("aiofl."):
@@ -94,64 +93,14 @@ def _user_functions(plant: Plant) -> bool:
     return False
 
 
-def _source_digest(path: str) -> str:
-    with open(path, "rb") as fh:
-        return hashlib.sha256(fh.read()).hexdigest()
-
-
-def _function_fingerprint(fn: Any) -> str | None:
-    """What identifies a plant function's code for the on-disk kernel cache, or None if it
-    cannot be identified (no source file, or a closure over non-scalar values)."""
-    fn = getattr(fn, "py_func", fn)
-    code = getattr(fn, "__code__", None)
-    if code is None:
-        return None
-    path = code.co_filename
-    if not os.path.isfile(path):
-        return None
-    extra: list[Any] = []
-    for cell in fn.__closure__ or ():
-        val = cell.cell_contents
-        if not isinstance(val, (int, float, str, bool, tuple)):
-            return None
-        extra.append(repr(val))
-    if fn.__defaults__:
-        extra.append(repr(fn.__defaults__))
-    return "|".join([path, fn.__qualname__, _source_digest(path), *extra])
-
-
-def _kernel_fingerprint(plant: Plant) -> str | None:
-    """A digest of everything the compiled kernel of ``plant`` depends on, or None if a
-    plant function cannot be fingerprinted (the kernel is then compiled every process)."""
-    parts = [sys.version, __import__("numba").__version__, str(plant.n_states)]
-    # the layout, the templates, how they are compiled (this module and, for the plant
-    # functions' compile flags, plants.base) and what they call
-    for path in _engine_sources():
-        parts.append(_source_digest(path))
-    for fname in ("f", "g", "h", "bd", "normal_form"):
-        fn = getattr(plant, fname)
-        if fn is None:
-            parts.append(f"{fname}=None")
-            continue
-        fp = _function_fingerprint(fn)
-        if fp is None:
-            return None
-        parts.append(f"{fname}={fp}")
-    return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:20]
-
-
-def _engine_sources() -> list[str]:
-    """The files of the modules the kernel's code comes from (besides the plant's)."""
+def engine_sources() -> tuple[str, ...]:
+    """The files every kernel's code comes from besides the plant's: the layout, the
+    scalar templates, this module, the compile factory, the array views, the plant
+    interface (its functions' compile flags) and the component modules."""
     base = sys.modules[Plant.__module__]
     here = sys.modules[__name__]
-    return [m.__file__ for m in (L, kernel, here, views, base, *_component_modules())]
-
-
-def _engine_sources_changed() -> bool:
-    """Whether a source file of :func:`_engine_sources` changed on disk since this process
-    loaded it (another process editing the tree).  The fingerprint digests the files *now*
-    while numba compiles the code loaded *then*: such a kernel must not be cached under it."""
-    return any(_source_digest(path) != digest for path, digest in _LOADED.items())
+    mods = (L, kernel, here, compile_, views, base, *_component_modules())
+    return tuple(m.__file__ for m in mods)
 
 
 def _component_modules() -> tuple[Any, ...]:
@@ -162,10 +111,10 @@ def _component_modules() -> tuple[Any, ...]:
     return fastmath, feedback, observers, differentiators, law, discrete
 
 
-def _component_functions(variant: str = "scalar") -> dict[str, Any]:
+def component_functions(variant: str = "scalar") -> dict[str, Any]:
     """The controller's component functions, by the global name the templates use: the
-    process's private, uncached copies (see :func:`_private_components`)."""
-    private = _private_components(variant)
+    process's private, uncached copies (see :func:`private_components`)."""
+    private = private_components(variant)
     fb, law, ob, td = (private[m] for m in ("feedback", "law", "observers", "differentiators"))
     return {
         "_HAN_TD": td.han_td_rhs,
@@ -193,7 +142,7 @@ def _component_functions(variant: str = "scalar") -> dict[str, Any]:
 _PRIVATE: dict[str, dict[str, types.ModuleType]] = {}
 
 
-def _private_components(variant: str = "scalar") -> dict[str, types.ModuleType]:
+def private_components(variant: str = "scalar") -> dict[str, types.ModuleType]:
     """Uncached copies of the component modules' compiled functions, built once per process.
 
     The component functions are compiled with ``cache=True``, and numba keys each one's
@@ -216,7 +165,6 @@ def _private_components(variant: str = "scalar") -> dict[str, types.ModuleType]:
     with _PRIVATE_LOCK:
         if variant in _PRIVATE:
             return _PRIVATE[variant]
-        from numba import njit
         from numba.core.dispatcher import Dispatcher
 
         from aiofl.engine.lanes import LANE_FASTMATH
@@ -230,13 +178,8 @@ def _private_components(variant: str = "scalar") -> dict[str, types.ModuleType]:
             spaces.append(space)
             for obj in vars(mod).values():
                 if isinstance(obj, Dispatcher) and obj.py_func.__module__ == mod.__name__:
-                    fn = obj.py_func
-                    py = types.FunctionType(fn.__code__, space, fn.__name__, fn.__defaults__)
-                    py.__qualname__, py.__doc__ = fn.__qualname__, fn.__doc__
-                    opts = {k: v for k, v in obj.targetoptions.items() if k != "nopython"}
-                    if lanes:
-                        opts.update(inline="always", fastmath=LANE_FASTMATH)
-                    copies[id(obj)] = njit(locals=dict(obj.locals), **opts)(py)
+                    extra = {"inline": "always", "fastmath": LANE_FASTMATH} if lanes else {}
+                    copies[id(obj)] = compile_.rejit(obj, space, **extra)
         for space in spaces:  # calls between components go to the copies too
             for name, obj in list(space.items()):
                 if id(obj) in copies:
@@ -274,67 +217,60 @@ def vector_math_globals(space: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _instantiate(tpl: Any, ns: dict[str, Any], suffix: str, **jit_options: Any) -> Any:
-    """Compile template ``tpl`` with the globals ``ns`` (which bind one plant's functions).
+def scalar_recipe(plant: Plant, *, guarded: bool = False) -> compile_.Recipe:
+    """The recipe of the one-member kernel of ``plant`` (:mod:`aiofl.engine.kernel`): the
+    time loop (entry, ``"member"``), the right-hand side inlined into its stage loop, the
+    per-member setup, the reference and a one-evaluation function (``_EVAL``, for
+    :func:`aiofl.engine.simulation.closed_loop_rhs`).  ``guarded`` builds the diagnostic
+    kernel of :func:`run_members` (plant functions wrapped by :func:`_guarded`)."""
+    from aiofl.components.fastmath import FASTMATH
 
-    The qualified name carries the plant fingerprint so that numba's on-disk cache keeps
-    one entry per plant (its index is keyed by file and qualified name).
-    """
-    from numba import njit
-
-    fn = types.FunctionType(tpl.__code__, ns, tpl.__name__, tpl.__defaults__, None)
-    fn.__qualname__ = f"{tpl.__name__}_{suffix}"
-    fn.__doc__ = tpl.__doc__
-    return njit(**jit_options)(fn)
+    ns = plant_namespace(plant, guarded=guarded)
+    # the time loop is compiled with the components' fast-math flags and error model
+    opts = {"fastmath": FASTMATH, "error_model": "numpy"}
+    tpl = compile_.Template
+    return compile_.Recipe(
+        kind="guarded" if guarded else "scalar",
+        plant=plant,
+        bindings=ns,
+        templates=(
+            tpl("_KEEP_ALIVE", kernel._tpl_keep_alive),
+            tpl("_SETUP", kernel._tpl_setup, opts),
+            tpl("_REFERENCE", kernel._tpl_reference, opts),
+            # one call site in the stage loop: inlined, so the compiler sees the whole step
+            tpl("_DERIV", kernel._tpl_deriv, {"inline": "always", **opts}),
+            tpl("_EVAL", kernel._tpl_eval, opts),
+        ),
+        entry=tpl("member", kernel._tpl_member, {"nogil": True, **opts}),
+        sources=engine_sources(),
+    )
 
 
 def _build_kernel(plant: Plant, *, cache: bool | None = None, guarded: bool = False) -> Kernel:
-    """Compile the closed-loop functions for one plant (see the module notes).
-
-    The templates read their globals from :func:`plant_namespace`. ``guarded`` builds the
-    diagnostic kernel of :func:`run_members` (never cached).
-    """
-    ns, plant_key, fingerprint = plant_namespace(plant, guarded=guarded)
-    use_cache = _cache_enabled() if cache is None else cache
-    use_cache = use_cache and fingerprint is not None and not _engine_sources_changed()
-    n = plant.n_states
-    if not use_cache and _user_functions(plant):
+    """Compile the closed-loop functions for one plant (see the module notes)."""
+    use_cache = cache_enabled() if cache is None else cache
+    recipe = scalar_recipe(plant, guarded=guarded)
+    inst = compile_.build(recipe, cache=use_cache and not guarded)
+    if not inst.cached and _user_functions(plant):
         plant.typecheck()  # numba compiles them now rather than inside the kernel
-    suffix = f"{plant_key}_{fingerprint}" if fingerprint else f"nocache{id(plant):x}"
-    from aiofl.components.fastmath import FASTMATH
-
-    # the time loop is compiled with the components' fast-math flags and error model
-    opts = {"fastmath": FASTMATH, "error_model": "numpy"}
-    ns["_UNMANAGED"] = views.unmanaged_intrinsic()
-    ns["_KEEP_ALIVE"] = _instantiate(kernel._tpl_keep_alive, ns, suffix)
-    ns["_SETUP"] = _instantiate(kernel._tpl_setup, ns, suffix, **opts)
-    ns["_REFERENCE"] = _instantiate(kernel._tpl_reference, ns, suffix, **opts)
-    # one call site in the stage loop: inlined, so the compiler sees the whole step
-    ns["_DERIV"] = _instantiate(kernel._tpl_deriv, ns, suffix, inline="always", **opts)
-    member = _instantiate(kernel._tpl_member, ns, suffix, nogil=True, cache=use_cache, **opts)
-    if use_cache:
-        _prune_stale_cache(member, plant_key, suffix)
-    evaluate = _instantiate(kernel._tpl_eval, ns, suffix, **opts)
-    n_cols = kernel.N_SIG + n + (L.RHO_MAX + 1) + L.RHO_MAX
-    _PLANT_OF_MEMBER[id(member)] = plant
-    return Kernel(member=member, evaluate=evaluate, n_cols=n_cols, cached=use_cache)
+    n_cols = kernel.N_SIG + plant.n_states + (L.RHO_MAX + 1) + L.RHO_MAX
+    _PLANT_OF_MEMBER[id(inst.entry)] = plant
+    return Kernel(
+        member=inst.entry, evaluate=inst.namespace["_EVAL"], n_cols=n_cols, cached=inst.cached
+    )
 
 
-def plant_namespace(
-    plant: Plant, *, guarded: bool = False
-) -> tuple[dict[str, Any], str, str | None]:
-    """The globals the kernel templates are compiled with for ``plant``: a copy of
+def plant_namespace(plant: Plant, *, guarded: bool = False) -> dict[str, Any]:
+    """The globals the scalar kernel templates are compiled with for ``plant``: a copy of
     :mod:`aiofl.engine.kernel`'s globals (layout constants, ``L``, ``np``) with the plant's
-    compiled functions (wrapped by :func:`_guarded` when ``guarded``), its sizes and the
-    controller's component functions bound; also the plant's key (a digest of its identity)
-    and the kernel fingerprint (None if the kernel cannot be cached)."""
+    compiled functions (wrapped by :func:`_guarded` when ``guarded``), its sizes, the
+    controller's component functions and the array views bound."""
     f, g, h, bd, nf = plant.compiled
-    fingerprint = None if guarded else _kernel_fingerprint(plant)
     n = plant.n_states
     if guarded:
         f, g, h, bd, nf = (_guarded(fn, k, n) for k, fn in enumerate((f, g, h, bd, nf)))
     ns = dict(vars(kernel))
-    _bind_private(ns)
+    bind_private(ns)
     ns.update(
         _N=n,
         _N_P=len(plant.params),
@@ -344,36 +280,26 @@ def plant_namespace(
         _PH=h,
         _PBD=bd,
         _PNF=nf,
-        **_component_functions(),
+        _UNMANAGED=views.unmanaged_intrinsic(),
+        **component_functions(),
     )
-    # the plant's identity (stable across edits) + the fingerprint of its code
-    ident = "|".join(
-        [plant.name, str(n)]
-        + [getattr(getattr(plant, k), "__qualname__", "-") for k in ("f", "g", "h", "bd")]
-    )
-    plant_key = hashlib.sha256(ident.encode()).hexdigest()[:8]
-    return ns, plant_key, fingerprint
+    return ns
 
 
-def _bind_private(ns: dict[str, Any], variant: str = "scalar") -> None:
+def bind_private(ns: dict[str, Any], variant: str = "scalar") -> None:
     """Point the component modules ``ns`` names (``_fb``, ``_law``) at the private copies of
-    :func:`_private_components`, and re-compile the kernel module's own compiled functions
+    :func:`private_components`, and re-compile the kernel module's own compiled functions
     (``_aiofl_command``, ``_iofl_command``, inlined where called) with ``ns`` as globals, so
     nothing a kernel compiled from ``ns`` calls comes from numba's per-function disk cache.
-    ``variant`` as for :func:`_private_components`."""
-    from numba import njit
+    ``variant`` as for :func:`private_components`."""
     from numba.core.dispatcher import Dispatcher
 
-    private = _private_components(variant)
+    private = private_components(variant)
     for name, obj in list(ns.items()):
         if isinstance(obj, types.ModuleType) and obj.__name__.startswith("aiofl.components."):
             ns[name] = private[obj.__name__.rsplit(".", 1)[1]]
         elif isinstance(obj, Dispatcher) and obj.py_func.__module__ == kernel.__name__:
-            fn = obj.py_func
-            py = types.FunctionType(fn.__code__, ns, fn.__name__, fn.__defaults__)
-            py.__qualname__, py.__doc__ = fn.__qualname__, fn.__doc__
-            opts = {k: v for k, v in obj.targetoptions.items() if k != "nopython"}
-            ns[name] = njit(locals=dict(obj.locals), **opts)(py)
+            ns[name] = compile_.rejit(obj, ns)
 
 
 def _guarded(fn: Any, index: int, n: int) -> Any:
@@ -393,29 +319,6 @@ def _guarded(fn: Any, index: int, n: int) -> Any:
     ns: dict[str, Any] = {"fn": fn, "PlantFailure": PlantFailure}
     exec(compile(src, "<aiofl.engine.build guard>", "exec"), ns)  # fixed source, no input
     return njit(error_model="numpy")(ns["guarded"])
-
-
-def _prune_stale_cache(member: Any, plant_key: str, suffix: str, template: Any = None) -> None:
-    """Delete this plant's cached kernels from older versions of its code or the engine's
-    (same plant key, other fingerprint), so the cache does not grow with every edit.
-    ``template`` is the template ``member`` was compiled from (default: the time loop)."""
-    cache_dir = getattr(getattr(member, "_cache", None), "_cache_path", None)
-    if not cache_dir or not os.path.isdir(cache_dir):
-        return
-    tpl = template if template is not None else kernel._tpl_member
-    # numba names a cache entry "<source file stem>.<qualified name>"
-    stem = os.path.splitext(os.path.basename(tpl.__code__.co_filename))[0]
-    prefix = f"{stem}.{tpl.__name__}_{plant_key}_"
-    keep = f"{prefix}{suffix.split('_', 1)[1]}"
-    for entry in os.scandir(cache_dir):
-        if entry.name.startswith(prefix) and not entry.name.startswith(keep):
-            with contextlib.suppress(OSError):  # another process may have removed it
-                os.remove(entry.path)
-
-
-def _cache_enabled() -> bool:
-    """On-disk kernel cache, on unless ``AIOFL_NO_CACHE=1`` (or numba's caching is off)."""
-    return os.environ.get("AIOFL_NO_CACHE", "") not in ("1", "true", "yes")
 
 
 def kernel_for(plant: Plant) -> Kernel:
@@ -494,12 +397,8 @@ def _explain_failure(member: Any, i: int, exc: Exception, args: tuple[Any, ...])
         except PlantFailure as failure:
             index, *state = failure.args
             raise PlantError(
-                f"plant {plant.name!r}: plant function {_PLANT_FUNCTIONS[index]} failed at "
+                f"plant {plant.name!r}: plant function {PLANT_FUNCTIONS[index]} failed at "
                 f"state x = {[float(v) for v in state]}: {type(exc).__name__}: {exc}"
             ) from None
         except Exception:  # not a plant function: the caller re-raises the original
             return
-
-
-# the engine's sources as this process loaded them (see _engine_sources_changed)
-_LOADED: dict[str, str] = {path: _source_digest(path) for path in _engine_sources()}

@@ -3,8 +3,9 @@ batch by component kinds and running the groups.
 
 :func:`lane_kernel_for` compiles the lane templates for one plant (the continuous time loop
 of :mod:`aiofl.engine.lanes`, or the sampled-data one of :mod:`aiofl.engine.lanes_sampled`)
-with the mechanism of :mod:`aiofl.engine.build` (a namespace that binds the plant; the
-on-disk cache under a fingerprint of every source involved), with two differences that make
+by the compile factory (:func:`lane_recipe`, :mod:`aiofl.engine.compile`: a namespace that
+binds the plant; the on-disk cache under a fingerprint of every source involved) with the
+bindings of :mod:`aiofl.engine.build`, with two differences that make
 the lane loops vectorize: the plant's f, g, h and b_d and the controller's component
 functions are compiled *inlined* (numba IR inlining) and with ``exp``/``log``/``sin``/``cos``
 rebound to :mod:`aiofl.components.vecmath` (:func:`aiofl.engine.build.vector_math_globals`).
@@ -20,7 +21,6 @@ from __future__ import annotations
 
 import contextlib
 import threading
-import types
 from collections.abc import Iterator
 from typing import Any
 
@@ -28,7 +28,9 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
+from aiofl.cache import cache_enabled
 from aiofl.engine import build, kernel, lane_blocks, lanes, lanes_sampled, sampled, views
+from aiofl.engine import compile as compile_
 from aiofl.plants.base import Plant
 
 __all__ = ["group_members", "lane_kernel_for", "plan_groups", "run_groups"]
@@ -40,15 +42,11 @@ _LOCK = threading.Lock()
 def _lane_plant_function(fn: Any, *, inline: bool = True) -> Any:
     """``fn`` (a plant function) compiled for the lane kernel: a private copy, with vector
     math and inlined where called (``inline``), else as the scalar kernel compiles it."""
-    from numba import njit
-
     py = getattr(fn, "py_func", fn)
-    space = build.vector_math_globals(py.__globals__) if inline else py.__globals__
-    copy = types.FunctionType(py.__code__, space, py.__name__, py.__defaults__, py.__closure__)
-    copy.__qualname__ = py.__qualname__
     if inline:
-        return njit(inline="always", error_model="numpy")(copy)
-    return njit(error_model="numpy")(copy)
+        space = build.vector_math_globals(py.__globals__)
+        return compile_.rejit(py, space, inline="always", error_model="numpy")
+    return compile_.rejit(py, error_model="numpy")
 
 
 def _noalias_option() -> dict[str, Any]:
@@ -95,8 +93,9 @@ instance."""
 _LIGHT = {"inline": "always"}
 
 
-def _lane_sources() -> list[str]:
-    """Source files of the lane kernel besides the scalar kernel's (fingerprint)."""
+def _lane_sources() -> tuple[str, ...]:
+    """Source files of the lane kernels: every kernel's, the lane templates and blocks, the
+    sampled controller's, this module and the vector math."""
     import sys
 
     from aiofl.components import vecmath, vecmath_tables
@@ -104,39 +103,25 @@ def _lane_sources() -> list[str]:
 
     here = sys.modules[__name__]
     mods = (lanes, lane_blocks, lanes_sampled, sampled, discrete, here, vecmath, vecmath_tables)
-    return [m.__file__ for m in mods]
+    return (*build.engine_sources(), *(m.__file__ for m in mods))
 
 
-def _build(
-    plant: Plant, width: int, *, sampled_data: bool = False, cache: bool | None = None
-) -> Any:
-    """Compile the lane kernel of ``plant`` for groups of ``width`` (see the module notes):
-    the continuous time loop, or with ``sampled_data`` the sampled-data one
+def lane_recipe(plant: Plant, width: int, *, sampled_data: bool = False) -> compile_.Recipe:
+    """The recipe of the lane kernel of ``plant`` for groups of ``width`` (see the module
+    notes): the continuous time loop, or with ``sampled_data`` the sampled-data one
     (:mod:`aiofl.engine.lanes_sampled`)."""
-    import hashlib
-
     from aiofl.components import vecmath
 
-    _, plant_key, fingerprint = build.plant_namespace(plant)
-    if fingerprint is not None:
-        digests = [build._source_digest(path) for path in _lane_sources()]
-        fingerprint = hashlib.sha256("|".join([fingerprint, *digests]).encode()).hexdigest()[:20]
-    use_cache = build._cache_enabled() if cache is None else cache
-    use_cache = use_cache and fingerprint is not None and not build._engine_sources_changed()
-    suffix = f"{plant_key}_{fingerprint}" if fingerprint else f"nocache{id(plant):x}"
-    suffix = f"{'s' if sampled_data else 'w'}{width}_{suffix}"
     opts = {"fastmath": lanes.LANE_FASTMATH, "error_model": "numpy"}
-    inst = build._instantiate
+    tpl = compile_.Template
     # the per-member setup and the IOFL law are the scalar kernel's templates, compiled
     # here against the lane variant's private components (nothing is shared with the
     # scalar kernel, whose code must not depend on what was compiled first)
     bd, nf = plant.compiled[3:]
-    if not use_cache and build._user_functions(plant):
-        plant.typecheck()  # numba compiles them now rather than inside the kernel
     ns_setup = dict(vars(kernel))
-    build._bind_private(ns_setup, "lanes")
-    ns_setup.update(_N=plant.n_states, **build._component_functions("lanes"))
-    setup = inst(kernel._tpl_setup, ns_setup, suffix, **opts)
+    build.bind_private(ns_setup, "lanes")
+    ns_setup.update(_N=plant.n_states, **build.component_functions("lanes"))
+    setup = compile_.instantiate(kernel._tpl_setup, ns_setup, f"w{width}", **opts)
 
     ns = {**vars(lane_blocks), **vars(lanes), **vars(lanes_sampled)}
     ns.update(
@@ -156,36 +141,55 @@ def _build(
         _LEADING_ROWS=views.leading_rows_intrinsic(),
         _SIN=vecmath.vsin,
         _COS=vecmath.vcos,
-        **build._component_functions("lanes"),
+        **build.component_functions("lanes"),
     )
     block_opts = {**opts, **_noalias_option()}
+    templates = []
     for name, fn in vars(lane_blocks).items():  # each block its own function
         if name.startswith("_blk_"):
             light = width == 1 and not set(fn.__code__.co_names) & _HEAVY
-            ns[name.upper()] = inst(fn, ns, suffix, **block_opts, **_LIGHT if light else {})
-    ns["_KEEP_ALIVE"] = inst(lanes._tpl_keep_alive, ns, suffix)
+            templates.append(tpl(name.upper(), fn, {**block_opts, **(_LIGHT if light else {})}))
+    templates.append(tpl("_KEEP_ALIVE", lanes._tpl_keep_alive))
     for name in ("assign_lanes", "load_lanes", "start_members", "stop_lane", "finish_lanes"):
-        ns[f"_{name.upper()}"] = inst(getattr(lanes, f"_tpl_{name}"), ns, suffix, **opts)
-    ns["_STEP_INPUTS"] = inst(lanes._tpl_step_inputs, ns, suffix, inline="always", **opts)
-    ns["_GROUP_SETUP"] = inst(lanes._tpl_group_setup, ns, suffix, **opts)
-    ns["_REFERENCE"] = inst(lanes._tpl_reference, ns, suffix, inline="always", **opts)
+        templates.append(tpl(f"_{name.upper()}", getattr(lanes, f"_tpl_{name}"), opts))
+    inline = {"inline": "always", **opts}
+    templates += [
+        tpl("_STEP_INPUTS", lanes._tpl_step_inputs, inline),
+        tpl("_GROUP_SETUP", lanes._tpl_group_setup, opts),
+        tpl("_REFERENCE", lanes._tpl_reference, inline),
+    ]
     if sampled_data:
         # the controller's update: the sampled kernel's, compiled as the lane blocks are
         ns_ctrl = dict(ns_setup)
-        sampled._bind(ns_ctrl, build._private_components("lanes")["discrete"])
-        ns["_CTRL_INIT"] = inst(sampled._tpl_ctrl_init, ns_ctrl, suffix, **opts)
-        ns["_CTRL_STEP"] = inst(sampled._tpl_ctrl_step, ns_ctrl, suffix, **opts)
-        tpl = lanes_sampled._tpl_group_sampled
-        deriv = lanes_sampled._tpl_plant_deriv
-        ns["_PLANT_DERIV"] = inst(deriv, ns, suffix, inline="always", **opts)
+        sampled._bind(ns_ctrl, build.private_components("lanes")["discrete"])
+        ns["_CTRL_INIT"] = compile_.instantiate(sampled._tpl_ctrl_init, ns_ctrl, "lanes", **opts)
+        ns["_CTRL_STEP"] = compile_.instantiate(sampled._tpl_ctrl_step, ns_ctrl, "lanes", **opts)
+        templates.append(tpl("_PLANT_DERIV", lanes_sampled._tpl_plant_deriv, inline))
+        entry = tpl("group", lanes_sampled._tpl_group_sampled, {"nogil": True, **opts})
     else:
-        tpl = lanes._tpl_group
-        ns["_DERIV"] = inst(lanes._tpl_deriv, ns, suffix, inline="always", **opts)
-    group = inst(tpl, ns, suffix, nogil=True, cache=use_cache, **opts)
-    if use_cache:
-        build._prune_stale_cache(group, plant_key, suffix, tpl)
-    build.register_group_function(group, plant)
-    return group
+        templates.append(tpl("_DERIV", lanes._tpl_deriv, inline))
+        entry = tpl("group", lanes._tpl_group, {"nogil": True, **opts})
+    return compile_.Recipe(
+        kind=f"{'s' if sampled_data else 'w'}{width}",
+        plant=plant,
+        bindings=ns,
+        templates=tuple(templates),
+        entry=entry,
+        sources=_lane_sources(),
+    )
+
+
+def _build(
+    plant: Plant, width: int, *, sampled_data: bool = False, cache: bool | None = None
+) -> Any:
+    """Compile the lane kernel of ``plant`` (:func:`lane_recipe`) and register its group
+    function for the diagnosis of plant failures."""
+    use_cache = cache_enabled() if cache is None else cache
+    inst = compile_.build(lane_recipe(plant, width, sampled_data=sampled_data), cache=use_cache)
+    if not inst.cached and build._user_functions(plant):
+        plant.typecheck()  # numba compiles them now rather than inside the kernel
+    build.register_group_function(inst.entry, plant)
+    return inst.entry
 
 
 def lane_kernel_for(plant: Plant, width: int = lanes.WIDTH, *, sampled_data: bool = False) -> Any:

@@ -7,7 +7,7 @@ step, at :math:`t_k = kT_s`, the controller reads the measurement, runs
 :func:`_tpl_ctrl_step` once and its command is held until the next sample (see
 :mod:`aiofl.engine.discrete` for the ADC, delay and DAC).  Like the continuous templates
 of :mod:`aiofl.engine.kernel`, these functions are plain Python compiled per plant by
-:func:`sampled_member_for` with the same mechanism (:func:`aiofl.engine.build.plant_namespace`);
+:func:`sampled_member_for` with the compile factory (:func:`sampled_recipe`);
 members of one batch may mix continuous members and any sample times, and run in parallel.
 This is the one-member sampled loop (``engine="scalar"``, the reference); the default engine
 runs sampled members in SIMD lanes (:mod:`aiofl.engine.lanes_sampled`), calling this
@@ -36,7 +36,6 @@ true state at :math:`t_k` and the nominal model, but has no :class:`DiscreteCont
 
 from __future__ import annotations
 
-import hashlib
 import sys
 import threading
 from collections.abc import Callable, Sequence
@@ -47,8 +46,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
+from aiofl.cache import cache_enabled
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine import build, kernel, views
+from aiofl.engine import build, kernel
+from aiofl.engine import compile as compile_
 from aiofl.engine import discrete as DS
 from aiofl.engine.discrete import (
     D_DELAY,
@@ -433,7 +434,7 @@ def _tpl_member_sampled(  # pragma: no cover - compiled
 def _bind(ns: dict[str, Any], cd: Any = None) -> None:
     """Add this module's layout constants and the discrete component functions to ``ns``
     (those of ``cd``, default :mod:`aiofl.components.discrete`; the lane kernel passes its
-    private copies, see :func:`aiofl.engine.build._private_components`)."""
+    private copies, see :func:`aiofl.engine.build.private_components`)."""
     if cd is None:
         from aiofl.components import discrete as cd
 
@@ -448,41 +449,44 @@ def _bind(ns: dict[str, Any], cd: Any = None) -> None:
     )
 
 
-def _digest(*parts: str) -> str:
-    """A digest of ``parts`` and of the sources the sampled templates depend on."""
-    from aiofl.components import discrete as cd
-
-    h = hashlib.sha256("\n".join(parts).encode())
-    for mod in (sys.modules[__name__], DS, cd):
-        h.update(build._source_digest(mod.__file__).encode())
-    return h.hexdigest()[:20]
-
-
 def _opts() -> dict[str, Any]:
     from aiofl.components.fastmath import FASTMATH
 
     return {"fastmath": FASTMATH, "error_model": "numpy"}
 
 
-def _build_sampled(plant: Plant) -> Any:
-    ns, plant_key, fingerprint = build.plant_namespace(plant)
+def _sources() -> tuple[str, ...]:
+    """Every kernel's sources, this module's and the discrete coefficient rows'."""
+    return (*build.engine_sources(), sys.modules[__name__].__file__, DS.__file__)
+
+
+def sampled_recipe(plant: Plant) -> compile_.Recipe:
+    """The recipe of the one-member sampled-data kernel of ``plant``: the scalar kernel's
+    namespace with the discrete components bound, the controller's init and update, the
+    plant's right-hand side (inlined) and the sampled time loop as entry."""
+    ns = build.plant_namespace(plant)
     _bind(ns)
-    fp = _digest(fingerprint) if fingerprint else None
-    use_cache = build._cache_enabled() and fp is not None
-    suffix = f"{plant_key}_{fp}" if fp else f"nocache{id(plant):x}"
     opts = _opts()
-    inst = build._instantiate
-    ns["_UNMANAGED"] = views.unmanaged_intrinsic()
-    ns["_KEEP_ALIVE"] = inst(kernel._tpl_keep_alive, ns, suffix)
-    ns["_SETUP"] = inst(kernel._tpl_setup, ns, suffix, **opts)
-    ns["_REFERENCE"] = inst(kernel._tpl_reference, ns, suffix, **opts)
-    ns["_CTRL_INIT"] = inst(_tpl_ctrl_init, ns, suffix, **opts)
-    ns["_CTRL_STEP"] = inst(_tpl_ctrl_step, ns, suffix, **opts)
-    ns["_PLANT_DERIV"] = inst(_tpl_plant_deriv, ns, suffix, inline="always", **opts)
-    member = inst(_tpl_member_sampled, ns, suffix, nogil=True, cache=use_cache, **opts)
-    if use_cache:
-        build._prune_stale_cache(member, plant_key, suffix, _tpl_member_sampled)
-    return member
+    tpl = compile_.Template
+    return compile_.Recipe(
+        kind="sampled",
+        plant=plant,
+        bindings=ns,
+        templates=(
+            tpl("_KEEP_ALIVE", kernel._tpl_keep_alive),
+            tpl("_SETUP", kernel._tpl_setup, opts),
+            tpl("_REFERENCE", kernel._tpl_reference, opts),
+            tpl("_CTRL_INIT", _tpl_ctrl_init, opts),
+            tpl("_CTRL_STEP", _tpl_ctrl_step, opts),
+            tpl("_PLANT_DERIV", _tpl_plant_deriv, {"inline": "always", **opts}),
+        ),
+        entry=tpl("member", _tpl_member_sampled, {"nogil": True, **opts}),
+        sources=_sources(),
+    )
+
+
+def _build_sampled(plant: Plant) -> Any:
+    return compile_.build(sampled_recipe(plant), cache=cache_enabled()).entry
 
 
 _MEMBERS: dict[int, tuple[Plant, Any]] = {}
@@ -525,16 +529,27 @@ def _standalone() -> SimpleNamespace:
     with _LOCK:
         if not _STANDALONE:
             ns = dict(vars(kernel))
-            ns.update(_N=1, _N_P=1, _NZ=1, **build._component_functions())
+            ns.update(_N=1, _N_P=1, _NZ=1, **build.component_functions())
             _bind(ns)
-            parts = [build._source_digest(m.__file__) for m in (L, kernel)]
-            suffix = f"standalone_{_digest(*parts)}"
             opts = _opts()
-            inst = build._instantiate
-            setup = inst(kernel._tpl_setup, ns, suffix, **opts)
-            init = inst(_tpl_ctrl_init, ns, suffix, **opts)
-            step = inst(_tpl_ctrl_step, ns, suffix, **opts)
-            _STANDALONE.append(SimpleNamespace(setup=setup, init=init, step=step))
+            tpl = compile_.Template
+            recipe = compile_.Recipe(
+                kind="standalone",
+                plant=None,
+                bindings=ns,
+                templates=(
+                    tpl("_SETUP", kernel._tpl_setup, opts),
+                    tpl("_CTRL_INIT", _tpl_ctrl_init, opts),
+                ),
+                entry=tpl("_CTRL_STEP", _tpl_ctrl_step, opts),
+                sources=_sources(),
+            )
+            space = compile_.build(recipe, cache=False).namespace
+            _STANDALONE.append(
+                SimpleNamespace(
+                    setup=space["_SETUP"], init=space["_CTRL_INIT"], step=space["_CTRL_STEP"]
+                )
+            )
         return _STANDALONE[0]
 
 

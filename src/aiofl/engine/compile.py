@@ -1,0 +1,341 @@
+"""The compile factory: one way to turn the engine's templates into a compiled, cached kernel.
+
+Every kernel instance of the engine (the lane kernels, continuous or sampled, at each lane
+width; the one-member kernels; the diagnostic kernel) is described by a :class:`Recipe`:
+
+- ``bindings``, the globals its templates are compiled with (the plant's compiled
+  functions, the sizes, the controller's component functions, layout constants, array-view
+  intrinsics);
+- ``templates``, plain Python functions compiled into that namespace under the global name
+  the others call them by, each with its numba options (:class:`Template`);
+- ``entry``, the template a caller runs (the time loop): the one function cached on disk;
+- ``sources``, the files its compiled code comes from, and the ``plant`` it runs.
+
+:func:`build` compiles a recipe.  The entry is cached under a **fingerprint** of everything
+the compiled code depends on (:func:`fingerprint`: Python, numba and llvmlite versions, the
+recipe's kind, every template's options, the text of every source file and of the plant's
+functions), in ``<cache root>/kernels`` (:mod:`aiofl.cache`): numba's index and data files
+of a kernel carry the plant's key and the fingerprint in their name, and the fingerprint is
+also numba's freshness stamp of the entry, so a kernel is loaded only if it was compiled
+from exactly this code.  When a plant's kernel is stored under a new fingerprint, the
+entries of its older fingerprints are deleted (:func:`prune_kernels`).  A plant function
+that cannot be fingerprinted (no source file, a closure over an array) makes the kernel
+uncacheable: it is compiled in every process.  A source file edited on disk after this
+process loaded it would make the fingerprint describe code numba is not compiling, so such
+a kernel is not cached either (:func:`sources_changed`).
+
+:func:`rejit` is the one helper that re-compiles a compiled function's Python code with
+other globals or options (private, uncached copies of the component functions; the plant
+functions compiled for the lanes).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import os
+import sys
+import threading
+import types
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from aiofl.cache import subdir
+from aiofl.plants.base import Plant
+
+__all__ = [
+    "Instance",
+    "Recipe",
+    "Template",
+    "build",
+    "fingerprint",
+    "function_fingerprint",
+    "plant_key",
+    "prune_kernels",
+    "rejit",
+    "source_digest",
+    "sources_changed",
+]
+
+PLANT_FUNCTIONS = ("f", "g", "h", "bd", "normal_form")
+"""The plant's functions a kernel may call, in the order of ``Plant.compiled``."""
+
+
+@dataclass(frozen=True)
+class Template:
+    """A template: plain Python that reads its collaborators as globals.
+
+    Attributes
+    ----------
+    name
+        The global name the other templates call it by (``"_DERIV"``); for the entry, the
+        name of the compiled function a caller gets.
+    function
+        The Python function whose code is compiled.
+    options
+        numba ``njit`` options (``inline``, ``fastmath``, ``error_model``, ``nogil``...).
+    """
+
+    name: str
+    function: Callable[..., Any]
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class Recipe:
+    """Everything that makes one compiled kernel instance (see the module notes).
+
+    Attributes
+    ----------
+    kind
+        The instance's name, file-name safe (``"w32"``: continuous lanes of 32; ``"s1"``:
+        sampled, one lane; ``"scalar"``...).  Part of the fingerprint and the cache name.
+    plant
+        The plant the kernel runs (None: a kernel without a plant).
+    bindings
+        Globals of every template.
+    templates
+        Compiled into the namespace before the entry, under their names.
+    entry
+        The function the caller runs, cached on disk.
+    sources
+        The files whose text the compiled code comes from (besides the plant's functions).
+    """
+
+    kind: str
+    plant: Plant | None
+    bindings: Mapping[str, Any]
+    templates: tuple[Template, ...]
+    entry: Template
+    sources: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Instance:
+    """A built recipe: the compiled ``entry``, the namespace it was compiled in, and
+    whether it is cached on disk (under ``fingerprint``)."""
+
+    entry: Any
+    namespace: dict[str, Any]
+    cached: bool
+    fingerprint: str | None
+
+
+# ------------------------------------------------------------------------ fingerprints
+_DIGESTS: dict[str, str] = {}  # path -> digest of the text this process first read
+_DIGESTS_LOCK = threading.Lock()
+
+
+def _file_digest(path: str) -> str:
+    with open(path, "rb") as fh:
+        return hashlib.sha256(fh.read()).hexdigest()
+
+
+def source_digest(path: str) -> str:
+    """The SHA-256 of ``path``'s text as this process first read it (memoized, so that a
+    fingerprint describes the code loaded, see :func:`sources_changed`)."""
+    with _DIGESTS_LOCK:
+        if path not in _DIGESTS:
+            _DIGESTS[path] = _file_digest(path)
+        return _DIGESTS[path]
+
+
+def sources_changed(paths: tuple[str, ...] | list[str]) -> bool:
+    """Whether a file of ``paths`` changed on disk since this process first digested it
+    (another process editing the tree): a kernel compiled now must not be cached under a
+    fingerprint of either text."""
+    for path in paths:
+        first = source_digest(path)
+        try:
+            if _file_digest(path) != first:
+                return True
+        except OSError:
+            return True
+    return False
+
+
+def function_fingerprint(fn: Any) -> str | None:
+    """What identifies a plant function's code, or None if it cannot be identified (no
+    source file, or a closure over a value that is not a plain scalar or string)."""
+    fn = getattr(fn, "py_func", fn)
+    code = getattr(fn, "__code__", None)
+    if code is None:
+        return None
+    path = code.co_filename
+    if not os.path.isfile(path):
+        return None
+    extra: list[str] = []
+    for cell in fn.__closure__ or ():
+        val = cell.cell_contents
+        if not isinstance(val, (int, float, str, bool, tuple)):
+            return None
+        extra.append(repr(val))
+    if fn.__defaults__:
+        extra.append(repr(fn.__defaults__))
+    return "|".join([os.path.basename(path), fn.__qualname__, source_digest(path), *extra])
+
+
+def plant_key(plant: Plant) -> str:
+    """A short digest of a plant's identity (name, size, function names): stable across
+    edits of its code, so the cache entries of one plant can be found and pruned."""
+    ident = "|".join(
+        [plant.name, str(plant.n_states)]
+        + [getattr(getattr(plant, k), "__qualname__", "-") for k in ("f", "g", "h", "bd")]
+    )
+    return hashlib.sha256(ident.encode()).hexdigest()[:8]
+
+
+def _plant_parts(plant: Plant | None) -> list[str] | None:
+    if plant is None:
+        return ["no plant"]
+    parts = [f"n={plant.n_states}", f"n_p={len(plant.params)}"]
+    for fname in PLANT_FUNCTIONS:
+        fn = getattr(plant, fname)
+        if fn is None:
+            parts.append(f"{fname}=None")
+            continue
+        fp = function_fingerprint(fn)
+        if fp is None:
+            return None
+        parts.append(f"{fname}={fp}")
+    return parts
+
+
+def fingerprint(recipe: Recipe) -> str | None:
+    """A digest of everything ``recipe``'s compiled code depends on (see the module
+    notes), or None if a plant function cannot be fingerprinted."""
+    import llvmlite
+    import numba
+
+    plant_parts = _plant_parts(recipe.plant)
+    if plant_parts is None:
+        return None
+    parts = [sys.version, numba.__version__, llvmlite.__version__, recipe.kind]
+    for tpl in (*recipe.templates, recipe.entry):
+        opts = sorted((k, repr(v)) for k, v in tpl.options.items())
+        parts.append(f"{tpl.name}:{tpl.function.__name__}:{opts}")
+    parts += [f"{os.path.basename(p)}={source_digest(p)}" for p in recipe.sources]
+    parts += plant_parts
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:20]
+
+
+# ---------------------------------------------------------------------------- compiling
+def copy_function(
+    fn: Callable[..., Any], space: dict[str, Any], qualname: str | None = None
+) -> types.FunctionType:
+    """A copy of the Python function ``fn`` whose globals are ``space``."""
+    py = types.FunctionType(fn.__code__, space, fn.__name__, fn.__defaults__, fn.__closure__)
+    py.__qualname__ = qualname or fn.__qualname__
+    py.__doc__ = fn.__doc__
+    return py
+
+
+def instantiate(tpl: Callable[..., Any], ns: dict[str, Any], suffix: str, **options: Any) -> Any:
+    """Template ``tpl`` as a numba function (compiled lazily) with the globals ``ns``; its
+    qualified name carries ``suffix`` (the instance's kind, plant key and fingerprint)."""
+    from numba import njit
+
+    return njit(**options)(copy_function(tpl, ns, f"{tpl.__name__}_{suffix}"))
+
+
+def rejit(fn: Any, space: dict[str, Any] | None = None, **override: Any) -> Any:
+    """A private, uncached copy of the compiled (or plain) function ``fn``: its Python code
+    with the globals ``space`` (default its own) and its numba options updated by
+    ``override``.  numba keys a function's disk cache on its own file only, so a kernel
+    never links a cached function (whose callees might be stale); see
+    :func:`aiofl.engine.build.private_components`."""
+    from numba import njit
+
+    py = getattr(fn, "py_func", fn)
+    opts = {k: v for k, v in getattr(fn, "targetoptions", {}).items() if k != "nopython"}
+    opts.update(override)
+    locals_ = dict(getattr(fn, "locals", {}))
+    return njit(locals=locals_, **opts)(copy_function(py, space or py.__globals__))
+
+
+def build(recipe: Recipe, *, cache: bool = True) -> Instance:
+    """Compile ``recipe`` (lazily: numba compiles on the first call, or loads the cached
+    entry) and cache its entry on disk when possible (see the module notes)."""
+    fp = fingerprint(recipe) if cache else None
+    folder = subdir("kernels") if fp is not None else None
+    if folder is not None and sources_changed(recipe.sources):
+        folder = None
+    key = plant_key(recipe.plant) if recipe.plant is not None else "noplant"
+    suffix = f"{recipe.kind}_{key}_{fp}" if folder is not None else f"{recipe.kind}_{id(recipe):x}"
+    ns = dict(recipe.bindings)
+    for tpl in recipe.templates:
+        ns[tpl.name] = instantiate(tpl.function, ns, suffix, **tpl.options)
+    entry = instantiate(recipe.entry.function, ns, suffix, **recipe.entry.options)
+    if folder is not None:
+        entry._cache = KernelCache.for_function(entry.py_func, folder, fp)
+        prune_kernels(folder, recipe.entry.function, f"{recipe.kind}_{key}_", fp)
+    ns[recipe.entry.name] = entry
+    return Instance(entry=entry, namespace=ns, cached=folder is not None, fingerprint=fp)
+
+
+# -------------------------------------------------------------------- numba's disk cache
+def _kernel_cache_classes() -> tuple[type, type]:
+    """numba cache classes that store an entry in aiofl's kernel folder with the
+    fingerprint as its freshness stamp (numba's own locators stamp the source file)."""
+    from numba.core.caching import CompileResultCacheImpl, FunctionCache, _CacheLocator
+
+    class Locator(_CacheLocator):
+        def __init__(self, folder: str, stamp: str) -> None:
+            self._folder = folder
+            self._stamp = stamp
+
+        def get_cache_path(self) -> str:
+            return self._folder
+
+        def get_source_stamp(self) -> str:
+            return self._stamp
+
+        def get_disambiguator(self) -> str:
+            return "k"
+
+        @classmethod
+        def from_function(cls, py_func: Any, py_file: str) -> Any:
+            where = getattr(py_func, "_aiofl_cache", None)
+            return None if where is None else cls(*where)
+
+    class Impl(CompileResultCacheImpl):
+        _locator_classes = [Locator]  # noqa: RUF012 - numba's class attribute
+
+    class Cache(FunctionCache):
+        _impl_class = Impl
+
+        @classmethod
+        def for_function(cls, py_func: Any, folder: Path, stamp: str) -> Any:
+            py_func._aiofl_cache = (str(folder), stamp)
+            return cls(py_func)
+
+    return Locator, Cache
+
+
+class _LazyKernelCache:
+    """:class:`numba.core.caching.FunctionCache` for aiofl's kernel folder, built on first
+    use (numba is not imported at aiofl's import)."""
+
+    _cls: Any = None
+
+    def for_function(self, py_func: Any, folder: Path, stamp: str) -> Any:
+        if self._cls is None:
+            type(self)._cls = _kernel_cache_classes()[1]
+        return self._cls.for_function(py_func, folder, stamp)
+
+
+KernelCache = _LazyKernelCache()
+
+
+def prune_kernels(folder: Path, template: Callable[..., Any], prefix: str, keep: str) -> None:
+    """Delete the cache files of ``template``'s instances named ``prefix`` + a fingerprint
+    other than ``keep`` (the same plant and kind compiled from older code)."""
+    stem = os.path.splitext(os.path.basename(template.__code__.co_filename))[0]
+    start = f"{stem}.{template.__name__}_{prefix}"
+    with contextlib.suppress(OSError):
+        for entry in os.scandir(folder):
+            if entry.name.startswith(start) and not entry.name.startswith(start + keep):
+                with contextlib.suppress(OSError):  # another process may have removed it
+                    os.remove(entry.path)

@@ -1,0 +1,284 @@
+"""The compile factory and the on-disk caches: what a kernel's fingerprint covers, when a
+cached kernel is reused, and plant files built once across processes.
+
+Nothing here compiles a kernel except the plant-file tests, which run a 0.2-s simulation
+of a 2-state plant in subprocesses (each a fresh process with its own cache folder).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+import types
+from pathlib import Path
+
+import pytest
+
+from aiofl.engine import build, compile, lanes_build, sampled
+from aiofl.plants import get_plant
+
+SRC = Path(__file__).resolve().parents[1] / "src" / "aiofl"
+
+
+def _recipes() -> dict[str, compile.Recipe]:
+    plant = get_plant("slfjm")
+    return {
+        "scalar": build.scalar_recipe(plant),
+        "sampled": sampled.sampled_recipe(plant),
+        "lanes w32": lanes_build.lane_recipe(plant, 32),
+        "lanes w1": lanes_build.lane_recipe(plant, 1),
+        "sampled lanes w32": lanes_build.lane_recipe(plant, 32, sampled_data=True),
+        "sampled lanes w1": lanes_build.lane_recipe(plant, 1, sampled_data=True),
+    }
+
+
+def _code_files(recipe: compile.Recipe) -> set[str]:
+    """The aiofl source files whose code a recipe's kernel can run: its templates and,
+    transitively, every compiled function, intrinsic and module reachable from its bindings
+    and their functions' globals."""
+    from numba.core.dispatcher import Dispatcher
+    from numba.core.extending import _Intrinsic
+
+    files: set[str] = set()
+    spaces: list[dict] = [dict(recipe.bindings)]
+    done: set[int] = set()
+
+    def add(fn: types.FunctionType) -> None:
+        files.add(fn.__code__.co_filename)
+        spaces.append(fn.__globals__)
+
+    for tpl in (*recipe.templates, recipe.entry):
+        add(tpl.function)
+    while spaces:
+        space = spaces.pop()
+        if id(space) in done:
+            continue
+        done.add(id(space))
+        for obj in list(space.values()):
+            if isinstance(obj, types.ModuleType) and obj.__name__.startswith("aiofl."):
+                spaces.append(vars(obj))
+            elif isinstance(obj, Dispatcher):
+                add(obj.py_func)
+            elif isinstance(obj, _Intrinsic):
+                files.add(obj._defn.__code__.co_filename)
+            # (a plain Python function in the globals cannot be called from compiled code)
+    return {f for f in files if f.startswith(str(SRC))}
+
+
+@pytest.mark.parametrize("name", list(_recipes()))
+def test_fingerprint_covers_every_source_a_kernel_runs(name):
+    """The fingerprint digests ``recipe.sources``: every aiofl file whose code the kernel
+    can reach must be among them, or an edit of it would load a stale kernel (the sampled
+    kernel once skipped the guard and the lane kernels' list missed files)."""
+    recipe = _recipes()[name]
+    reached = _code_files(recipe)
+    assert str(SRC / "engine" / "kernel.py") in reached  # the walk sees the templates' code
+    assert str(SRC / "components" / "fastmath.py") in reached  # and the components'
+    plant_files = {  # covered by the plant's part of the fingerprint
+        getattr(fn, "py_func", fn).__code__.co_filename
+        for fn in (getattr(recipe.plant, k) for k in compile.PLANT_FUNCTIONS)
+        if fn is not None
+    }
+    missing = sorted(reached - set(recipe.sources) - plant_files)
+    assert not missing, f"{name}: not in the fingerprint: {missing}"
+
+
+def test_editing_any_source_changes_the_fingerprint(tmp_path):
+    """Each source file of each recipe, edited in a temporary copy, changes the recipe's
+    fingerprint; the unedited recipe keeps it."""
+    for name, recipe in _recipes().items():
+        before = compile.fingerprint(recipe)
+        assert before is not None and compile.fingerprint(recipe) == before
+        for i, path in enumerate(recipe.sources):
+            copy = tmp_path / f"{name.replace(' ', '_')}_{i}" / os.path.basename(path)
+            copy.parent.mkdir()
+            copy.write_text(Path(path).read_text() + "\n# an edit\n")
+            sources = (*recipe.sources[:i], str(copy), *recipe.sources[i + 1 :])
+            edited = dataclasses.replace(recipe, sources=sources)
+            assert compile.fingerprint(edited) != before, (name, path)
+
+
+def test_kind_plant_and_options_are_part_of_the_fingerprint():
+    recipes = _recipes()
+    fps = {name: compile.fingerprint(r) for name, r in recipes.items()}
+    assert len(set(fps.values())) == len(fps)  # every instance has its own
+    r = recipes["lanes w32"]
+    entry = dataclasses.replace(r.entry, options={**r.entry.options, "nogil": False})
+    assert compile.fingerprint(dataclasses.replace(r, entry=entry)) != fps["lanes w32"]
+    other = dataclasses.replace(r, plant=get_plant("pendulum"))
+    assert compile.fingerprint(other) != fps["lanes w32"]
+
+
+def test_a_plant_without_source_is_never_cached():
+    from aiofl.plants.base import Plant
+
+    ns: dict = {}
+    exec("def f(x, p):\n    return (x[1], -x[0])\n", ns)  # no source file
+    slfjm = get_plant("slfjm")
+    plant = Plant("nofile", 2, ns["f"], slfjm.g, slfjm.h, {"a": 1.0})
+    recipe = dataclasses.replace(_recipes()["scalar"], plant=plant)
+    assert compile.fingerprint(recipe) is None
+    assert not compile.build(recipe).cached
+
+
+def test_a_source_edited_after_loading_is_not_cached(tmp_path, monkeypatch):
+    """The fingerprint describes the text this process first read, numba compiles the
+    code it loaded: when another process edits a source in between, the kernel is built
+    uncached rather than stored under either fingerprint."""
+    monkeypatch.setenv("AIOFL_CACHE_DIR", str(tmp_path / "cache"))
+    src = tmp_path / "tpl.py"
+    src.write_text("x = 1\n")
+    recipe = dataclasses.replace(_recipes()["scalar"], sources=(str(src),))
+    assert not compile.sources_changed(recipe.sources)
+    assert compile.build(recipe).cached
+    src.write_text("x = 2\n")
+    assert compile.sources_changed(recipe.sources)
+    assert not compile.build(recipe).cached
+
+
+def test_cache_folder_environment(tmp_path, monkeypatch):
+    from aiofl import cache
+
+    monkeypatch.setenv("AIOFL_CACHE_DIR", str(tmp_path / "c"))
+    assert cache.subdir("kernels") == tmp_path / "c" / "kernels"
+    recipe = _recipes()["lanes w1"]
+    inst = compile.build(recipe)
+    assert inst.cached and inst.entry._cache.cache_path == str(tmp_path / "c" / "kernels")
+    monkeypatch.setenv("AIOFL_NO_CACHE", "1")
+    assert cache.cache_root() is None and not compile.build(recipe).cached
+    monkeypatch.delenv("AIOFL_NO_CACHE")
+    monkeypatch.delenv("AIOFL_CACHE_DIR")
+    assert cache.cache_root() is not None and cache.cache_root().name == "aiofl"
+
+
+def test_entries_of_an_older_fingerprint_are_pruned(tmp_path, monkeypatch):
+    monkeypatch.setenv("AIOFL_CACHE_DIR", str(tmp_path))
+    recipe = _recipes()["lanes w1"]
+    key = compile.plant_key(recipe.plant)
+    folder = tmp_path / "kernels"
+    folder.mkdir()
+    stale = folder / f"lanes._tpl_group_w1_{key}_0123456789abcdef0123-k.py311.nbi"
+    other_kind = folder / f"lanes._tpl_group_w32_{key}_0123456789abcdef0123-k.py311.nbi"
+    other_plant = folder / "lanes._tpl_group_w1_ffffffff_0123456789abcdef0123-k.py311.nbi"
+    for p in (stale, other_kind, other_plant):
+        p.write_bytes(b"")
+    compile.build(recipe)
+    assert not stale.exists() and other_kind.exists() and other_plant.exists()
+
+
+# ------------------------------------------------------------------ plant files, cached
+PLANT_TOML = """\
+name = "duffing"
+states = ["x", "v"]
+f = ["v", "(-k*x - 0.5*k*x**3 - c*v)/m"]
+g = ["0", "1/m"]
+h = "x"
+[params]
+k = 4.0
+c = 0.3
+m = 1.0
+"""
+
+CONFIG_TOML = """\
+plant = "duffing.toml"
+[scenario]
+t_final = 0.2
+[scenario.reference]
+kind = "step"
+amplitude = 1.0
+[controller]
+structure = "LADRC"
+[controller.eso]
+omega0 = 40.0
+[controller.sef]
+omega_c = 5.0
+[controller.td]
+omega = 10.0
+[controller.law]
+b0 = 1.0
+[simulation]
+dt = 1e-3
+"""
+
+_PROBE = """\
+import json, sys
+from aiofl.config import load_config
+from aiofl.engine import lanes_build
+cfg = load_config(sys.argv[1])
+res = cfg.simulate(store=False)
+kernel = lanes_build.lane_kernel_for(cfg.plant, 1)
+print(json.dumps({
+    "itae": res.metrics["itae"],
+    "sympy": "sympy" in sys.modules,
+    "compiled": [str(s) for s in kernel.signatures],
+    "hits": sum(kernel.stats.cache_hits.values()),
+    "misses": sum(kernel.stats.cache_misses.values()),
+}))
+"""
+
+
+def _probe(cfg: Path, cache_dir: Path) -> dict:
+    env = {**os.environ, "AIOFL_CACHE_DIR": str(cache_dir)}
+    env.pop("AIOFL_NO_CACHE", None)
+    out = subprocess.run(
+        [sys.executable, "-c", _PROBE, str(cfg)],
+        env=env,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.slow
+def test_a_plant_file_is_built_and_compiled_once_across_processes(tmp_path, monkeypatch):
+    """First process: sympy builds the plant, the module is written, the kernel compiled
+    and stored.  Second process: the plant comes from the module (no sympy import) and the
+    kernel from the disk cache (a cache hit, no compile); same numbers.  Editing the plant
+    file makes a new entry and removes the old one."""
+    (tmp_path / "duffing.toml").write_text(PLANT_TOML)
+    cfg = tmp_path / "sim.toml"
+    cfg.write_text(CONFIG_TOML)
+    cache_dir = tmp_path / "cache"
+    first = _probe(cfg, cache_dir)
+    assert first["sympy"] and first["misses"] == 1 and first["hits"] == 0
+    modules = sorted((cache_dir / "plants").glob("plant_*.py"))
+    assert len(modules) == 1
+    second = _probe(cfg, cache_dir)
+    assert not second["sympy"], "a cached plant file must not need sympy"
+    assert second["hits"] == 1 and second["misses"] == 0
+    assert second["itae"] == first["itae"]
+    # an edited plant file: a new module, the old one pruned
+    monkeypatch.setenv("AIOFL_CACHE_DIR", str(cache_dir))
+    from aiofl.plants import plant_cache
+
+    (tmp_path / "duffing.toml").write_text(PLANT_TOML.replace("k = 4.0", "k = 5.0"))
+    edited = plant_cache.plant_from_file(tmp_path / "duffing.toml")
+    assert edited.params["k"] == 5.0
+    now = sorted((cache_dir / "plants").glob("plant_*.py"))
+    assert len(now) == 1 and now != modules
+
+
+def test_a_damaged_plant_module_is_rebuilt(tmp_path, monkeypatch):
+    from aiofl.plants import plant_cache
+
+    monkeypatch.setenv("AIOFL_CACHE_DIR", str(tmp_path / "cache"))
+    path = tmp_path / "duffing.toml"
+    path.write_text(PLANT_TOML)
+    plant = plant_cache.plant_from_file(path)
+    module = plant_cache.plant_module_path(path)
+    assert module is not None and module.is_file()
+    assert plant.f.__code__.co_filename == str(module)  # a real source file
+    assert plant.relative_degree == 2 and dict(plant.params) == {"k": 4.0, "c": 0.3, "m": 1.0}
+    text = module.read_text()
+    module.write_text(text[: len(text) // 2])  # a partial write
+    again = plant_cache.plant_from_file(path)
+    assert module.read_text() == text
+    x, p = [0.3, -0.2], [4.0, 0.3, 1.0]
+    assert again.f(x, p) == plant.f(x, p)
+    monkeypatch.setenv("AIOFL_NO_CACHE", "1")
+    assert plant_cache.plant_module_path(path) is None
+    assert plant_cache.plant_from_file(path).f(x, p) == plant.f(x, p)
