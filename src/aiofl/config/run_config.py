@@ -299,7 +299,8 @@ def resolve_plant(name_or_file: str, base_dir: str | Path | None = None) -> Plan
 
     A relative file path is taken relative to ``base_dir`` (the config's folder).  A file
     plant is built once per process (per path and modification time) and cached on disk
-    across processes with its compiled kernel (:mod:`aiofl.plants.plant_cache`).  See :meth:`aiofl.plants.symbolic.SymbolicPlant.from_dict` for the format.
+    across processes with its compiled kernel (:mod:`aiofl.plants.plant_cache`).  See
+    :meth:`aiofl.plants.symbolic.SymbolicPlant.from_dict` for the format.
     """
     from aiofl.plants.registry import get_plant
 
