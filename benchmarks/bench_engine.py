@@ -172,13 +172,13 @@ _COLD = textwrap.dedent(
     import time
     t0 = time.perf_counter()
     from aiofl.config import load_config
-    from aiofl.engine import build, simulation
+    from aiofl.engine import instances, simulation
     rc = load_config("paper-s1-leso")
     t1 = time.perf_counter()
     import dataclasses
     simulation.simulate(rc.plant, rc.controller, dataclasses.replace(rc.scenario, t_final=0.01))
     t2 = time.perf_counter()
-    print(f"{t1 - t0:.3f} {t2 - t1:.3f} {int(build.kernel_for(rc.plant).cached)}")
+    print(f"{t1 - t0:.3f} {t2 - t1:.3f} {int(instances.instance_for(rc.plant, 1).cached)}")
     """
 )
 

@@ -10,16 +10,17 @@ Usage::
 For each structure (LESO: ``retuned-s1-leso``; INLESO: ``paper-s1-inleso``; LADRC:
 ``retuned-s1-ladrc``; all on the paper's scenario 1, RK4, dt = 1e-4, metrics only, every
 member stable) and batch size (1, 8, 64, 256, 1024 copies of the design), the time of one
-``simulate_batch`` call with ``engine="scalar"`` (one member at a time,
-:mod:`aiofl.engine.kernel`) and ``engine="lanes"`` (groups of 32 members in SIMD lanes,
-:mod:`aiofl.engine.lanes`), on ``numba.get_num_threads()`` threads, after a warm-up call
-(compilation excluded), best of ``--repeat``.  Printed as member-steps per second (members
+``simulate_batch`` call with ``engine="scalar"`` (one member at a time: the time loop of
+:mod:`aiofl.engine.loop` at width 1 with libm and fast-math) and ``engine="lanes"`` (groups
+of 32 members in SIMD lanes, or alone for batches under 16), on
+``numba.get_num_threads()`` threads, after a warm-up call (compilation excluded), best of
+``--repeat``.  Printed as member-steps per second (members
 × RK4 steps / wall time) and the ratio.  The load average at the start is printed: the
 figures are wall-clock and the machine may be shared.
 
 ``--sampled TS`` runs the members as sampled-data controllers (``Sampling(TS)``, the
-default ZOH/fhan discretisations): the one-member sampled kernel
-(:mod:`aiofl.engine.sampled`) against sampled lane groups (:mod:`aiofl.engine.lanes_sampled`).
+default ZOH/fhan discretisations): the sampled instances of the same loop, scalar against
+lanes.
 LADRC then uses ``frontier-s1-ladrc`` (``retuned-s1-ladrc``'s ω0 = 1583 is too fast for a
 1 ms sample).
 """

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from aiofl.engine import build, compile, lanes_build, sampled
+from aiofl.engine import compile, instances
 from aiofl.plants import get_plant
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "aiofl"
@@ -25,13 +25,15 @@ SRC = Path(__file__).resolve().parents[1] / "src" / "aiofl"
 
 def _recipes() -> dict[str, compile.Recipe]:
     plant = get_plant("slfjm")
+    rec = instances.recipe
     return {
-        "scalar": build.scalar_recipe(plant),
-        "sampled": sampled.sampled_recipe(plant),
-        "lanes w32": lanes_build.lane_recipe(plant, 32),
-        "lanes w1": lanes_build.lane_recipe(plant, 1),
-        "sampled lanes w32": lanes_build.lane_recipe(plant, 32, sampled_data=True),
-        "sampled lanes w1": lanes_build.lane_recipe(plant, 1, sampled_data=True),
+        "lanes w32": rec(plant, 32),
+        "lanes w1": rec(plant, 1),
+        "sampled lanes w32": rec(plant, 32, sampled_data=True),
+        "sampled lanes w1": rec(plant, 1, sampled_data=True),
+        "scalar": rec(plant, 1, variant="scalar"),
+        "sampled scalar": rec(plant, 1, sampled_data=True, variant="scalar"),
+        "guarded": rec(plant, 1, variant="guarded"),
     }
 
 
@@ -75,7 +77,7 @@ def test_fingerprint_covers_every_source_a_kernel_runs(name):
     kernel once skipped the guard and the lane kernels' list missed files)."""
     recipe = _recipes()[name]
     reached = _code_files(recipe)
-    assert str(SRC / "engine" / "kernel.py") in reached  # the walk sees the templates' code
+    assert str(SRC / "engine" / "loop.py") in reached  # the walk sees the templates' code
     assert str(SRC / "components" / "fastmath.py") in reached  # and the components'
     plant_files = {  # covered by the plant's part of the fingerprint
         getattr(fn, "py_func", fn).__code__.co_filename
@@ -119,7 +121,7 @@ def test_a_plant_without_source_is_never_cached():
     exec("def f(x, p):\n    return (x[1], -x[0])\n", ns)  # no source file
     slfjm = get_plant("slfjm")
     plant = Plant("nofile", 2, ns["f"], slfjm.g, slfjm.h, {"a": 1.0})
-    recipe = dataclasses.replace(_recipes()["scalar"], plant=plant)
+    recipe = dataclasses.replace(_recipes()["lanes w1"], plant=plant)
     assert compile.fingerprint(recipe) is None
     assert not compile.build(recipe).cached
 
@@ -131,7 +133,7 @@ def test_a_source_edited_after_loading_is_not_cached(tmp_path, monkeypatch):
     monkeypatch.setenv("AIOFL_CACHE_DIR", str(tmp_path / "cache"))
     src = tmp_path / "tpl.py"
     src.write_text("x = 1\n")
-    recipe = dataclasses.replace(_recipes()["scalar"], sources=(str(src),))
+    recipe = dataclasses.replace(_recipes()["lanes w1"], sources=(str(src),))
     assert not compile.sources_changed(recipe.sources)
     assert compile.build(recipe).cached
     src.write_text("x = 2\n")
@@ -160,9 +162,9 @@ def test_entries_of_an_older_fingerprint_are_pruned(tmp_path, monkeypatch):
     key = compile.plant_key(recipe.plant)
     folder = tmp_path / "kernels"
     folder.mkdir()
-    stale = folder / f"lanes._tpl_group_w1_{key}_0123456789abcdef0123-k.py311.nbi"
-    other_kind = folder / f"lanes._tpl_group_w32_{key}_0123456789abcdef0123-k.py311.nbi"
-    other_plant = folder / "lanes._tpl_group_w1_ffffffff_0123456789abcdef0123-k.py311.nbi"
+    stale = folder / f"loop._tpl_loop_lc1_{key}_0123456789abcdef0123-k.py311.nbi"
+    other_kind = folder / f"loop._tpl_loop_lc32_{key}_0123456789abcdef0123-k.py311.nbi"
+    other_plant = folder / "loop._tpl_loop_lc1_ffffffff_0123456789abcdef0123-k.py311.nbi"
     for p in (stale, other_kind, other_plant):
         p.write_bytes(b"")
     compile.build(recipe)
@@ -206,10 +208,10 @@ dt = 1e-3
 _PROBE = """\
 import json, sys
 from aiofl.config import load_config
-from aiofl.engine import lanes_build
+from aiofl.engine import instances
 cfg = load_config(sys.argv[1])
 res = cfg.simulate(store=False)
-kernel = lanes_build.lane_kernel_for(cfg.plant, 1)
+kernel = instances.instance_for(cfg.plant, 1).entry
 print(json.dumps({
     "itae": res.metrics["itae"],
     "sympy": "sympy" in sys.modules,

@@ -16,7 +16,7 @@ from hypothesis import strategies as st
 
 from aiofl.config import load_config
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine import build as engine
+from aiofl.engine import instances
 from aiofl.engine.reference import closed_loop, reference_simulate, setup_loop
 from aiofl.engine.simulation import closed_loop_rhs, simulate, simulate_batch
 from aiofl.plants import get_plant
@@ -228,7 +228,9 @@ def test_kernel_links_no_component_from_numbas_per_function_cache(slfjm):
     private copies it calls compute bitwise what the public components do."""
     from aiofl.components import differentiators, fastmath, feedback, law, observers
 
-    ns = engine.plant_namespace(slfjm)
+    # the sampled instance binds every component, the law dispatch and the discrete update;
+    # the scalar variant keeps the components' own flags and libm (bitwise the public ones)
+    ns = dict(instances.recipe(slfjm, 1, sampled_data=True, variant="scalar").bindings)
     found = _reachable_dispatchers(ns)
     component = [d for d in found if d.py_func.__module__.startswith("aiofl.components.")]
     names = {d.py_func.__name__ for d in component}
@@ -236,7 +238,7 @@ def test_kernel_links_no_component_from_numbas_per_function_cache(slfjm):
     assert {"fal_scaled", "linear_sef_gain", "binomial_power", "abspow", "aiofl_law"} <= names
     assert any(d.py_func.__name__ == "_aiofl_command" for d in found)
     for d in found:
-        if d.py_func.__module__.startswith(("aiofl.components.", "aiofl.engine.kernel")):
+        if d.py_func.__module__.startswith(("aiofl.components.", "aiofl.engine.member")):
             assert type(d._cache).__name__ == "NullCache", d.py_func.__qualname__
     for public in (fastmath, feedback, observers, differentiators, law):
         assert not any(d is v for d in found for v in vars(public).values())

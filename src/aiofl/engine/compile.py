@@ -245,7 +245,7 @@ def rejit(fn: Any, space: dict[str, Any] | None = None, **override: Any) -> Any:
     with the globals ``space`` (default its own) and its numba options updated by
     ``override``.  numba keys a function's disk cache on its own file only, so a kernel
     never links a cached function (whose callees might be stale); see
-    :func:`aiofl.engine.build.private_components`."""
+    :func:`aiofl.engine.bindings.private_components`."""
     from numba import njit
 
     py = getattr(fn, "py_func", fn)

@@ -1,30 +1,30 @@
-r"""The lane blocks of :mod:`aiofl.engine.lanes`: each formula of the closed loop applied to
-every lane of a group, in a loop over the lanes that LLVM vectorizes.
+r"""The lane blocks of the time loop (:mod:`aiofl.engine.loop`): each formula of the closed
+loop applied to every lane of a group, in a loop over the lanes that LLVM vectorizes.
 
 Each block is one compiled function holding its loop over the lanes, so LLVM optimizes (and
 vectorizes) that loop alone; the scalar formulas it calls (the component functions of
 :mod:`aiofl.components`, the plant's f, g, h, b_d) are inlined into it.  A block takes every
 quantity it writes as its own array (a row of the group's workspace), so that no two
 arguments overlap (blocks are compiled with ``noalias``, see
-:func:`aiofl.engine.lanes_build._noalias_option`), and reaches per-lane plant states through
+:func:`aiofl.engine.instances._noalias_option`), and reaches per-lane plant states through
 unmanaged views (no reference counting).  Multi-row outputs whose row stride LLVM cannot see
 are written flat (state i of lane l at ``i W + l``).
 
-Like the other kernel templates these are plain Python until
-:mod:`aiofl.engine.lanes_build` compiles them with the globals of one plant and lane width
-(placeholders here).  This module's source is part of the lane kernel's cache fingerprint.
+Like the other templates these are plain Python until :mod:`aiofl.engine.instances`
+compiles them with the globals of one plant and lane width (placeholders here).  This
+module's source is part of every kernel's cache fingerprint.
 """
 
 from __future__ import annotations
 
 from aiofl import layout as L
-from aiofl.engine.kernel import (
+from aiofl.engine.member import (
     Q_ITD_BC,
     Q_ITD_GAIN,
     SWITCH_RTOL,
 )
 
-# Placeholders for what a lane-kernel instance binds (see aiofl.engine.lanes_build).
+# Placeholders for what an instance binds (see aiofl.engine.instances).
 _W = 32
 _N = 1
 _PF = _PG = _PH = _PBD = _PNF = None  # the plant's functions, inlined, vector math
@@ -124,6 +124,12 @@ def _blk_output(z, p, noise, y, ym):  # pragma: no cover - compiled
         yl = _PH(_COLUMN(z, l), _COLUMN(p, l))
         y[l] = yl
         ym[l] = yl + noise[l]
+
+
+def _blk_plant_output(z, p, y):  # pragma: no cover - compiled
+    """y = h(x), every lane."""
+    for l in range(_W):
+        y[l] = _PH(_COLUMN(z, l), _COLUMN(p, l))
 
 
 def _blk_error(ri, xi, e):  # pragma: no cover - compiled
@@ -244,33 +250,32 @@ def _blk_metrics(t, y, r, u, itae, iae, ise, isu, iau):  # pragma: no cover - co
         iau[l] = abs(u[l])
 
 
-def _blk_rk_first(z, zt, kd, acc, nza, h, euler):  # pragma: no cover - compiled
-    """After stage 1: Euler's step, or acc = k1 and the stage-2 state z + h k1."""
-    for j in range(nza):
-        if euler:
+def _blk_stage(z, zt, kd, acc, nza, first, last, h, w, scale):  # pragma: no cover
+    """One stage of an explicit Runge-Kutta step (the stage tables of
+    :mod:`aiofl.engine.loop`), every lane: the weighted sum of the stage derivatives
+    ``acc`` gains ``w kd`` (``first``: starts at it) and the next stage's state is
+    ``z + h kd``; after the ``last`` stage ``z += scale acc`` (forward Euler is one stage,
+    both first and last: ``z += dt kd``)."""
+    if first and last:
+        for j in range(nza):
             for l in range(_W):
-                z[j, l] += h * kd[j, l]
+                z[j, l] += scale * kd[j, l]
                 zt[j, l] = z[j, l]
-        else:
+    elif first:
+        for j in range(nza):
             for l in range(_W):
-                acc[j, l] = kd[j, l]
+                acc[j, l] = w * kd[j, l]
                 zt[j, l] = z[j, l] + h * kd[j, l]
-
-
-def _blk_rk_mid(z, zt, kd, acc, nza, h):  # pragma: no cover - compiled
-    """After stages 2 and 3: acc += 2 k and the next stage's state z + h k."""
-    for j in range(nza):
-        for l in range(_W):
-            acc[j, l] += 2.0 * kd[j, l]
-            zt[j, l] = z[j, l] + h * kd[j, l]
-
-
-def _blk_rk_last(z, zt, kd, acc, nza, sixth):  # pragma: no cover - compiled
-    """After stage 4: z += dt/6 (k1 + 2 k2 + 2 k3 + k4)."""
-    for j in range(nza):
-        for l in range(_W):
-            z[j, l] += sixth * (acc[j, l] + kd[j, l])
-            zt[j, l] = z[j, l]
+    elif last:
+        for j in range(nza):
+            for l in range(_W):
+                z[j, l] += scale * (acc[j, l] + w * kd[j, l])
+                zt[j, l] = z[j, l]
+    else:
+        for j in range(nza):
+            for l in range(_W):
+                acc[j, l] += w * kd[j, l]
+                zt[j, l] = z[j, l] + h * kd[j, l]
 
 
 def _blk_out_of_range(z, nza, threshold, bad):  # pragma: no cover - compiled

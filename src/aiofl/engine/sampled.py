@@ -1,21 +1,18 @@
-r"""The sampled-data closed loop: a discrete controller on a continuous plant, compiled.
+r"""The discrete controller: what a processor runs at the samples, and its place in the loop.
 
-A member whose discrete row (:mod:`aiofl.engine.discrete`) has ``D_STEPS = N > 0`` runs
-:func:`_tpl_member_sampled` instead of the continuous time loop: the plant and the
-performance integrals are integrated as before (RK4 or Euler at ``dt``), and every N-th
-step, at :math:`t_k = kT_s`, the controller reads the measurement, runs
-:func:`_tpl_ctrl_step` once and its command is held until the next sample (see
-:mod:`aiofl.engine.discrete` for the ADC, delay and DAC).  Like the continuous templates
-of :mod:`aiofl.engine.kernel`, these functions are plain Python compiled per plant by
-:func:`sampled_member_for` with the compile factory (:func:`sampled_recipe`);
-members of one batch may mix continuous members and any sample times, and run in parallel.
-This is the one-member sampled loop (``engine="scalar"``, the reference); the default engine
-runs sampled members in SIMD lanes (:mod:`aiofl.engine.lanes_sampled`), calling this
-module's controller update lane by lane.
+A member whose discrete row (:mod:`aiofl.engine.discrete`) has ``D_STEPS = N > 0`` runs the
+time loop's sampled instance (:mod:`aiofl.engine.loop` with ``_SAMPLED``): the plant and the
+performance integrals are integrated at ``dt`` (:func:`_tpl_plant_deriv`, the loop's
+right-hand side between samples), and every N-th step, at :math:`t_k = kT_s`,
+:func:`_tpl_sample` runs the controller of every lane once: the ADC reads the measurement,
+:func:`_tpl_ctrl_step` updates the controller, the DAC holds its command until the next
+sample (see :mod:`aiofl.engine.discrete` for the delay and the quantisers).  The update is
+scalar, lane by lane, on the member's row of a lane-major controller state; between samples
+the plant runs in SIMD lanes.
 
-The controller's update calls the same component functions as the continuous loop (the
-INLESO injection, Han's TD (18), the ITD, saturation), the same compiled SEF-and-law
-dispatch (:func:`aiofl.engine.kernel._aiofl_command`, :func:`~aiofl.engine.kernel._iofl_command`)
+The update calls the same component functions as the continuous controller (the INLESO
+injection, Han's TD (18), the ITD, saturation), the same compiled SEF-and-law dispatch
+(:func:`aiofl.engine.member._aiofl_command`, :func:`~aiofl.engine.member._iofl_command`)
 and the discrete ones of :mod:`aiofl.components.discrete` (ESO correction and prediction,
 fhan, the prefilter's ZOH update), with the coefficients of the member's discrete row.  The
 ESO starts as the continuous loop's does (``eso.init``: "zero", the default, or "output",
@@ -38,7 +35,7 @@ from __future__ import annotations
 
 import sys
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from types import SimpleNamespace
 from typing import Any
 
@@ -46,9 +43,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
-from aiofl.cache import cache_enabled
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine import build, kernel
+from aiofl.engine import bindings, member
 from aiofl.engine import compile as compile_
 from aiofl.engine import discrete as DS
 from aiofl.engine.discrete import (
@@ -72,7 +68,8 @@ from aiofl.engine.discrete import (
     Sampling,
     sampling_rows,
 )
-from aiofl.engine.kernel import (
+from aiofl.engine.loop import S_BAD, S_D, S_NOISE, S_U, S_Y, S_YM
+from aiofl.engine.member import (
     IQ_EINIT,
     IQ_ESO,
     IQ_LAW,
@@ -81,17 +78,13 @@ from aiofl.engine.kernel import (
     IQ_TD,
     N_IQ,
     N_Q,
-    N_SIG,
     Q_ITD_BC,
     Q_ITD_GAIN,
     Q_PF,
-    SWITCH_RTOL,
     _aiofl_command,
-    _iofl_command,
 )
-from aiofl.plants.base import Plant
 
-__all__ = ["DiscreteController", "member_dispatch", "sampled_member_for"]
+__all__ = ["DiscreteController"]
 
 C_TD = 0  #: differentiator / prefilter state
 C_P = C_TD + L.RHO_MAX  #: ESO prediction p_k
@@ -103,12 +96,13 @@ C_PROF = C_RPREV + 1  #: the differentiator's profile r_1.. used at the last sam
 C_SCR = C_PROF + L.RHO_MAX  #: scratch for the prefilter update
 N_CS = C_SCR + L.RHO_MAX
 
-# placeholders bound per instance (see _bind and aiofl.engine.kernel)
+# placeholders bound per instance (see _bind and aiofl.engine.instances)
+_W = 32
 _N = _N_P = 1
-_PF = _PG = _PH = _PBD = _PNF = None
-_SETUP = _REFERENCE = _UNMANAGED = _KEEP_ALIVE = None
-_CTRL_INIT = _CTRL_STEP = _PLANT_DERIV = None
+_PNF = _MEMBER_SETUP = _LEADING_ROWS = _IOFL_COMMAND = None
+_CTRL_INIT = _CTRL_STEP = None
 _SATURATE = None
+_BLK_OUTPUT = _BLK_PLANT_OUTPUT = _BLK_PLANT = _BLK_DISTURBANCE = _BLK_METRICS = None
 _INLESO = _HAN_TD = _ITD = _PREFILTER = None
 _FHAN_TD = _OBS_INNOVATION = _OBS_CORRECT = _OBS_PREDICT = _LIN_UPDATE = None
 
@@ -169,7 +163,7 @@ def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri):  # pragma: no cover - compil
         if td_kind == L.TD_LINEAR:
             rff = _PREFILTER(cs, scr, C_TD, rho, r, q, Q_PF)
 
-    # SEF and law (14), the continuous loop's formulas (aiofl.engine.kernel._aiofl_command)
+    # SEF and law (14), the continuous loop's formulas (aiofl.engine.member._aiofl_command)
     u = _aiofl_command(iq, q, rr, ri, cs, C_PROF, cs, C_X, rff)
     u = _SATURATE(u, q[L.F_UMIN], q[L.F_UMAX])  # actuator range [u_min, u_max]
 
@@ -199,242 +193,100 @@ def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri):  # pragma: no cover - compil
     return u
 
 
-def _tpl_plant_deriv(t, z, dz, p, u, d, r, xb):  # pragma: no cover - compiled
-    """Plant (1) under the held command u and the integrands of eq. (22); returns y."""
-    for i in range(_N):
-        xb[i] = z[i]
-    y = _PH(xb, p)
-    fx = _PF(xb, p)
-    gx = _PG(xb, p)
-    for i in range(_N):
-        dz[i] = fx[i] + gx[i] * u
-    if d != 0.0:
-        bdx = _PBD(xb, p)
-        for i in range(_N):
-            dz[i] += bdx[i] * d
-    err = abs(y - r)
-    dz[_N + L.M_ITAE] = t * err
-    dz[_N + L.M_IAE] = err
-    dz[_N + L.M_ISE] = err * err
-    dz[_N + L.M_ISU] = u * u
-    dz[_N + L.M_IAU] = abs(u)
-    return y
+# ---------------------------------------------------- in the time loop, lane by lane
+def _tpl_setup(lanes, batch, q, qt, iq, ctrl):  # pragma: no cover - compiled
+    """Per-member constants of the group's lanes, one row per lane (``q[l]``, read by the
+    scalar controller update), and their discrete rows (``ctrl[0, l]``); ``iq`` from the
+    first lane (kinds are uniform within a group).  Returns the steps per sample N
+    (uniform within a group)."""
+    for l in range(_W):
+        mi = lanes[l]
+        _MEMBER_SETUP(batch.ints[mi], batch.floats[mi], q[l], iq)
+        for j in range(N_DISC):
+            ctrl[0, l, j] = batch.disc[mi, j]
+    _MEMBER_SETUP(batch.ints[lanes[0]], batch.floats[lanes[0]], qt, iq)
+    return int(ctrl[0, 0, D_STEPS])
 
 
-def _tpl_member_sampled(  # pragma: no cover - compiled
-    mi,
-    ints,
-    floats,
-    p_before,
-    p_after,
-    p_nom,
-    scen,
-    x0,
-    ref_table,
-    ref_row,
-    noise_table,
-    noise_row,
-    dt,
-    n_steps,
-    method,
-    decimation,
-    store,
-    threshold,
-    metrics,
-    status,
-    t_div,
-    traj,
-    disc,
-):
-    """Integrate sampled member ``mi`` (same arguments as the continuous time loop, plus
-    the batch's discrete rows ``disc``); every array of the loop is thread-local."""
-    nr = L.RHO_MAX + 2
-    nza = _N + L.N_METRIC
-    work_owner = np.zeros(N_Q + N_DISC + 2 * N_CS + 4 * nza + _N + 4 * _N_P + L.N_SCEN)
-    iq_owner = np.zeros(N_IQ, dtype=np.int64)
-    rr_owner = np.zeros((4, nr))  # r at t, t + dt/2, t + dt; r and derivatives at t_k
-    w = _UNMANAGED(work_owner)
-    iq = _UNMANAGED(iq_owner)
-    rrs = _UNMANAGED(rr_owner)
-    ref_t = _UNMANAGED(ref_table)
-    noise_t = _UNMANAGED(noise_table)
-    tr = _UNMANAGED(traj)
-    o = 0
-    q = w[o : o + N_Q]
-    o += N_Q
-    dsc = w[o : o + N_DISC]
-    o += N_DISC
-    cs = w[o : o + N_CS]
-    o += N_CS
-    scr = w[o : o + N_CS]
-    o += N_CS
-    z = w[o : o + nza]
-    o += nza
-    zt = w[o : o + nza]
-    o += nza
-    kd = w[o : o + nza]
-    o += nza
-    acc = w[o : o + nza]
-    o += nza
-    xb = w[o : o + _N]
-    o += _N
-    pb = w[o : o + _N_P]
-    o += _N_P
-    pa = w[o : o + _N_P]
-    o += _N_P
-    pn = w[o : o + _N_P]
-    o += _N_P
-    p = w[o : o + _N_P]
-    o += _N_P
-    sc = w[o : o + L.N_SCEN]
-    _SETUP(ints[mi], floats[mi], q, iq)
-    for j in range(N_DISC):
-        dsc[j] = disc[mi, j]
-    n_per = int(dsc[D_STEPS])
-    delay = dsc[D_DELAY] > 0.0
-    yq = dsc[D_YQ]
-    uq = dsc[D_UQ]
+def _tpl_sample(k, z, p, pn, s, rrs, rl, iq, q, ctrl):  # pragma: no cover - compiled
+    """A sample at t_k of every lane: the ADC (``s[S_YM]`` = y + noise, quantised), the
+    discrete controller's update (:func:`_tpl_ctrl_step`, or the classical IOFL law from
+    the true state and the nominal model) with the reference and its derivatives at t_k
+    (``rrs[3]``), and the DAC (the command, delayed a sample if asked, quantised, held in
+    ``s[S_U]`` until the next sample)."""
     rho = iq[IQ_RHO]
-    ntd = iq[IQ_NTD]
-    exact = iq[IQ_TD] == L.TD_EXACT
+    nr = L.RHO_MAX + 2
     iofl = iq[IQ_LAW] == L.LAW_IOFL
-    nd = rho if exact else 0
-    for j in range(_N_P):
-        pb[j] = p_before[mi, j]
-        pa[j] = p_after[mi, j]
-        pn[j] = p_nom[mi, j]
-        p[j] = pb[j]
-    for j in range(L.N_SCEN):
-        sc[j] = scen[mi, j]
-    rrow = ref_row[mi]
-    nrow = noise_row[mi]
-    n_noise = noise_table.shape[1]
-    for i in range(_N):
-        z[i] = x0[mi, i]
-        zt[i] = z[i]
-    switched = False
-    std = sc[L.S_NOISE_STD]
-    hold = sc[L.S_NOISE_HOLD]
-    t_change = sc[L.S_PCHANGE_TIME] * (1.0 - SWITCH_RTOL)
-    t_dist = sc[L.S_DIST_TIME] * (1.0 - SWITCH_RTOL)
-    rk4 = method == L.METHOD_RK4
-    hdt = 0.5 * dt
-    sixth = dt / 6.0
-    status[mi] = L.STATUS_OK
-    t_div[mi] = np.nan
-    row = 0
-    save_in = 0
-    ua = 0.0  # the command the plant gets over the current sample interval
-    ym = 0.0  # the measurement of the last sample
-    for k in range(n_steps + 1):
-        t = k * dt
-        noise_val = 0.0
-        if std > 0.0:  # held over [i hold, (i+1) hold)
-            idx = int(t / hold + 1e-9)
-            noise_val = std * noise_t[nrow, idx if idx < n_noise else n_noise - 1]
-        d = sc[L.S_DIST_AMP] if t >= t_dist else 0.0
-        if not switched and t >= t_change:
-            for j in range(_N_P):
-                p[j] = pa[j]
-            switched = True
-        if k % n_per == 0 and k < n_steps:  # a sample: ADC, controller, DAC
-            for i in range(_N):
-                xb[i] = z[i]
-            ym = _PH(xb, p) + noise_val
-            if yq > 0.0:
-                ym = yq * np.floor(ym / yq + 0.5)
-            _REFERENCE(t, t, sc, ref_t, rrow, rrs, 3, nd)
-            if k == 0:
-                _CTRL_INIT(iq, cs, ym)
-            u_before = cs[C_UPREV]
-            if iofl:  # classical IOFL from the true state and the nominal model
-                nfx = _PNF(xb, pn)
-                uc = _iofl_command(iq, q, rrs, 3, cs, C_PROF, nfx, rrs[3, rho])
-                uc = _SATURATE(uc, q[L.F_UMIN], q[L.F_UMAX])
-                cs[C_UPREV] = uc
-            else:
-                uc = _CTRL_STEP(iq, q, dsc, cs, scr, ym, rrs, 3)
-            ua = u_before if delay else uc
-            if uq > 0.0:
-                ua = uq * np.floor(ua / uq + 0.5)
-        _REFERENCE(t, t, sc, ref_t, rrow, rrs, 0, 0)
-        if rk4:
-            _REFERENCE((k + 0.5) * dt, t, sc, ref_t, rrow, rrs, 1, 0)
-            _REFERENCE((k + 1) * dt, t, sc, ref_t, rrow, rrs, 2, 0)
-        y = _PLANT_DERIV(t, zt, kd, p, ua, d, rrs[0, 0], xb)
-        if store and save_in == 0:
-            tr[mi, row, 0] = t
-            tr[mi, row, 1] = rrs[0, 0]
-            tr[mi, row, 2] = y
-            tr[mi, row, 3] = ym
-            tr[mi, row, 4] = ua
-            tr[mi, row, 5] = d
-            for j in range(_N):
-                tr[mi, row, N_SIG + j] = z[j]
-            c0 = N_SIG + _N
-            for j in range(L.RHO_MAX + 1):
-                tr[mi, row, c0 + j] = cs[C_X + j] if j <= rho and not iofl else 0.0
-            c0 += L.RHO_MAX + 1
-            for j in range(L.RHO_MAX):
-                val = 0.0
-                if exact and j < rho:
-                    val = rrs[3, j]
-                elif j < ntd:
-                    val = cs[C_PROF + j]  # the profile the last sample used
-                tr[mi, row, c0 + j] = val
-            row += 1
-            save_in = decimation
-        save_in -= 1
-        if k == n_steps:
-            break
-        if not rk4:  # forward Euler
-            for j in range(nza):
-                z[j] += dt * kd[j]
-                zt[j] = z[j]
+    _BLK_OUTPUT(z, p, s[S_NOISE], s[S_Y], s[S_YM])
+    for l in range(_W):
+        dsc = ctrl[0, l]
+        cs = ctrl[1, l]
+        yq = dsc[D_YQ]
+        yl = yq * np.floor(s[S_YM, l] / yq + 0.5) if yq > 0.0 else s[S_YM, l]
+        s[S_YM, l] = yl
+        for j in range(nr):
+            rl[0, j] = rrs[3, j, l]
+        if k == 0:
+            _CTRL_INIT(iq, cs, yl)
+        u_before = cs[C_UPREV]
+        if iofl:
+            nfx = _PNF(z[:_N, l].copy(), pn[:, l].copy())
+            uc = _IOFL_COMMAND(iq, q[l], rl, 0, cs, C_PROF, nfx, rl[0, rho])
+            uc = _SATURATE(uc, q[l, L.F_UMIN], q[l, L.F_UMAX])
+            cs[C_UPREV] = uc
         else:
-            for j in range(nza):
-                acc[j] = kd[j]
-                zt[j] = z[j] + hdt * kd[j]
-            _PLANT_DERIV((k + 0.5) * dt, zt, kd, p, ua, d, rrs[1, 0], xb)
-            for j in range(nza):
-                acc[j] += 2.0 * kd[j]
-                zt[j] = z[j] + hdt * kd[j]
-            _PLANT_DERIV((k + 0.5) * dt, zt, kd, p, ua, d, rrs[1, 0], xb)
-            for j in range(nza):
-                acc[j] += 2.0 * kd[j]
-                zt[j] = z[j] + dt * kd[j]
-            _PLANT_DERIV((k + 1) * dt, zt, kd, p, ua, d, rrs[2, 0], xb)
-            for j in range(nza):
-                z[j] += sixth * (acc[j] + kd[j])
-                zt[j] = z[j]
-        bad = not abs(ua) < threshold
-        for j in range(nza):
-            if not abs(z[j]) < threshold:  # also catches NaN
-                bad = True
+            uc = _CTRL_STEP(iq, q[l], dsc, cs, ctrl[2, l], yl, rl, 0)
+        ua = u_before if dsc[D_DELAY] > 0.0 else uc
+        uq = dsc[D_UQ]
+        s[S_U, l] = uq * np.floor(ua / uq + 0.5) if uq > 0.0 else ua
+
+
+def _tpl_plant_deriv(t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - compiled
+    """The plant under the held command ``s[S_U]`` and the integrands of eq. (22), every
+    lane (the time loop's right-hand side between samples); y into ``s[S_Y]``."""
+    _BLK_PLANT_OUTPUT(z, p, s[S_Y])
+    dx = _LEADING_ROWS(dz, _N)
+    _BLK_PLANT(z, p, s[S_U], dx)
+    if dany:
+        _BLK_DISTURBANCE(z, p, s[S_D], dx)
+    m0 = _N
+    r = rr[ri, 0]
+    _BLK_METRICS(t, s[S_Y], r, s[S_U], dz[m0], dz[m0 + 1], dz[m0 + 2], dz[m0 + 3], dz[m0 + 4])
+
+
+def _tpl_controller_bad(rho, ntd, threshold, s, ctrl):  # pragma: no cover - compiled
+    """Adds to ``s[S_BAD, l]`` when lane l's command, ESO prediction or differentiator
+    state leaves ``|.| < threshold`` (or is NaN)."""
+    for l in range(_W):
+        cs = ctrl[1, l]
+        bad = not abs(s[S_U, l]) < threshold
         for j in range(C_P, C_P + rho + 1):  # (the first is p_1 - y)
-            if not abs(cs[j]) < threshold:
-                bad = True
+            bad = bad or not abs(cs[j]) < threshold
         for j in range(ntd):
-            if not abs(cs[C_TD + j]) < threshold:
-                bad = True
+            bad = bad or not abs(cs[C_TD + j]) < threshold
         if bad:
-            status[mi] = L.STATUS_DIVERGED
-            t_div[mi] = (k + 1) * dt
-            break
-    for j in range(L.N_METRIC):
-        metrics[mi, j] = z[_N + j]
-    if store:
-        for rw in range(row, tr.shape[1]):
-            for j in range(tr.shape[2]):
-                tr[mi, rw, j] = np.nan
-    _KEEP_ALIVE(work_owner, iq_owner, rr_owner)
+            s[S_BAD, l] += 1.0
+
+
+def _tpl_store_controller(which, j, rho, ntd, exact, l, z, iq, rrs, ctrl):  # pragma: no cover
+    """Trajectory column j of lane l: the ESO estimate ξ̂_{j+1} after the last sample's
+    correction (``which`` 0; 0 for the IOFL law, which has none) or the profile r_{j+1}
+    the last sample used (``which`` 1; the reference's derivative for the exact TD)."""
+    cs = ctrl[1, l]
+    if which == 0:
+        return cs[C_X + j] if j <= rho and iq[IQ_LAW] != L.LAW_IOFL else 0.0
+    if exact and j < rho:
+        return rrs[3, j, l]
+    if j < ntd:
+        return cs[C_PROF + j]
+    return 0.0
 
 
 # ------------------------------------------------------------------------------ building
 def _bind(ns: dict[str, Any], cd: Any = None) -> None:
     """Add this module's layout constants and the discrete component functions to ``ns``
     (those of ``cd``, default :mod:`aiofl.components.discrete`; the lane kernel passes its
-    private copies, see :func:`aiofl.engine.build.private_components`)."""
+    private copies, see :func:`aiofl.engine.bindings.private_components`)."""
     if cd is None:
         from aiofl.components import discrete as cd
 
@@ -457,68 +309,10 @@ def _opts() -> dict[str, Any]:
 
 def _sources() -> tuple[str, ...]:
     """Every kernel's sources, this module's and the discrete coefficient rows'."""
-    return (*build.engine_sources(), sys.modules[__name__].__file__, DS.__file__)
+    return (*bindings.engine_sources(), sys.modules[__name__].__file__, DS.__file__)
 
 
-def sampled_recipe(plant: Plant) -> compile_.Recipe:
-    """The recipe of the one-member sampled-data kernel of ``plant``: the scalar kernel's
-    namespace with the discrete components bound, the controller's init and update, the
-    plant's right-hand side (inlined) and the sampled time loop as entry."""
-    ns = build.plant_namespace(plant)
-    _bind(ns)
-    opts = _opts()
-    tpl = compile_.Template
-    return compile_.Recipe(
-        kind="sampled",
-        plant=plant,
-        bindings=ns,
-        templates=(
-            tpl("_KEEP_ALIVE", kernel._tpl_keep_alive),
-            tpl("_SETUP", kernel._tpl_setup, opts),
-            tpl("_REFERENCE", kernel._tpl_reference, opts),
-            tpl("_CTRL_INIT", _tpl_ctrl_init, opts),
-            tpl("_CTRL_STEP", _tpl_ctrl_step, opts),
-            tpl("_PLANT_DERIV", _tpl_plant_deriv, {"inline": "always", **opts}),
-        ),
-        entry=tpl("member", _tpl_member_sampled, {"nogil": True, **opts}),
-        sources=_sources(),
-    )
-
-
-def _build_sampled(plant: Plant) -> Any:
-    return compile_.build(sampled_recipe(plant), cache=cache_enabled()).entry
-
-
-_MEMBERS: dict[int, tuple[Plant, Any]] = {}
 _LOCK = threading.Lock()
-
-
-def sampled_member_for(plant: Plant) -> Any:
-    """The compiled sampled-data time loop of ``plant`` (built on first use, cached on disk
-    like the continuous kernel)."""
-    key = id(plant)
-    with _LOCK:
-        if key not in _MEMBERS or _MEMBERS[key][0] is not plant:
-            _MEMBERS[key] = (plant, _build_sampled(plant))
-        return _MEMBERS[key][1]
-
-
-def member_dispatch(
-    plant: Plant, continuous: Any, disc: NDArray[np.float64]
-) -> Callable[..., None]:
-    """A member function for :func:`aiofl.engine.build.run_members` that runs member i
-    sampled when ``disc[i, D_STEPS] > 0`` and with ``continuous`` otherwise (the choice is
-    made once per member, in Python; the time loops are compiled)."""
-    sampled = sampled_member_for(plant)
-    steps = disc[:, D_STEPS]
-
-    def member(i: int, *args: Any) -> None:
-        if steps[i] > 0:
-            sampled(i, *args, disc)
-        else:
-            continuous(i, *args)
-
-    return member
 
 
 _STANDALONE: list[SimpleNamespace] = []
@@ -528,8 +322,8 @@ def _standalone() -> SimpleNamespace:
     """The controller update compiled without a plant (for :class:`DiscreteController`)."""
     with _LOCK:
         if not _STANDALONE:
-            ns = dict(vars(kernel))
-            ns.update(_N=1, _N_P=1, _NZ=1, **build.component_functions())
+            ns = dict(vars(member))
+            ns.update(_N=1, _N_P=1, _NZ=1, **bindings.component_functions())
             _bind(ns)
             opts = _opts()
             tpl = compile_.Template
@@ -538,7 +332,7 @@ def _standalone() -> SimpleNamespace:
                 plant=None,
                 bindings=ns,
                 templates=(
-                    tpl("_SETUP", kernel._tpl_setup, opts),
+                    tpl("_SETUP", member._tpl_setup, opts),
                     tpl("_CTRL_INIT", _tpl_ctrl_init, opts),
                 ),
                 entry=tpl("_CTRL_STEP", _tpl_ctrl_step, opts),

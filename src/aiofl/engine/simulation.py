@@ -1,13 +1,16 @@
 """Simulating closed loops: the Python-facing API of the compiled, batched engine.
 
 :func:`simulate_batch` packs a *batch* of members (one row each of controller,
-plant-parameter and scenario arrays) and runs them in one call of the plant's compiled
-kernel (:mod:`aiofl.engine.build`), in parallel; :func:`simulate` is a batch of one.  The
-closed loop the kernel integrates (plant, tracking differentiator, ESO, state error feedback,
+plant-parameter, scenario and discrete-controller arrays: a :class:`~aiofl.engine.batch.Batch`),
+plans their groups (:func:`plan`: by timing, kinds and lane width), runs each group on the
+plant's compiled instance of the time loop (:mod:`aiofl.engine.loop`,
+:mod:`aiofl.engine.instances`) in parallel, and unpacks the outputs; :func:`simulate` is a
+batch of one.  The closed loop (plant, tracking differentiator, ESO, state error feedback,
 linearizing law and the performance integrals, RK4 or forward Euler) is described in
-:mod:`aiofl.engine.kernel`.  A member that diverges (its state non-finite or beyond
-``divergence_threshold``) is reported as such with the time, the others carry on; results
-come back as a :class:`BatchResult` (or a :class:`SimulationResult` per member).
+:mod:`aiofl.engine.continuous` and, sampled, :mod:`aiofl.engine.sampled`.  A member that
+diverges (its state non-finite or beyond ``divergence_threshold``) is reported as such with
+the time, the others carry on; results come back as a :class:`BatchResult` (or a
+:class:`SimulationResult` per member).
 :func:`closed_loop_rhs` evaluates the compiled right-hand side once, for cross-checks.
 """
 
@@ -23,8 +26,9 @@ from numpy.typing import NDArray
 from aiofl import layout as L
 from aiofl.components.metrics import OPIWeights, opi
 from aiofl.controller import Controller, ControllerBatch, controller_batch
-from aiofl.engine.build import kernel_for, run_members
-from aiofl.engine.discrete import D_STEPS, Sampling, sampling_rows
+from aiofl.engine.batch import Batch, Outputs
+from aiofl.engine.discrete import D_STEPS, N_DISC, Sampling, sampling_rows
+from aiofl.engine.instances import instance_for, plan_groups, run_groups
 from aiofl.plants.base import Plant
 from aiofl.scenario import Scenario, noise_sequence
 
@@ -154,13 +158,13 @@ def simulate_batch(
         multiples of ``dt`` (:mod:`aiofl.engine.sampled`).  Continuous members are
         unaffected.
     engine
-        ``"lanes"`` (default): continuous members run in groups of 32, one per SIMD lane
-        (:mod:`aiofl.engine.lanes`); ``"scalar"``: every member runs the one-member
-        kernel (:mod:`aiofl.engine.kernel`), the reference the lane kernel is checked
-        against.  Default: the environment variable ``AIOFL_ENGINE``, else ``"lanes"``.
-        Sampled members run in lanes too (:mod:`aiofl.engine.lanes_sampled`: the plant in
-        SIMD lanes, the controller lane by lane at the samples), or with ``"scalar"`` the
-        one-member sampled kernel (:mod:`aiofl.engine.sampled`).
+        ``"lanes"`` (default): members run in groups of 32, one per SIMD lane, or alone
+        (width 1) when their kind has few members (:mod:`aiofl.engine.instances`);
+        ``"scalar"``: every member alone, in the same time loop compiled with libm and
+        the components' fast-math flags, a differently-rounded check of the lane engine.
+        Default: the environment variable ``AIOFL_ENGINE``, else ``"lanes"``.  Sampled
+        members run the sampled instance of the same loop (the plant in lanes, the
+        controller lane by lane at the samples).
 
     Returns
     -------
@@ -229,67 +233,76 @@ def simulate_batch(
 
     n_save = n_steps // decimation + 1 if store else 0
     n_cols = len(L.trajectory_columns(n))
-    traj = np.empty((b, n_save, n_cols))  # rows after a divergence are set to NaN
-    metrics = np.zeros((b, L.N_METRIC))
-    status = np.zeros(b, dtype=np.int64)
-    t_div = np.zeros(b)
-    lane_members = np.arange(b) if engine == "lanes" else np.zeros(0, dtype=np.int64)
-    sampled_lanes = np.zeros(0, dtype=np.int64)
-    if disc is not None:
-        sampled_lanes = lane_members[disc[lane_members, D_STEPS] > 0]
-        lane_members = lane_members[disc[lane_members, D_STEPS] <= 0]
-    scalar_members = np.setdiff1d(np.arange(b), np.union1d(lane_members, sampled_lanes))
-    args = (
-        batch.ints,
-        batch.floats,
-        np.ascontiguousarray(p_before_d[rows]),
-        np.ascontiguousarray(p_after_d[rows]),
-        p_nom,
-        np.ascontiguousarray(scen_d[rows]),
-        np.ascontiguousarray(x0_d[rows]),
-        ref_d,
-        rows,
-        noise_d,
-        rows,
-        float(dt),
-        n_steps,
-        L.METHODS[method],
-        int(decimation),
-        bool(store),
-        float(divergence_threshold),
-        metrics,
-        status,
-        t_div,
-        traj,
+    batch_rec = Batch(
+        ints=batch.ints,
+        floats=batch.floats,
+        p_before=np.ascontiguousarray(p_before_d[rows]),
+        p_after=np.ascontiguousarray(p_after_d[rows]),
+        p_nom=p_nom,
+        scen=np.ascontiguousarray(scen_d[rows]),
+        x0=np.ascontiguousarray(x0_d[rows]),
+        ref_table=ref_d,
+        ref_row=rows,
+        noise_table=noise_d,
+        noise_row=rows,
+        disc=disc if disc is not None else np.zeros((b, N_DISC)),
+        dt=float(dt),
+        n_steps=int(n_steps),
+        method=int(L.METHODS[method]),
+        decimation=int(decimation),
+        store=bool(store),
+        threshold=float(divergence_threshold),
     )
-    if lane_members.size or sampled_lanes.size:
-        from aiofl.engine.lanes_build import lane_kernel_for, plan_groups, run_groups
-
-        ref_kind = scen_d[rows, L.S_REF_KIND]
-        for width, groups in plan_groups(batch.ints, ref_kind, lane_members).items():
-            run_groups(lane_kernel_for(plant, width), groups, *args)
-        if disc is not None and sampled_lanes.size:
-            steps = disc[:, D_STEPS]
-            plan = plan_groups(batch.ints, ref_kind, sampled_lanes, steps)
-            for width, groups in plan.items():
-                group_fn = lane_kernel_for(plant, width, sampled_data=True)
-                run_groups(group_fn, groups, *args, disc)
-    if scalar_members.size:  # the scalar engine
-        member = kernel_for(plant).member
-        if disc is not None:
-            from aiofl.engine.sampled import member_dispatch
-
-            member = member_dispatch(plant, member, disc)
-        subset = None if scalar_members.size == b else scalar_members
-        run_members(member, scalar_members.size, *args, indices=subset)
+    out = Outputs(
+        metrics=np.zeros((b, L.N_METRIC)),
+        status=np.zeros(b, dtype=np.int64),
+        t_div=np.zeros(b),
+        traj=np.empty((b, n_save, n_cols)),  # rows after a divergence are set to NaN
+    )
+    run_plan(plant, plan(batch_rec, engine), batch_rec, out, engine)
     return BatchResult(
-        metrics=metrics,
-        diverged=status == L.STATUS_DIVERGED,
-        diverged_at=t_div,
-        trajectories=traj if store else None,
+        metrics=out.metrics,
+        diverged=out.status == L.STATUS_DIVERGED,
+        diverged_at=out.t_div,
+        trajectories=out.traj if store else None,
         columns=L.trajectory_columns(n),
         dt=float(dt),
     )
+
+
+def plan(batch: Batch, engine: str = "lanes") -> dict[tuple[int, bool], NDArray[np.int64]]:
+    """The groups to run, by (lane width, sampled): continuous and sampled members apart,
+    grouped by kinds (:func:`aiofl.engine.instances.plan_groups`); with ``engine="scalar"``
+    every member alone (width 1)."""
+    steps = batch.disc[:, D_STEPS]
+    sampled = steps > 0
+    out: dict[tuple[int, bool], NDArray[np.int64]] = {}
+    ref_kind = batch.scen[:, L.S_REF_KIND]
+    for is_sampled in (False, True):
+        members = np.flatnonzero(sampled == is_sampled)
+        if not members.size:
+            continue
+        if engine == "scalar":
+            out[(1, is_sampled)] = members.reshape(-1, 1)
+            continue
+        by_steps = steps if is_sampled else None
+        for width, groups in plan_groups(batch.ints, ref_kind, members, by_steps).items():
+            out[(width, is_sampled)] = groups
+    return out
+
+
+def run_plan(
+    plant: Plant,
+    groups_by_instance: dict[tuple[int, bool], NDArray[np.int64]],
+    batch: Batch,
+    out: Outputs,
+    engine: str = "lanes",
+) -> None:
+    """Run every planned group on its instance (compiled on first use)."""
+    variant = "scalar" if engine == "scalar" else "lanes"
+    for (width, is_sampled), groups in groups_by_instance.items():
+        inst = instance_for(plant, width, sampled_data=is_sampled, variant=variant)
+        run_groups(inst.entry, groups, batch, out)
 
 
 ENGINES = ("lanes", "scalar")
@@ -369,7 +382,7 @@ def closed_loop_rhs(
         ``dx``, ``dtd``, ``dxi``, ``dmetrics`` (ITAE, IAE, ISE, ISU, IAU integrands) and the
         signals ``r``, ``y``, ``y_meas``, ``u``, ``d``.
     """
-    kernel = kernel_for(plant)
+    evaluate = instance_for(plant, 1).namespace["_EVAL"]
     n = plant.n_states
     rho = controller.rho
     n_td = {"exact": 0, "han": 2, "improved": 2, "linear": rho}[controller.td]
@@ -390,19 +403,28 @@ def closed_loop_rhs(
     z[o_eso : o_eso + xi_v.size] = xi_v
     dz = np.zeros(nz)
     sig = np.zeros(5)
-    kernel.evaluate(
-        batch.ints,
-        batch.floats,
-        p,
-        p_nom,
-        scenario.row()[None, :],
-        np.asarray([samples], dtype=float),
-        float(t),
-        z,
-        float(noise),
-        dz,
-        sig,
+    one = np.zeros(1, dtype=np.int64)
+    rec = Batch(
+        ints=batch.ints,
+        floats=batch.floats,
+        p_before=p_nom[None, :],
+        p_after=p[None, :],  # the parameters the right-hand side is evaluated with
+        p_nom=p_nom[None, :],
+        scen=scenario.row()[None, :],
+        x0=np.zeros((1, n)),
+        ref_table=np.asarray([samples], dtype=float),
+        ref_row=one,
+        noise_table=np.zeros((1, 1)),
+        noise_row=one,
+        disc=np.zeros((1, N_DISC)),
+        dt=1.0,
+        n_steps=0,
+        method=0,
+        decimation=1,
+        store=False,
+        threshold=1.0,
     )
+    evaluate(rec, float(t), z, float(noise), dz, sig)
     return {
         "dx": dz[:n].copy(),
         "dmetrics": dz[n : n + L.N_METRIC].copy(),

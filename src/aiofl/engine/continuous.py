@@ -1,0 +1,200 @@
+r"""The continuous controller: its blocks in the stage right-hand side of the time loop.
+
+A continuous member's closed loop is one ODE :math:`\dot z = F(t, z)`, with
+
+    z = [ x (n) | ITAE IAE ISE ISU IAU | TD state (0, 2 or ρ) | ESO state ξ̂ (ρ+1) ]
+
+(only the active part is integrated).  :func:`_tpl_deriv` is F for every lane of a group,
+bound as the time loop's ``_RHS`` (:mod:`aiofl.engine.loop`); :func:`_tpl_setup` fills
+the group's per-member constants; :func:`_tpl_store_controller` gives the trajectory's
+observer and differentiator columns; :func:`_tpl_evaluate` evaluates F once at a given
+state (:func:`aiofl.engine.simulation.closed_loop_rhs`, for cross-checks).
+
+Component kinds are uniform within a group (the batch is grouped by kinds), so the
+branches on kinds are taken here, outside the lane loops.  The classical IOFL law needs the
+plant's normal form (an array per call), which cannot be vectorized: an IOFL group
+evaluates its law lane by lane with :func:`aiofl.engine.member._iofl_command`.
+
+This module's source is part of the cache fingerprint of every kernel.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from aiofl import layout as L
+from aiofl.engine.loop import N_S, S_D, S_E, S_NOISE, S_RFF, S_U, S_V, S_Y, S_YM
+from aiofl.engine.member import (
+    IQ_ESO,
+    IQ_LAW,
+    IQ_M,
+    IQ_NZ,
+    IQ_OESO,
+    IQ_OTD,
+    IQ_RHO,
+    IQ_SEF,
+    IQ_TD,
+    N_IQ,
+    N_Q,
+    Q_BETA,
+    Q_LINK,
+    Q_PF,
+    Q_SLOPE,
+    SWITCH_RTOL,
+)
+
+# Placeholders for what an instance binds (see aiofl.engine.instances).
+_W = 32
+_N = 1
+_N_P = 1
+_NZ = 1
+_MEMBER_SETUP = _SETUP = _LEADING_ROWS = _REFERENCE = _RHS = None
+_BLK_HAN = _BLK_ITD = _BLK_PREFILTER_START = _BLK_PREFILTER_TERM = _BLK_COPY = None
+_BLK_FILL = _BLK_OUTPUT = _BLK_ERROR = _BLK_FAL = _BLK_INLSEF = _BLK_LINEAR_TERM = None
+_BLK_INLSEF_LIMIT = _BLK_LINEAR_SEF = _BLK_LAW = _BLK_IOFL = _BLK_ESO_ERROR = None
+_BLK_INLESO_ERROR = _BLK_ESO_ROW = _BLK_ESO_INPUT = _BLK_ESO_LAST = _BLK_PLANT = None
+_BLK_DISTURBANCE = _BLK_METRICS = None
+
+
+def _tpl_deriv(t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - compiled
+    r"""F(t, z) of every lane: ``dz[:nz, l]`` and the signals y, y_meas, u in ``s``.
+
+    In order: the differentiator's profile :math:`r_1..r_\rho` (Han's TD, eq. 18; the ITD,
+    eq. 21; a linear prefilter; or the reference's exact derivatives ``rr[ri]``), the
+    measurement :math:`y_m = h(x) + n`, the SEF (17), (20) or linear on
+    :math:`e_i = r_i - \hat\xi_i` and the law :math:`u = v - \hat\xi_{\rho+1}/b_0`
+    (14), saturated (or the classical IOFL law on the nominal model), the ESO (5)/(16) or
+    (19), the plant :math:`\dot x = f(x) + g(x)u + b_d(x)\tau_d` and the integrands of
+    eq. (22).  Each formula is a lane block (:mod:`aiofl.engine.lane_blocks`)."""
+    rho = iq[IQ_RHO]
+    m = iq[IQ_M]
+    o_td = iq[IQ_OTD]
+    o_eso = iq[IQ_OESO]
+    td_kind = iq[IQ_TD]
+    exact = td_kind == L.TD_EXACT
+    r = rr[ri, 0]
+    rff = s[S_RFF]
+    e = s[S_E]
+    v = s[S_V]
+    u = s[S_U]
+
+    # reference profile r_1..r_rho and feed-forward r^(rho)
+    if td_kind == L.TD_HAN:  # eq. (18)
+        _BLK_HAN(z, dz[o_td], dz[o_td + 1], q, r, o_td, rff)
+    elif td_kind == L.TD_IMPROVED:  # eq. (21)
+        _BLK_ITD(z, dz[o_td], dz[o_td + 1], q, r, o_td, rff)
+    elif td_kind == L.TD_LINEAR:
+        _BLK_PREFILTER_START(z[o_td], q[Q_PF], r, rff)
+        for i in range(1, rho):
+            _BLK_PREFILTER_TERM(z[o_td + i], q[Q_PF + i], dz[o_td + i - 1], rff)
+        _BLK_COPY(rff, dz[o_td + rho - 1])
+    else:
+        _BLK_COPY(rr[ri, rho], rff)
+
+    _BLK_OUTPUT(z, p, s[S_NOISE], s[S_Y], s[S_YM])
+
+    # state error feedback and law (kernel._aiofl_command), e_i = r_i - ξ̂_i
+    if iq[IQ_LAW] == L.LAW_AIOFL:
+        sef_kind = iq[IQ_SEF]
+        _BLK_FILL(v, 0.0)
+        for i in range(m):
+            _BLK_ERROR(rr[ri, i] if exact else z[o_td + i], z[o_eso + i], e)
+            if sef_kind == L.SEF_NONLINEAR:  # eq. (17)
+                k, alpha = q[L.F_SEF_K + i], q[L.F_SEF_ALPHA + i]
+                _BLK_FAL(k, alpha, q[L.F_SEF_DELTA + i], q[Q_SLOPE + i], e, v)
+            elif sef_kind == L.SEF_IMPROVED:  # eq. (20)
+                k, kb = q[L.F_SEF_K + i], q[L.F_SEF_KB + i]
+                _BLK_INLSEF(k, kb, q[L.F_SEF_MU + i], q[L.F_SEF_ALPHA + i], e, v)
+            else:
+                _BLK_LINEAR_TERM(q[Q_LINK + i], e, v)
+        if sef_kind == L.SEF_IMPROVED:
+            _BLK_INLSEF_LIMIT(q[L.F_SEF_DOUT], v)
+        elif sef_kind == L.SEF_LINEAR:
+            _BLK_LINEAR_SEF(q[L.F_B0], rff, v)
+        _BLK_LAW(v, z[o_eso + rho], q[L.F_B0], q[L.F_UMIN], q[L.F_UMAX], u)
+    else:
+        _BLK_IOFL(z, iq, q, pn, rr, ri, o_td, rff, u)
+
+    # observer, eqs. (5)/(16) or (19)
+    if iq[IQ_ESO] == L.ESO_IMPROVED:
+        _BLK_INLESO_ERROR(s[S_YM], z[o_eso], q[L.F_KA], q[L.F_KB], q[L.F_EA], q[L.F_EB], e)
+    else:
+        _BLK_ESO_ERROR(s[S_YM], z[o_eso], e)
+    for i in range(rho):
+        _BLK_ESO_ROW(z[o_eso + i + 1], q[Q_BETA + i], e, dz[o_eso + i])
+    _BLK_ESO_INPUT(q[L.F_B0], u, dz[o_eso + rho - 1])
+    _BLK_ESO_LAST(q[Q_BETA + rho], e, dz[o_eso + rho])
+
+    dx = _LEADING_ROWS(dz, _N)
+    _BLK_PLANT(z, p, u, dx)
+    if dany:
+        _BLK_DISTURBANCE(z, p, s[S_D], dx)
+    m0 = _N
+    _BLK_METRICS(t, s[S_Y], r, u, dz[m0], dz[m0 + 1], dz[m0 + 2], dz[m0 + 3], dz[m0 + 4])
+
+
+def _tpl_setup(lanes, batch, q, qt, iq, ctrl):  # pragma: no cover - compiled
+    """Per-lane constants ``q[:, l]`` of the group's members
+    (:func:`aiofl.engine.member._tpl_setup`); ``iq`` from its first lane (kinds and sizes
+    are uniform within a group).  Returns 0 (no samples)."""
+    for l in range(_W):
+        _MEMBER_SETUP(batch.ints[lanes[l]], batch.floats[lanes[l]], qt, iq)
+        for i in range(N_Q):
+            q[i, l] = qt[i]
+    _MEMBER_SETUP(batch.ints[lanes[0]], batch.floats[lanes[0]], qt, iq)
+    return 0
+
+
+def _tpl_store_controller(which, j, rho, ntd, exact, l, z, iq, rrs, ctrl):  # pragma: no cover
+    """Trajectory column j of lane l: the ESO estimate ξ̂_{j+1} (``which`` 0) or the
+    differentiator's profile r_{j+1} (``which`` 1; the reference's derivative for the
+    exact TD), 0 beyond the member's order."""
+    if which == 0:
+        return z[iq[IQ_OESO] + j, l] if j <= rho else 0.0
+    if exact and j < rho:
+        return rrs[0, j, l]
+    if j < ntd:
+        return z[iq[IQ_OTD] + j, l]
+    return 0.0
+
+
+def _tpl_evaluate(batch, t, zin, noise_val, dz_out, sig):  # pragma: no cover - compiled
+    """F(t, z) of member 0 at the state ``zin`` (width-1 instance): ``dz_out`` and the
+    signals r, y, y_meas, u, d into ``sig``; returns the TD and ESO offsets and the length
+    of the active state."""
+    nr = L.RHO_MAX + 2
+    q = np.zeros((N_Q, 1))
+    qt = np.zeros(N_Q)
+    iq = np.zeros(N_IQ, dtype=np.int64)
+    lanes = np.zeros(1, dtype=np.int64)
+    _SETUP(lanes, batch, q, qt, iq, q)
+    sc = np.zeros((L.N_SCEN, 1))
+    for j in range(L.N_SCEN):
+        sc[j, 0] = batch.scen[0, j]
+    s = np.zeros((N_S, 1))
+    rr = np.zeros((3, nr, 1))
+    rrow = np.zeros(1, dtype=np.int64)
+    nd = iq[IQ_RHO] if iq[IQ_TD] == L.TD_EXACT else 0
+    _REFERENCE(t, t, sc, batch.ref_table, rrow, rr, 0, nd, int(sc[L.S_REF_KIND, 0]), s)
+    z = np.zeros((_NZ, 1))
+    dz = np.zeros((_NZ, 1))
+    for i in range(_NZ):
+        z[i, 0] = zin[i]
+    p = np.zeros((_N_P, 1))
+    pn = np.zeros((_N_P, 1))
+    for j in range(_N_P):
+        p[j, 0] = batch.p_after[0, j]
+        pn[j, 0] = batch.p_nom[0, j]
+    s[S_NOISE, 0] = noise_val
+    on = t >= sc[L.S_DIST_TIME, 0] * (1.0 - SWITCH_RTOL)
+    s[S_D, 0] = sc[L.S_DIST_AMP, 0] if on else 0.0
+    _RHS(t, z, dz, iq, q, p, pn, rr, 0, s, s[S_D, 0] != 0.0)
+    for i in range(_NZ):
+        dz_out[i] = dz[i, 0]
+    sig[0] = rr[0, 0, 0]
+    sig[1] = s[S_Y, 0]
+    sig[2] = s[S_YM, 0]
+    sig[3] = s[S_U, 0]
+    sig[4] = s[S_D, 0]
+    return iq[IQ_OTD], iq[IQ_OESO], iq[IQ_NZ]
+

@@ -1,0 +1,457 @@
+"""Engine instances: every compiled kernel the engine runs, and running a batch on them.
+
+An *instance* is the time loop of :mod:`aiofl.engine.loop` compiled for one plant with
+compile-time choices (:func:`recipe`, built by :mod:`aiofl.engine.compile`):
+
+- the lane width ``W``: 32 (groups of members, one per SIMD lane) or 1 (a lone member);
+- the timing: continuous (the controller's blocks in the stage right-hand side,
+  :mod:`aiofl.engine.continuous`) or sampled (the discrete controller at the samples,
+  :mod:`aiofl.engine.sampled`);
+- the variant: ``"lanes"`` (the default engine: branch-free vector math, strict IEEE
+  arithmetic, so a member's numbers are bitwise the same at any width), ``"scalar"``
+  (``engine="scalar"``: width 1 with libm and the components' fast-math flags, a
+  differently-rounded check of the same code), or ``"guarded"`` (the diagnostic instance
+  whose plant functions report which of them raised, at which state).
+
+In the lane variant the plant's f, g, h, b_d and the controller's component functions are
+compiled *inlined* into the lane blocks (numba IR inlining) with ``exp``/``log``/``sin``/
+``cos`` rebound to :mod:`aiofl.components.vecmath`
+(:func:`aiofl.engine.bindings.vector_math_globals`), so the loops over lanes vectorize.
+:func:`instance_for` builds an instance on first use (one per plant and choice per process;
+across processes the disk cache of :mod:`aiofl.engine.compile` skips the compile); only the
+instances a batch needs are built.
+
+:func:`plan_groups` splits a batch into groups with uniform component kinds (ESO, TD, SEF and
+law kinds, ρ, the feedback length, the ESO start, the reference kind and, for sampled
+members, the steps per sample), in batch order, padding the last group of each kind with -1;
+:func:`run_groups` runs them on ``numba.get_num_threads()`` threads: the compiled loop
+releases the GIL and each thread claims the next unclaimed group, so a group that diverges
+early frees its core at once.  Members are independent, so a member's numbers do not depend
+on the batch it is in, the thread count or the scheduling (bitwise).
+
+**User plants that fail.**  A plant whose functions are defined outside aiofl is
+type-checked (:meth:`aiofl.plants.base.Plant.typecheck`) before its instance is compiled
+when it is not loaded from the disk cache, and again whenever compiling fails, so a
+function numba cannot compile, or one that returns complex numbers, is a
+:class:`~aiofl.plants.base.PlantError` naming the plant and the function, not a numba
+traceback.  At run time a division by zero or a math domain error in a plant function gives
+inf/NaN (numba's ``numpy`` error model), which the loop reports as the member diverging at
+that time.  A plant function that *raises* stops the run: :func:`run_groups` then replays
+the group's members one by one in the guarded instance and raises a PlantError
+``plant function f failed at state x = [...]: ValueError: ...``.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import itertools
+import sys
+import threading
+import types
+from collections.abc import Iterator
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from aiofl import layout as L
+from aiofl.cache import cache_enabled
+from aiofl.engine import bindings, continuous, lane_blocks, loop, member, sampled, views
+from aiofl.engine import compile as compile_
+from aiofl.engine.bindings import PLANT_FUNCTIONS, PlantFailure
+from aiofl.engine.sampled import N_CS
+from aiofl.plants.base import Plant, PlantError
+
+__all__ = ["VARIANTS", "instance_for", "plan_groups", "recipe", "run_groups"]
+
+VARIANTS = ("lanes", "scalar", "guarded")
+"""The ways an instance's code is compiled (see the module notes)."""
+
+_INSTANCES: dict[tuple[int, int, bool, str], tuple[Plant, compile_.Instance]] = {}
+_LOCK = threading.Lock()
+_PLANT_OF_ENTRY: dict[int, tuple[Plant, bool]] = {}  # id(entry) -> (plant, sampled)
+
+
+def _plant_function(fn: Any, variant: str) -> Any:
+    """A plant function as an instance binds it: a private copy, with vector math and
+    inlined where called (``"lanes"``), else as written (libm, called)."""
+    py = getattr(fn, "py_func", fn)
+    if variant == "lanes":
+        space = bindings.vector_math_globals(py.__globals__)
+        return compile_.rejit(py, space, inline="always", error_model="numpy")
+    return compile_.rejit(py, error_model="numpy")
+
+
+def _noalias_option() -> dict[str, Any]:
+    """``{"_noalias": True}``: compile a function with LLVM's ``noalias`` on its pointer
+    arguments, or ``{}`` where this numba cannot.
+
+    Without it LLVM must assume that two array arguments of a lane block may overlap, and
+    does not vectorize a loop of 8 lanes that stores into one and loads from the other (the
+    run-time overlap check costs more than the loop).  numba sets this flag only for its
+    parallel gufuncs (``Flags.noalias``); the CPU target's option table maps decorator
+    keywords to flags, and this adds the mapping ``_noalias -> noalias`` to it (nothing
+    else changes: a function compiled without the keyword is compiled as before).  Every
+    block is called with arrays that do not overlap (distinct rows of the group's
+    workspace), which is what ``noalias`` promises.  If a future numba lacks the flag or
+    the table, the blocks compile without it: the same numbers, unvectorized.
+    """
+    try:
+        from numba.core.compiler import Flags
+        from numba.core.cpu import CPUTargetOptions
+        from numba.core.options import TargetOptions
+    except ImportError:  # pragma: no cover - numba internals moved
+        return {}
+    if not hasattr(Flags, "noalias"):  # pragma: no cover
+        return {}
+    if not isinstance(getattr(CPUTargetOptions, "_noalias", None), TargetOptions.Mapping):
+        CPUTargetOptions._noalias = TargetOptions.Mapping("noalias")
+    return {"_noalias": True}
+
+
+_HEAVY = frozenset({"_IOFL_COMMAND", "_SIN", "_COS", "_HAN_TD", "_ITD"})
+"""The component functions whose lane blocks stay calls in the width-1 instance.
+
+With one lane there is no loop to vectorize and a call per formula cost ~40 % of a lone
+member's time, so the width-1 instance inlines its blocks into the step, all but those
+calling one of these: the IOFL law (large), the reference's sine and cosine and the
+tracking differentiators (once per step or cheap: inlining them too took the first compile
+of paper-s1-inleso from 20 to 26 s and gave no measurable gain).  Inlining fal, the linear
+SEF, the law and the saturation took a lone LESO member from 65 to 40 ms (20-s S1; the
+scalar engine: 37-41 ms); inlining the INLESO structure's components (INLESO, the INLSEF
+terms and limit, each holding several exp/log) took a lone INLESO member from 0.75 to
+0.96 of the scalar engine's speed, for a first compile of 15 -> 20 s.  Strict IEEE
+arithmetic rounds alike inlined or not: the numbers stay those of the width-32
+instance."""
+_LIGHT = {"inline": "always"}
+
+
+_HEAVY = frozenset({"_IOFL_COMMAND", "_SIN", "_COS", "_HAN_TD", "_ITD"})
+"""The component functions whose lane blocks stay calls in the width-1 lane instance.
+
+With one lane there is no loop to vectorize and a call per formula cost ~40 % of a lone
+member's time, so the width-1 instance inlines its blocks into the step, all but those
+calling one of these: the IOFL law (large), the reference's sine and cosine and the
+tracking differentiators (once per step or cheap: inlining them too took the first compile
+of paper-s1-inleso from 20 to 26 s and gave no measurable gain).  Inlining fal, the linear
+SEF, the law and the saturation took a lone LESO member from 65 to 40 ms (20-s S1); inlining
+the INLESO structure's components (INLESO, the INLSEF terms and limit, each holding several
+exp/log) took a lone INLESO member from 0.75 to 0.96 of the scalar engine's speed, for a
+first compile of 15 -> 20 s.  Strict IEEE arithmetic rounds alike inlined or not: the
+numbers stay those of the width-32 instance."""
+
+
+def _sources(sampled_data: bool) -> tuple[str, ...]:
+    """Source files of an instance: every kernel's, the loop, the lane blocks, the
+    controller's module, this module and the vector math (and, sampled, the discrete
+    components and coefficient rows)."""
+    from aiofl.components import vecmath, vecmath_tables
+    from aiofl.engine import discrete
+
+    here = sys.modules[__name__]
+    mods = [loop, lane_blocks, continuous, here, vecmath, vecmath_tables]
+    if sampled_data:
+        mods += [sampled, discrete]
+    return (*bindings.engine_sources(), *(m.__file__ for m in mods))
+
+
+def _imported(obj: Any) -> bool:
+    """Whether a module global is an aiofl module or a compiled function (neither is called
+    by a template unless bound by its placeholder name)."""
+    from numba.core.dispatcher import Dispatcher
+
+    if isinstance(obj, types.ModuleType):
+        return obj.__name__.startswith("aiofl.") and obj is not L
+    return isinstance(obj, Dispatcher)
+
+
+def recipe(
+    plant: Plant, width: int, *, sampled_data: bool = False, variant: str = "lanes"
+) -> compile_.Recipe:
+    """The recipe of the instance of ``plant`` for groups of ``width``, continuous or
+    ``sampled_data``, compiled as ``variant`` (see the module notes)."""
+    from aiofl.components import vecmath
+    from aiofl.components.fastmath import FASTMATH
+
+    if variant not in VARIANTS:
+        raise ValueError(f"variant = {variant!r}; allowed: {', '.join(VARIANTS)}")
+    lanes = variant != "scalar"  # the guarded instance is a lane instance
+    private = "lanes" if lanes else "scalar"
+    fastmath = loop.LANE_FASTMATH if lanes else FASTMATH
+    opts = {"fastmath": fastmath, "error_model": "numpy"}
+    tpl = compile_.Template
+    # the per-member setup and the laws (aiofl.engine.member), compiled against this
+    # variant's private components (nothing shared with another variant's instances)
+    ns_member = dict(vars(member))
+    bindings.bind_private(ns_member, private)
+    ns_member.update(_N=plant.n_states, **bindings.component_functions(private))
+    member_setup = compile_.instantiate(member._tpl_setup, ns_member, variant, **opts)
+
+    fns = plant.compiled
+    if variant == "guarded":
+        n = plant.n_states
+        f, g, h, bd, nf = (bindings.guarded(fn, k, n) for k, fn in enumerate(fns))
+    else:
+        f, g, h, bd = (_plant_function(fn, variant) for fn in (plant.f, plant.g, plant.h, fns[3]))
+        nf = _plant_function(fns[4], "scalar")
+    # the templates' modules' globals (layout constants, placeholders), without the modules
+    # and compiled functions they import: an instance calls only what is bound below
+    merged = {**vars(lane_blocks), **vars(continuous), **vars(sampled), **vars(loop)}
+    ns = {k: v for k, v in merged.items() if not _imported(v)}
+    sin, cos = (vecmath.vsin, vecmath.vcos) if lanes else (np.sin, np.cos)
+    nza = plant.n_states + L.N_METRIC
+    ns.update(
+        _W=width,
+        _SAMPLED=sampled_data,
+        _N=plant.n_states,
+        _N_P=len(plant.params),
+        _NZ=nza if sampled_data else nza + 2 * L.RHO_MAX + 1,
+        _CONTROLLER_SIZE=max(N_CS, sampled.N_DISC) if sampled_data else 1,
+        _PF=f,
+        _PG=g,
+        _PH=h,
+        _PBD=bd,
+        _PNF=nf,
+        _MEMBER_SETUP=member_setup,
+        _IOFL_COMMAND=ns_member["_iofl_command"],
+        _UNMANAGED=views.unmanaged_intrinsic(),
+        _COLUMN=views.lane_column_intrinsic(),
+        _LEADING_ROWS=views.leading_rows_intrinsic(),
+        _SIN=sin,
+        _COS=cos,
+        **bindings.component_functions(private),
+    )
+    block_opts = {**opts, **(_noalias_option() if lanes else {})}
+    inline_all = width == 1 and variant == "lanes"
+    templates = []
+    for name, fn in vars(lane_blocks).items():  # each block its own function
+        if name.startswith("_blk_"):
+            light = inline_all and not set(fn.__code__.co_names) & _HEAVY
+            templates.append(tpl(name.upper(), fn, {**block_opts, **(_LIGHT if light else {})}))
+    inline = {"inline": "always", **opts}
+    templates.append(tpl("_KEEP_ALIVE", loop._tpl_keep_alive))
+    for name in ("assign_lanes", "load_lanes", "start_members", "stop_lane", "finish_lanes"):
+        templates.append(tpl(f"_{name.upper()}", getattr(loop, f"_tpl_{name}"), opts))
+    templates += [
+        tpl("_STEP_INPUTS", loop._tpl_step_inputs, inline),
+        tpl("_REFERENCE", loop._tpl_reference, inline),
+        tpl("_STORE_ROW", loop._tpl_store_row, opts),
+    ]
+    if sampled_data:
+        # the controller's update, compiled as the blocks are, in the members' namespace
+        ns_ctrl = dict(ns_member)
+        sampled._bind(ns_ctrl, bindings.private_components(private)["discrete"])
+        ns["_CTRL_INIT"] = compile_.instantiate(sampled._tpl_ctrl_init, ns_ctrl, variant, **opts)
+        ns["_CTRL_STEP"] = compile_.instantiate(sampled._tpl_ctrl_step, ns_ctrl, variant, **opts)
+        templates += [
+            tpl("_SETUP", sampled._tpl_setup, opts),
+            tpl("_SAMPLE", sampled._tpl_sample, opts),
+            tpl("_RHS", sampled._tpl_plant_deriv, inline),
+            tpl("_CONTROLLER_BAD", sampled._tpl_controller_bad, inline),
+            tpl("_STORE_CONTROLLER", sampled._tpl_store_controller, inline),
+        ]
+    else:
+        templates += [
+            tpl("_SETUP", continuous._tpl_setup, opts),
+            tpl("_RHS", continuous._tpl_deriv, inline),
+            tpl("_STORE_CONTROLLER", continuous._tpl_store_controller, inline),
+            tpl("_EVAL", continuous._tpl_evaluate, opts),
+        ]
+    return compile_.Recipe(
+        kind=f"{variant[0]}{'s' if sampled_data else 'c'}{width}",
+        plant=plant,
+        bindings=ns,
+        templates=tuple(templates),
+        entry=tpl("loop", loop._tpl_loop, {"nogil": True, **opts}),
+        sources=_sources(sampled_data),
+    )
+
+
+def instance_for(
+    plant: Plant, width: int = loop.WIDTH, *, sampled_data: bool = False, variant: str = "lanes"
+) -> compile_.Instance:
+    """The compiled instance of ``plant`` (see :func:`recipe`), built on first use in this
+    process; the guarded variant is never cached on disk."""
+    key = (id(plant), width, sampled_data, variant)
+    with _LOCK:
+        if key not in _INSTANCES or _INSTANCES[key][0] is not plant:
+            rec = recipe(plant, width, sampled_data=sampled_data, variant=variant)
+            inst = compile_.build(rec, cache=cache_enabled() and variant != "guarded")
+            if not inst.cached and bindings.user_functions(plant):
+                plant.typecheck()  # numba compiles them now rather than inside the kernel
+            _PLANT_OF_ENTRY[id(inst.entry)] = (plant, sampled_data)
+            _INSTANCES[key] = (plant, inst)
+        return _INSTANCES[key][1]
+
+
+def _by_kind(
+    ints: NDArray[np.int64],
+    ref_kind: NDArray[np.float64],
+    members: NDArray[np.int64],
+    steps: NDArray[np.float64] | None = None,
+) -> list[list[int]]:
+    """``members`` split by component kinds (the integer row, the reference kind and, for
+    sampled members, the steps per sample ``steps``), each list in batch order, the kinds
+    in order of first appearance."""
+    by_kind: dict[tuple[int, ...], list[int]] = {}
+    for i in members.tolist():
+        n_per = int(steps[i]) if steps is not None else 0
+        by_kind.setdefault((*(int(v) for v in ints[i]), int(ref_kind[i]), n_per), []).append(i)
+    return list(by_kind.values())
+
+
+def group_members(
+    ints: NDArray[np.int64],
+    ref_kind: NDArray[np.float64],
+    members: NDArray[np.int64],
+    width: int = loop.WIDTH,
+    steps: NDArray[np.float64] | None = None,
+) -> NDArray[np.int64]:
+    """Groups of :data:`~aiofl.engine.loop.WIDTH` members with uniform kinds.
+
+    Parameters
+    ----------
+    ints
+        The batch's integer rows (:data:`aiofl.layout.INT_NAMES`).
+    ref_kind
+        Each member's reference kind (scenario column ``S_REF_KIND``).
+    members
+        The members to group (indices into the batch), in the order to keep.
+    width
+        Lanes per group.
+    steps
+        Sampled members: each member's engine steps per sample (uniform within a group).
+
+    Returns
+    -------
+    ndarray of int64, shape (G, width)
+        Member indices per group, -1 for the pads of a group's last lanes.
+    """
+    w = width
+    rows: list[list[int]] = []
+    for group in _by_kind(ints, ref_kind, members, steps):
+        for start in range(0, len(group), w):
+            chunk = group[start : start + w]
+            rows.append(chunk + [-1] * (w - len(chunk)))
+    return np.array(rows, dtype=np.int64).reshape(len(rows), w)
+
+
+def plan_groups(
+    ints: NDArray[np.int64],
+    ref_kind: NDArray[np.float64],
+    members: NDArray[np.int64],
+    steps: NDArray[np.float64] | None = None,
+) -> dict[int, NDArray[np.int64]]:
+    """The groups to run, by lane width: members of a kind that fill at least half a group
+    of :data:`~aiofl.engine.loop.WIDTH` run in such groups (the last one padded), the
+    others in groups of one lane.  Either way a member's numbers are the same (bitwise).
+    ``steps``: as for :func:`group_members` (sampled members)."""
+    w = loop.WIDTH
+    kinds = _by_kind(ints, ref_kind, members, steps)
+    wide = [i for group in kinds if 2 * len(group) >= w for i in group]
+    narrow = [i for group in kinds if 2 * len(group) < w for i in group]
+    plan = {}
+    if wide:
+        plan[w] = group_members(ints, ref_kind, np.array(wide, dtype=np.int64), w, steps)
+    if narrow:
+        plan[1] = np.array(narrow, dtype=np.int64).reshape(-1, 1)
+    return plan
+
+
+def run_groups(
+    loop_fn: Any, groups: NDArray[np.int64], batch: Any, out: Any, *, compile_only: bool = False
+) -> None:
+    """Run ``loop_fn(g, groups, batch, out)`` for every group, on all threads.
+
+    The loop is compiled (or loaded from the disk cache) here, in the calling thread,
+    before any worker starts: with LLVM's SLP vectorizer on (:func:`_slp_on`).  Each
+    thread claims the next unclaimed group (dynamic scheduling, so groups that diverge
+    early do not leave a core idle); the numbers do not depend on the thread count.
+    """
+    import numba
+    from numba.core.errors import NumbaError
+
+    sig = tuple(numba.typeof(a) for a in (0, groups, batch, out))
+    if sig not in loop_fn.signatures:
+        try:
+            with _slp_on():
+                loop_fn.compile(sig)
+        except NumbaError:  # a user plant function numba cannot compile: say which
+            plant, _ = _PLANT_OF_ENTRY.get(id(loop_fn), (None, False))
+            if plant is not None and bindings.user_functions(plant):
+                plant.typecheck()
+            raise
+    if compile_only:
+        return
+    n_groups = len(groups)
+    n_threads = max(1, min(numba.get_num_threads(), n_groups))
+    claim = itertools.count()  # next() on a count is atomic under the GIL
+    errors: list[tuple[int, BaseException]] = []
+
+    def work() -> None:
+        g = -1
+        try:
+            while not errors:
+                g = next(claim)
+                if g >= n_groups:
+                    return
+                loop_fn(g, groups, batch, out)
+        except BaseException as exc:  # re-raised below
+            errors.append((g, exc))
+
+    threads = [threading.Thread(target=work, daemon=True) for _ in range(n_threads - 1)]
+    for th in threads:
+        th.start()
+    work()
+    for th in threads:
+        th.join()
+    if errors:
+        g, exc = errors[0]
+        if isinstance(exc, Exception):
+            _explain_failure(loop_fn, groups[g], exc, batch, out)
+        raise exc
+
+
+def _explain_failure(loop_fn: Any, group: Any, exc: Exception, batch: Any, out: Any) -> None:
+    """Raise a PlantError if a user plant's function caused ``exc`` (see the module notes):
+    the group's members are replayed one by one in the guarded instance; return otherwise,
+    so the caller re-raises ``exc`` with its traceback."""
+    plant, sampled_data = _PLANT_OF_ENTRY.get(id(loop_fn), (None, False))
+    if plant is None or not bindings.user_functions(plant):
+        return
+    guarded = instance_for(plant, 1, sampled_data=sampled_data, variant="guarded").entry
+    for m in (int(v) for v in group if v >= 0):
+        one = np.array([[m]], dtype=np.int64)
+        run_groups(guarded, one, batch, out, compile_only=True)
+        try:  # replay the member with every plant function reporting where it raised
+            guarded(0, one, batch, out)
+        except PlantFailure as failure:
+            index, *state = failure.args
+            raise PlantError(
+                f"plant {plant.name!r}: plant function {PLANT_FUNCTIONS[index]} failed at "
+                f"state x = {[float(v) for v in state]}: {type(exc).__name__}: {exc}"
+            ) from None
+        except Exception:  # not a plant function: the caller re-raises the original
+            return
+
+
+@contextlib.contextmanager
+def _slp_on() -> Iterator[None]:
+    """Compile with LLVM's SLP vectorizer, which numba leaves off by default.
+
+    A loop over 8 lanes is short enough that LLVM unrolls it completely before its loop
+    vectorizer runs; the SLP (straight-line) vectorizer then packs the 8 unrolled copies
+    into vector instructions.  numba reads ``config.SLP_VECTORIZE`` each time it builds the
+    optimisation pipeline of a library: it is switched on while the lane kernel compiles
+    (holding numba's compiler lock, so no other compilation sees it) and restored after.
+    """
+    from numba.core import config
+    from numba.core.compiler_lock import global_compiler_lock
+
+    with global_compiler_lock:
+        old = config.SLP_VECTORIZE
+        config.SLP_VECTORIZE = 1
+        try:
+            yield
+        finally:
+            config.SLP_VECTORIZE = old
