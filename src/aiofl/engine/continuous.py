@@ -197,4 +197,3 @@ def _tpl_evaluate(batch, t, zin, noise_val, dz_out, sig):  # pragma: no cover - 
     sig[3] = s[S_U, 0]
     sig[4] = s[S_D, 0]
     return iq[IQ_OTD], iq[IQ_OESO], iq[IQ_NZ]
-
