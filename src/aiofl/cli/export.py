@@ -4,6 +4,8 @@ Writes ``DIR/aiofl_controller.h`` and ``DIR/aiofl_controller.c`` (:mod:`aiofl.ex
 discrete controller the engine simulates with ``--ts`` / ``[controller.discrete]``.  A
 controller the C code cannot express (the IOFL law, which needs the plant model), a missing
 sample time or a bad option exits with status 2 and the reason; nothing is written then.
+The config's name, description and path go into the files' comment block only, made inert
+by :func:`aiofl.export.c_text.comment_text` inside :func:`aiofl.export.export_c`.
 """
 
 from __future__ import annotations

@@ -3,7 +3,8 @@
 A thin command over :mod:`aiofl.tuning`: it validates the input (exit status 2 and one
 message on bad input, :mod:`aiofl.cli.errors`), runs :func:`aiofl.tuning.search.tune` with
 a progress bar, a checkpoint in ``DIR`` and optional Dask evaluation, then writes the
-outputs (:func:`aiofl.tuning.results.write_outputs`) and prints a summary.  numpy, pymoo
+outputs (:func:`aiofl.tuning.results.write_outputs`: the results first, then the figures;
+what was left out is printed as a note) and prints a summary.  numpy, pymoo
 and the engine are imported inside the command, so registering it keeps ``aiofl --help``
 fast.
 """
@@ -58,7 +59,8 @@ def tune_command(
     convergence.png and summary.json (with algorithm = "nsga2" also the Pareto front,
     front.csv and front.png, best.toml being the design picked by `choose`);
     OUT/checkpoint.npz is updated after every generation so `--resume` continues a killed
-    run with the same final result.
+    run with the same final result.  The results are written before the figures; a figure
+    or marker that cannot be made is left out with a note.
     """
     from aiofl.tuning.checkpoint import CHECKPOINT, load_checkpoint
     from aiofl.tuning.results import write_outputs
@@ -102,18 +104,21 @@ def tune_command(
             raise typer.Exit(130) from None
         summary = write_outputs(result, out)
     full = summary["full_horizon"]
-    status = (
-        f"diverged at {full['diverged_at']:.3g} s"
-        if full["diverged"]
-        else (
+    if full is None:
+        status = "not computed (see the note)"
+    elif full["diverged"]:
+        status = f"diverged at {full['diverged_at']:.3g} s"
+    else:
+        status = (
             f"ITAE {full['itae']:.4g}, ISU {full['isu']:.4g}, IAU {full['iau']:.4g}, "
             f"OPI {full['opi']:.4g}"
         )
-    )
+    horizon = f"{full['t_final']:g} s" if full is not None else "its own horizon"
+    for note in summary["notes"]:
+        typer.echo(f"aiofl: note: {note}", err=True)
     typer.echo(
         f"best objective {result.best_objective:.6g} ({result.n_evaluations} evaluations, "
         f"{int(result.diverged.sum())} diverged, {result.evals_per_second:.1f} eval/s)\n"
-        f"best config over {full['t_final']:g} s: {status}\n"
-        f"wrote {out}/best.toml, history.csv, evaluations.csv, convergence.png, summary.json"
-        + (", front.csv, front.png" if result.front is not None else "")
+        f"best config over {horizon}: {status}\n"
+        f"wrote {out}/{', '.join(summary['files'])}"
     )

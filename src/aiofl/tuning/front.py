@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import csv
 import io
+import textwrap
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -177,7 +178,9 @@ def front_png(
     ``markers`` are labelled reference points (the paper's printed designs, the y ≡ 0
     controller); ``isu_floor`` draws the exact-tracking ISU floor as a vertical line when
     the second objective is an ISU (or a horizontal one when the first is); ``notes`` are
-    printed under the title (e.g. why the paper's designs are not shown).
+    printed under the title, one per line (e.g. why the paper's designs or the floor are
+    not shown).  Title and notes are plain text, never mathtext: a ``$`` in a config's path
+    or an error message cannot break the figure.
     """
     import matplotlib
 
@@ -211,7 +214,9 @@ def front_png(
         ax.set_yscale("log")
     ax.set_xlabel(front.objectives[1])
     ax.set_ylabel(front.objectives[0])
-    ax.set_title(title + ("\n" + "; ".join(notes) if notes else ""), fontsize=8)
+    # one line per note, wrapped; the text (a path, an error message) is not mathtext
+    lines = [title, *(ln for note in notes for ln in textwrap.wrap(note, 110))]
+    ax.set_title("\n".join(lines), fontsize=8, parse_math=False)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, loc="best")
     fig.tight_layout()

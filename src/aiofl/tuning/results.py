@@ -1,6 +1,13 @@
 """Writing a tuning run's outputs: best config, history, evaluations, plot and summary.
 
-:func:`write_outputs` writes, all or nothing (:func:`aiofl.outputs.atomic_output_dir`),
+:func:`write_outputs` writes the run's results first, all or nothing
+(:func:`aiofl.outputs.atomic_output_dir`): ``best.toml``, ``history.csv``,
+``evaluations.csv``, ``front.csv`` and ``summary.json`` are the search's own data and
+nothing is simulated or drawn before they are on disk.  Then it adds what is computed from
+them (the full-horizon record, ``convergence.png``, the front figure's reference markers
+and ``front.png``), each on its own: one that fails is left out with a note (in
+``summary.json``'s ``notes``, printed by ``aiofl tune``; a marker's note also under the
+front figure's title), so nothing after the search can lose the search.
 
 ``best.toml``
     The input config with the best parameters, loadable by ``aiofl simulate`` from any
@@ -17,14 +24,17 @@
     Best so far, generation best and median vs generation (:func:`convergence_png`).
 ``summary.json``
     Settings, budget, best values, and the best config's metrics over the tuning horizon
-    and over the config's own horizon (:func:`full_horizon_record`).
+    and over the config's own horizon (:func:`full_horizon_record`; ``null`` if it could
+    not be computed); ``notes``: what was left out and why, and the front figure's notes;
+    ``files``: the files written.
 ``front.csv``, ``front.png`` (``algorithm = "nsga2"`` only)
     The Pareto front and its figure (:mod:`aiofl.tuning.front`); ``best.toml`` is then the
     design chosen by ``[tune] choose``.  The figure marks the paper's printed designs
     (the ``paper-s{N}-{leso,inleso}`` presets whose plant and scenario tables equal the
     config's, simulated over the tuning horizon), the exact-tracking ISU floor
     (:func:`aiofl.analysis.exact_tracking.exact_tracking_cost`) and the y ≡ 0 controller
-    (:func:`reference_markers`).
+    (:func:`reference_markers`); a marker that cannot be computed (the floor of a step
+    reference, which no input tracks exactly) is left out with a note.
 """
 
 from __future__ import annotations
@@ -32,8 +42,9 @@ from __future__ import annotations
 import csv
 import io
 import json
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 
@@ -49,6 +60,21 @@ __all__ = [
     "reference_markers",
     "write_outputs",
 ]
+
+_T = TypeVar("_T")
+
+
+def _optional(notes: list[str], what: str, compute: Callable[[], _T]) -> _T | None:
+    """``compute()``, or None and a note ``"{what}: {error}"`` if it raises.
+
+    For outputs that are derived from a finished search and may be left out (a figure, a
+    reference marker, a re-simulation): their failure must not lose the search.
+    """
+    try:
+        return compute()
+    except Exception as exc:  # an optional output: left out with a note, never fatal
+        notes.append(f"{what}: {type(exc).__name__}: {exc}")
+        return None
 
 
 def _history_csv(result: TuneResult) -> str:
@@ -108,7 +134,7 @@ def convergence_png(result: TuneResult) -> bytes:
     obj = st.objective if isinstance(st.objective, str) else "weighted sum"
     ax.set_xlabel("generation")
     ax.set_ylabel(f"objective ({obj}, t_f = {st.t_final:g} s)")
-    ax.set_title(f"{result.source}: {st.budget()}", fontsize=9)
+    ax.set_title(f"{result.source}: {st.budget()}", fontsize=9, parse_math=False)  # a path
     ax.grid(True, alpha=0.3)
     ax2 = ax.twinx()
     ax2.bar(gen, [r["diverged"] for r in h], alpha=0.15, color="red", label="diverged")
@@ -203,7 +229,10 @@ def reference_markers(
     horizon: the y ≡ 0 controller (:math:`e = r`: ITAE :math:`=\int_0^{t_f} t|r|\,dt`,
     IAE, ISE likewise, ISU = IAU = 0, by the trapezoidal rule on the tuning step) and the
     paper's printed designs whose presets share the config's plant and scenario tables.
-    Objectives that are not plain metrics (``stable_fraction``) get no markers.
+    Objectives that are not plain metrics (``stable_fraction``) get no markers.  Every
+    marker and the floor are optional: one that cannot be computed (the exact-tracking
+    floor of a reference that is not smooth, e.g. a step) is left out and a note says which
+    and why; this function does not raise for them.
     """
     from dataclasses import replace
 
@@ -220,16 +249,23 @@ def reference_markers(
         return [], None, ["no reference markers: an objective is not an engine metric"]
     if any(":" in q for q in front.objectives) or st.robust is not None:
         notes.append("markers on the nominal plant")
-    t = np.linspace(0.0, tf, max(2, round(tf / dt) + 1))
-    r = np.asarray(cfg.scenario.reference.evaluate(t), dtype=np.float64)
-    zero = {
-        "itae": np.trapezoid(t * np.abs(r), t),
-        "iae": np.trapezoid(np.abs(r), t),
-        "ise": np.trapezoid(r * r, t),
-        "isu": 0.0,
-        "iau": 0.0,
-    }
-    markers = [("y ≡ 0 (u = 0)", float(zero[metric[1]]), float(zero[metric[0]]))]
+
+    def y_zero() -> tuple[str, float, float]:
+        t = np.linspace(0.0, tf, max(2, round(tf / dt) + 1))
+        r = np.asarray(cfg.scenario.reference.evaluate(t), dtype=np.float64)
+        zero = {
+            "itae": np.trapezoid(t * np.abs(r), t),
+            "iae": np.trapezoid(np.abs(r), t),
+            "ise": np.trapezoid(r * r, t),
+            "isu": 0.0,
+            "iau": 0.0,
+        }
+        return ("y ≡ 0 (u = 0)", float(zero[metric[1]]), float(zero[metric[0]]))
+
+    markers: list[tuple[str, float, float]] = []
+    zero_marker = _optional(notes, "y ≡ 0 marker not shown", y_zero)
+    if zero_marker is not None:
+        markers.append(zero_marker)
     found = False
     for n in (1, 2, 3):
         for structure in ("leso", "inleso"):
@@ -240,14 +276,20 @@ def reference_markers(
             ) != cfg.raw.get("scenario"):
                 continue
             found = True
-            res = simulate_batch(
-                paper.plant,
-                paper.controller,
-                replace(paper.scenario, t_final=tf),
-                dt=dt,
-                method=st.method or cfg.method,
-                sampling=paper.sampling,
+            res = _optional(
+                notes,
+                f"{name} not shown",
+                lambda paper=paper: simulate_batch(
+                    paper.plant,
+                    paper.controller,
+                    replace(paper.scenario, t_final=tf),
+                    dt=dt,
+                    method=st.method or cfg.method,
+                    sampling=paper.sampling,
+                ),
             )
+            if res is None:
+                continue
             if res.diverged[0]:
                 notes.append(f"{name} diverged over {tf:g} s")
                 continue
@@ -259,68 +301,130 @@ def reference_markers(
     if "isu" in metric:
         from aiofl.analysis.exact_tracking import exact_tracking_cost
 
-        floor = float(exact_tracking_cost(replace(cfg, dt=dt), t_final=tf)["isu"])
+        floor = _optional(
+            notes,
+            "exact-tracking ISU floor not shown",
+            lambda: float(exact_tracking_cost(replace(cfg, dt=dt), t_final=tf)["isu"]),
+        )
     return markers, floor, notes
 
 
 def write_outputs(result: TuneResult, out: str | Path, *, header: str = "") -> dict[str, Any]:
-    """Write best.toml, history.csv, evaluations.csv, convergence.png, summary.json to ``out``.
+    """Write a run's outputs to ``out``: its results first, then what is computed from them.
 
-    ``out`` is replaced as a whole (:func:`aiofl.outputs.atomic_output_dir`); the
-    checkpoint written there during the run is carried over.  Returns the summary dict.
+    1. The results (``best.toml``, ``history.csv``, ``evaluations.csv``, ``front.csv``
+       with NSGA-II, ``summary.json``): the search's own data, nothing simulated or
+       drawn.  ``out`` is replaced by them as a whole
+       (:func:`aiofl.outputs.atomic_output_dir`); the checkpoint written there during the
+       run is carried over.
+    2. Each on its own, atomically, into ``out``: the full-horizon record (a simulation),
+       ``convergence.png``, the front figure's reference markers and ``front.png``; then
+       ``summary.json`` again, with them.  One that fails is left out and a note in the
+       summary's ``notes`` says what and why; a reference marker that cannot be computed
+       is also noted under the front figure's title.
+
+    So a failure after the search (a figure, a marker, the re-simulation, even a crash)
+    never loses the search's results.
+
+    Parameters
+    ----------
+    result
+        A finished run (:func:`aiofl.tuning.search.tune`).
+    out
+        The output directory (new, empty, or written by aiofl).
+    header
+        Comment lines for ``best.toml`` (default: the run's provenance).
+
+    Returns
+    -------
+    dict
+        The summary (as in ``summary.json``): ``full_horizon`` is None if it could not be
+        computed; ``notes`` lists what was left out and the front figure's notes;
+        ``files`` the files written.
     """
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
+    from aiofl.tuning.checkpoint import CHECKPOINT
 
-    summary = {
+    notes: list[str] = []
+    summary: dict[str, Any] = {
         "source": result.source,
         "budget": result.settings.budget(),
         "settings": result.settings.model_dump(mode="json"),
         "best_values": result.best_values,
         "best_objective": result.best_objective,
         "tuning_horizon_metrics": result.best_metrics,
-        "full_horizon": full_horizon_record(result),
+        "full_horizon": None,  # step 2
         "evaluations": result.n_evaluations,
         "diverged": int(result.diverged.sum()),
         "live_evaluations": result.live_evaluations,
         "live_seconds": result.live_seconds,
         "evals_per_second": result.evals_per_second,
         "evaluator": result.evaluator,
+        "notes": notes,
     }
-    text = best_toml(result, out, header)
-    from aiofl.tuning.checkpoint import CHECKPOINT
+    results: dict[str, str] = {
+        "best.toml": best_toml(result, out, header),
+        "history.csv": _history_csv(result),
+        "evaluations.csv": _evaluations_csv(result),
+    }
+    front = result.front
+    if front is not None:
+        from aiofl.tuning.front import front_csv
 
-    front_files: dict[str, str | bytes] = {}
-    if result.front is not None:
-        from aiofl.tuning.front import front_csv, front_png
-
-        markers, floor, notes = reference_markers(result)
-        title = f"{result.source}: {result.settings.budget()}, t_f = {result.settings.t_final:g} s"
-        front_files["front.csv"] = front_csv(result.front)
-        front_files["front.png"] = front_png(result.front, title, markers, floor, notes)
+        results["front.csv"] = front_csv(front)
         summary["front"] = {
-            "designs": int(result.front.F.shape[0]),
-            "choose": result.front.rule,
-            "objectives": list(result.front.objectives),
-            "constraints": list(result.front.constraints),
-            "chosen_objectives": result.front.F[result.front.chosen].tolist(),
-            "exact_tracking_isu_floor": floor,
-            "markers": [{"label": a, "x": x, "y": y} for a, x, y in markers],
-            "notes": notes,
+            "designs": int(front.F.shape[0]),
+            "choose": front.rule,
+            "objectives": list(front.objectives),
+            "constraints": list(front.constraints),
+            "chosen_objectives": front.F[front.chosen].tolist(),
+            "exact_tracking_isu_floor": None,  # step 2
+            "markers": [],
+            "notes": [],
         }
+    files = [*results, "summary.json"]
+    summary["files"] = files
 
+    def summary_json() -> str:
+        return json.dumps(summary, indent=2, default=_json_default) + "\n"
+
+    # 1. the results
     with atomic_output_dir(out, keep=(CHECKPOINT,)) as stage:
-        atomic_write_text(stage / "best.toml", text)
-        atomic_write_text(stage / "history.csv", _history_csv(result))
-        atomic_write_text(stage / "evaluations.csv", _evaluations_csv(result))
-        atomic_write_bytes(stage / "convergence.png", convergence_png(result))
-        atomic_write_text(
-            stage / "summary.json", json.dumps(summary, indent=2, default=_json_default) + "\n"
+        for name, text in results.items():
+            atomic_write_text(stage / name, text)
+        atomic_write_text(stage / "summary.json", summary_json())
+
+    # 2. what is computed from them; each may be left out with a note
+    out = Path(out)
+
+    def figure(name: str, draw: Callable[[], bytes]) -> None:
+        data = _optional(notes, f"{name} not written", draw)
+        if data is not None:
+            atomic_write_bytes(out / name, data)
+            files.append(name)
+
+    summary["full_horizon"] = _optional(
+        notes, "full-horizon record not computed", lambda: full_horizon_record(result)
+    )
+    figure("convergence.png", lambda: convergence_png(result))
+    if front is not None:
+        from aiofl.tuning.front import front_png
+
+        marker_notes: list[str] = []
+        found = _optional(
+            marker_notes, "reference markers not shown", lambda: reference_markers(result)
         )
-        for name, data in front_files.items():
-            if isinstance(data, bytes):
-                atomic_write_bytes(stage / name, data)
-            else:
-                atomic_write_text(stage / name, data)
+        markers, floor, figure_notes = found if found is not None else ([], None, [])
+        figure_notes = [*figure_notes, *marker_notes]
+        summary["front"].update(
+            exact_tracking_isu_floor=floor,
+            markers=[{"label": a, "x": x, "y": y} for a, x, y in markers],
+            notes=figure_notes,
+        )
+        notes.extend(f"front.png: {n}" for n in figure_notes)
+        title = f"{result.source}: {result.settings.budget()}, t_f = {result.settings.t_final:g} s"
+        figure("front.png", lambda: front_png(front, title, markers, floor, figure_notes))
+    atomic_write_text(out / "summary.json", summary_json())
     return summary
 
 
