@@ -224,8 +224,8 @@ def test_unset_alphas_are_binomial_and_put_every_observer_pole_at_minus_omega0(r
     alphas = [c.value(f"eso.alpha{i}") for i in range(1, rho + 2)]
     assert alphas == [comb(rho + 1, i) for i in range(1, rho + 2)]
     row = c.float_row()
-    np.testing.assert_array_equal(row[L.F_ALPHA : L.F_ALPHA + rho + 1], alphas)
-    assert not row[L.F_ALPHA + rho + 1 : L.F_ALPHA + L.RHO_MAX + 1].any()
+    np.testing.assert_array_equal(row[L.F_ESO_ALPHA : L.F_ESO_ALPHA + rho + 1], alphas)
+    assert not row[L.F_ESO_ALPHA + rho + 1 : L.F_ESO_ALPHA + L.RHO_MAX + 1].any()
     # characteristic polynomial of the ESO error (eq. 9) is (s + ω0)^(ρ+1)
     a_e = eso_error_matrix(eso_gains(w0, alphas))
     np.testing.assert_allclose(np.poly(a_e), np.poly(np.full(rho + 1, -w0)), rtol=1e-9)

@@ -374,7 +374,7 @@ class Controller:
         """
         row = np.array([_DEFAULTS[n] for n in L.FLOAT_COLUMNS], dtype=np.float64)
         alphas = binomial_alphas(self.rho)
-        row[L.F_ALPHA : L.F_ALPHA + self.rho + 1] = alphas
+        row[L.F_ESO_ALPHA : L.F_ESO_ALPHA + self.rho + 1] = alphas
         for name, val in self.values.items():
             row[L.FLOAT_COLUMNS[name]] = val
         return row

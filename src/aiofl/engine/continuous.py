@@ -37,7 +37,7 @@ from aiofl.engine.member import (
     N_IQ,
     N_Q,
     Q_BETA,
-    Q_LINK,
+    Q_FEEDBACK_GAIN,
     Q_PF,
     Q_SLOPE,
     SWITCH_RTOL,
@@ -106,9 +106,9 @@ def _tpl_deriv(t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - c
                 k, kb = q[L.F_SEF_K + i], q[L.F_SEF_KB + i]
                 _BLK_INLSEF(k, kb, q[L.F_SEF_MU + i], q[L.F_SEF_ALPHA + i], e, v)
             else:
-                _BLK_LINEAR_TERM(q[Q_LINK + i], e, v)
+                _BLK_LINEAR_TERM(q[Q_FEEDBACK_GAIN + i], e, v)
         if sef_kind == L.SEF_IMPROVED:
-            _BLK_INLSEF_LIMIT(q[L.F_SEF_DOUT], v)
+            _BLK_INLSEF_LIMIT(q[L.F_SEF_V_LIMIT], v)
         elif sef_kind == L.SEF_LINEAR:
             _BLK_LINEAR_SEF(q[L.F_B0], rff, v)
         _BLK_LAW(v, z[o_eso + rho], q[L.F_B0], q[L.F_UMIN], q[L.F_UMAX], u)
@@ -117,7 +117,15 @@ def _tpl_deriv(t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - c
 
     # observer, eqs. (5)/(16) or (19)
     if iq[IQ_ESO] == L.ESO_IMPROVED:
-        _BLK_INLESO_ERROR(s[S_YM], z[o_eso], q[L.F_KA], q[L.F_KB], q[L.F_EA], q[L.F_EB], e)
+        _BLK_INLESO_ERROR(
+            s[S_YM],
+            z[o_eso],
+            q[L.F_ESO_K_ALPHA],
+            q[L.F_ESO_K_BETA],
+            q[L.F_ESO_G_ALPHA],
+            q[L.F_ESO_G_BETA],
+            e,
+        )
     else:
         _BLK_ESO_ERROR(s[S_YM], z[o_eso], e)
     for i in range(rho):

@@ -238,7 +238,7 @@ def _fill_row(
     n = rho + 1
     w0 = floats[L.F_OMEGA0]
     b0 = floats[L.F_B0]
-    alphas = floats[L.F_ALPHA : L.F_ALPHA + n]
+    alphas = floats[L.F_ESO_ALPHA : L.F_ESO_ALPHA + n]
     if method == "zoh":
         if eso_kind != L.ESO_LINEAR:
             raise ValueError(

@@ -34,8 +34,8 @@ from aiofl.components.fastmath import FASTMATH
 # Per-member packed parameters (thread-local inside the kernel): the controller's float row
 # followed by quantities derived from it once per member.
 Q_BETA = L.N_FLOAT  #: observer gains β_i = α_i ω0^i, i = 1..ρ+1
-Q_LINK = Q_BETA + L.RHO_MAX + 1  #: feedback gains k_i (linear SEF / IOFL) or sef.k_i
-Q_SLOPE = Q_LINK + L.RHO_MAX  #: fal inner slopes δ_i^(α_i - 1)
+Q_FEEDBACK_GAIN = Q_BETA + L.RHO_MAX + 1  #: feedback gains k_i (linear SEF / IOFL) or sef.k_i
+Q_SLOPE = Q_FEEDBACK_GAIN + L.RHO_MAX  #: fal inner slopes δ_i^(α_i - 1)
 Q_PF = Q_SLOPE + L.RHO_MAX  #: linear prefilter coefficients ω^ρ, C(ρ,i) ω^(ρ-i)
 Q_ITD_BC = Q_PF + L.RHO_MAX  #: b/c of the ITD
 Q_ITD_GAIN = Q_ITD_BC + 1  #: (1 - a)/c of the ITD
@@ -97,11 +97,11 @@ def _aiofl_command(iq, q, rr, ri, ref, o_ref, xh, o_x, rff):  # pragma: no cover
             acc += _fb.inlsef_term(
                 ei, q[L.F_SEF_K + i], q[L.F_SEF_KB + i], q[L.F_SEF_MU + i], q[L.F_SEF_ALPHA + i]
             )
-        v = _fb.inlsef_limit(acc, q[L.F_SEF_DOUT])
+        v = _fb.inlsef_limit(acc, q[L.F_SEF_V_LIMIT])
     else:  # linear full-state feedback of the chain (14)
         acc = 0.0
         for i in range(m):
-            acc += q[Q_LINK + i] * ((rr[ri, i] if exact else ref[o_ref + i]) - xh[o_x + i])
+            acc += q[Q_FEEDBACK_GAIN + i] * ((rr[ri, i] if exact else ref[o_ref + i]) - xh[o_x + i])
         v = _fb.linear_sef(acc, rff, b0)
     return _law.aiofl_law(v, xh[o_x + rho], b0)  # eq. (14)
 
@@ -116,7 +116,7 @@ def _iofl_command(iq, q, rr, ri, ref, o_ref, nfx, rff):  # pragma: no cover - co
     exact = iq[IQ_TD] == L.TD_EXACT
     acc = rff
     for i in range(iq[IQ_M]):
-        acc += q[Q_LINK + i] * ((rr[ri, i] if exact else ref[o_ref + i]) - nfx[i])
+        acc += q[Q_FEEDBACK_GAIN + i] * ((rr[ri, i] if exact else ref[o_ref + i]) - nfx[i])
     return _law.iofl_law(acc, nfx[rho], nfx[rho + 1])
 
 
@@ -132,13 +132,13 @@ def _tpl_setup(ip, fp, q, iq):  # pragma: no cover - compiled
         q[L.F_UMIN] = -fp[L.F_UMAX]
     w0 = fp[L.F_OMEGA0]
     for i in range(rho + 1):
-        q[Q_BETA + i] = _ESO_GAIN(fp[L.F_ALPHA + i], w0, i + 1)
+        q[Q_BETA + i] = _ESO_GAIN(fp[L.F_ESO_ALPHA + i], w0, i + 1)
     if ip[L.I_SEF] == L.SEF_LINEAR or ip[L.I_LAW] == L.LAW_IOFL:
         for i in range(rho):
-            q[Q_LINK + i] = _LINEAR_SEF_GAIN(rho, i + 1, fp[L.F_SEF_OMEGA_C])
+            q[Q_FEEDBACK_GAIN + i] = _LINEAR_SEF_GAIN(rho, i + 1, fp[L.F_SEF_OMEGA_C])
     else:
         for i in range(L.RHO_MAX):
-            q[Q_LINK + i] = fp[L.F_SEF_K + i]
+            q[Q_FEEDBACK_GAIN + i] = fp[L.F_SEF_K + i]
     for i in range(L.RHO_MAX):
         q[Q_SLOPE + i] = _FAL_SLOPE(fp[L.F_SEF_ALPHA + i], fp[L.F_SEF_DELTA + i])
     for i in range(rho):

@@ -145,7 +145,9 @@ def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri):  # pragma: no cover - compil
     e = _OBS_INNOVATION(cs, C_P, C_Y, y)  # y - p_1
     phi = e
     if iq[IQ_ESO] == L.ESO_IMPROVED:  # eq. (19)
-        phi = _INLESO(e, q[L.F_KA], q[L.F_KB], q[L.F_EA], q[L.F_EB])
+        phi = _INLESO(
+            e, q[L.F_ESO_K_ALPHA], q[L.F_ESO_K_BETA], q[L.F_ESO_G_ALPHA], q[L.F_ESO_G_BETA]
+        )
     dx1 = _OBS_CORRECT(cs, C_P, C_X, n1, dsc, D_L, y, e, phi)
 
     # the profile r_1.. at t_k (Han's TD keeps r_1 as its change since the last reference,
