@@ -284,3 +284,15 @@ def test_a_damaged_plant_module_is_rebuilt(tmp_path, monkeypatch):
     monkeypatch.setenv("AIOFL_NO_CACHE", "1")
     assert plant_cache.plant_module_path(path) is None
     assert plant_cache.plant_from_file(path).f(x, p) == plant.f(x, p)
+
+
+def test_numba_inlining_copies_a_callee_with_one_memo():
+    """The compile-time fix of :func:`aiofl.engine.compile.share_scope_when_inlining` is in
+    place on the numba version the project pins (a numba whose source changed would leave
+    it out silently, and every lane instance would compile ~1.5x slower: this says so)."""
+    from numba.core import inline_closurecall as ic
+
+    assert compile.share_scope_when_inlining()
+    nested = [c for c in ic.InlineWorker.inline_ir.__code__.co_consts if hasattr(c, "co_name")]
+    copy_ir = next(c for c in nested if c.co_name == "copy_ir")
+    assert "memo" in copy_ir.co_varnames
