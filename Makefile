@@ -19,9 +19,11 @@ $(STAMP): pyproject.toml $(CONSTRAINTS)
 run: $(STAMP)
 	$(BIN)/aiofl reproduce --out $(OUT)
 
+# the tests run on every core (pytest-xdist; a test file stays on one worker, so its
+# fixtures are built once); they share one kernel cache (tests/conftest.py)
 test: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto --dist loadfile
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
