@@ -299,9 +299,8 @@ def share_scope_when_inlining() -> bool:
     variable scope again (``ir.Var.__deepcopy__`` copies its scope), so the copy grows
     like blocks × variables; it was half of a lane instance's compile time.  With one memo
     for all blocks of a copy, the scope is copied once and shared by the copied blocks, as
-    it is by the original ones.  Measured on a cold compile of the width-1 instance
-    (``AIOFL_NO_CACHE=1``, first simulation of a preset): frontier-s1-ladrc 20.3 -> 13.0 s,
-    paper-s1-inleso 18.6 -> 12.2 s, the same metrics bit for bit.
+    it is by the original ones: a cold compile of a lane instance takes about a third less
+    time, with the same numbers bit for bit (``docs/benchmarks.md``).
 
     The change is applied once per process, to numba's ``InlineWorker.inline_ir`` by
     re-compiling its source with the two lines above replaced; if the source is not the

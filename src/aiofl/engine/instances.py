@@ -110,35 +110,16 @@ def _noalias_option() -> dict[str, Any]:
 
 
 _HEAVY = frozenset({"_IOFL_COMMAND", "_SIN", "_COS", "_HAN_TD", "_ITD"})
-"""The component functions whose lane blocks stay calls in the width-1 instance.
-
-With one lane there is no loop to vectorize and a call per formula cost ~40 % of a lone
-member's time, so the width-1 instance inlines its blocks into the step, all but those
-calling one of these: the IOFL law (large), the reference's sine and cosine and the
-tracking differentiators (once per step or cheap: inlining them too took the first compile
-of paper-s1-inleso from 20 to 26 s and gave no measurable gain).  Inlining fal, the linear
-SEF, the law and the saturation took a lone LESO member from 65 to 40 ms (20-s S1; the
-scalar engine: 37-41 ms); inlining the INLESO structure's components (INLESO, the INLSEF
-terms and limit, each holding several exp/log) took a lone INLESO member from 0.75 to
-0.96 of the scalar engine's speed, for a first compile of 15 -> 20 s.  Strict IEEE
-arithmetic rounds alike inlined or not: the numbers stay those of the width-32
-instance."""
-_LIGHT = {"inline": "always"}
-
-
-_HEAVY = frozenset({"_IOFL_COMMAND", "_SIN", "_COS", "_HAN_TD", "_ITD"})
 """The component functions whose lane blocks stay calls in the width-1 lane instance.
 
-With one lane there is no loop to vectorize and a call per formula cost ~40 % of a lone
-member's time, so the width-1 instance inlines its blocks into the step, all but those
-calling one of these: the IOFL law (large), the reference's sine and cosine and the
-tracking differentiators (once per step or cheap: inlining them too took the first compile
-of paper-s1-inleso from 20 to 26 s and gave no measurable gain).  Inlining fal, the linear
-SEF, the law and the saturation took a lone LESO member from 65 to 40 ms (20-s S1); inlining
-the INLESO structure's components (INLESO, the INLSEF terms and limit, each holding several
-exp/log) took a lone INLESO member from 0.75 to 0.96 of the scalar engine's speed, for a
-first compile of 15 -> 20 s.  Strict IEEE arithmetic rounds alike inlined or not: the
-numbers stay those of the width-32 instance."""
+With one lane there is no loop to vectorize and a call per formula costs a lone member much
+of its time, so the width-1 instance inlines its blocks into the step, all but those calling
+one of these: the IOFL law (large), the reference's sine and cosine and the tracking
+differentiators (once per step or cheap: inlining them lengthens the first compile for no
+measurable gain).  Strict IEEE arithmetic rounds alike inlined or not: the numbers stay
+those of the width-32 instance.  The measurements behind the choice are in
+``docs/architecture.md`` ("Members in SIMD lanes")."""
+_LIGHT = {"inline": "always"}
 
 
 def _sources(sampled_data: bool) -> tuple[str, ...]:

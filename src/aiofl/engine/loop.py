@@ -59,12 +59,10 @@ from aiofl.engine.member import (
 )
 
 WIDTH = 32
-"""Members per group in a batch: 32 float64 lanes, four AVX-512 registers per quantity.
-Measured (20-s S1, one thread, batch 64, ``benchmarks/bench_lanes.py``'s cases): 32 lanes
-run 14-28 % more member-steps per second than 16 (more independent work to hide the
-latency of each formula's dependency chain), 64 lanes fewer (registers spill).  Small
-batches run groups of 1 (the same code, compiled for one lane; the numbers are bitwise the
-same, see :mod:`aiofl.engine.instances`)."""
+"""Members per group in a batch: 32 float64 lanes, four AVX-512 registers per quantity (more
+independent work to hide each formula's dependency chain than 16; 64 spill registers; see
+``docs/benchmarks.md``).  Small batches run groups of 1 (the same code, compiled for one
+lane; the numbers are bitwise the same, see :mod:`aiofl.engine.instances`)."""
 
 LANE_FASTMATH: set[str] = set()
 """LLVM fast-math flags of the lane instances: none, strict IEEE 754.  With any of them

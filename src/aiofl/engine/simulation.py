@@ -196,6 +196,45 @@ def simulate_batch(
     t_final = scens[0].t_final
     if any(abs(s.t_final - t_final) > 1e-12 for s in scens):
         raise ValueError("all scenarios in one batch must share t_final")
+    rec, out = pack(
+        plant,
+        batch,
+        scens,
+        disc,
+        dt=dt,
+        method=method,
+        store=store,
+        decimation=decimation,
+        divergence_threshold=divergence_threshold,
+    )
+    run_plan(plant, plan(rec, engine), rec, out, engine)
+    return BatchResult(
+        metrics=out.metrics,
+        diverged=out.status == L.STATUS_DIVERGED,
+        diverged_at=out.t_div,
+        trajectories=out.traj if store else None,
+        columns=L.trajectory_columns(plant.n_states),
+        dt=float(dt),
+    )
+
+
+def pack(
+    plant: Plant,
+    batch: ControllerBatch,
+    scens: list[Scenario],
+    disc: NDArray[np.float64] | None,
+    *,
+    dt: float,
+    method: str,
+    store: bool,
+    decimation: int,
+    divergence_threshold: float,
+) -> tuple[Batch, Outputs]:
+    """The batch as the time loop reads it, and its output arrays: one row per member of
+    every table (the scenario tables computed once per distinct scenario), the discrete
+    rows ``disc`` (zeros for continuous members) and the run's settings."""
+    t_final = scens[0].t_final
+    b = len(batch)
     n_steps = round(t_final / dt)
     n = plant.n_states
 
@@ -233,7 +272,7 @@ def simulate_batch(
 
     n_save = n_steps // decimation + 1 if store else 0
     n_cols = len(L.trajectory_columns(n))
-    batch_rec = Batch(
+    rec = Batch(
         ints=batch.ints,
         floats=batch.floats,
         p_before=np.ascontiguousarray(p_before_d[rows]),
@@ -259,15 +298,7 @@ def simulate_batch(
         t_div=np.zeros(b),
         traj=np.empty((b, n_save, n_cols)),  # rows after a divergence are set to NaN
     )
-    run_plan(plant, plan(batch_rec, engine), batch_rec, out, engine)
-    return BatchResult(
-        metrics=out.metrics,
-        diverged=out.status == L.STATUS_DIVERGED,
-        diverged_at=out.t_div,
-        trajectories=out.traj if store else None,
-        columns=L.trajectory_columns(n),
-        dt=float(dt),
-    )
+    return rec, out
 
 
 def plan(batch: Batch, engine: str = "lanes") -> dict[tuple[int, bool], NDArray[np.int64]]:
