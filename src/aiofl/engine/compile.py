@@ -37,7 +37,7 @@ import os
 import sys
 import threading
 import types
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -50,6 +50,7 @@ __all__ = [
     "Recipe",
     "Template",
     "build",
+    "compile_lock",
     "fingerprint",
     "function_fingerprint",
     "plant_key",
@@ -381,6 +382,35 @@ class _LazyKernelCache:
 
 
 KernelCache = _LazyKernelCache()
+
+
+@contextlib.contextmanager
+def compile_lock(entry: Any) -> Iterator[None]:
+    """Hold an exclusive lock on ``entry``'s cache entry while it is compiled, so that
+    processes needing the same kernel at once compile it once: the others wait, then load
+    it from the disk cache (numba looks there first).  No lock for an uncached entry, or
+    where ``fcntl`` (POSIX) is missing."""
+    cache = getattr(entry, "_cache", None)
+    impl = getattr(cache, "_impl", None)
+    folder = getattr(cache, "_cache_path", None)
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        fcntl = None  # type: ignore[assignment]
+    if impl is None or not folder or fcntl is None:
+        yield
+        return
+    path = os.path.join(folder, f"{impl.filename_base}.lock")
+    try:
+        fh = open(path, "a+b")  # noqa: SIM115 - held across the yield
+    except OSError:
+        yield
+        return
+    try:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        yield
+    finally:
+        fh.close()  # releases the lock
 
 
 def prune_kernels(folder: Path, template: Callable[..., Any], prefix: str, keep: str) -> None:

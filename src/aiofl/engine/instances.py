@@ -355,7 +355,7 @@ def run_groups(
     sig = tuple(numba.typeof(a) for a in (0, groups, batch, out))
     if sig not in loop_fn.signatures:
         try:
-            with _slp_on():
+            with compile_.compile_lock(loop_fn), _slp_on():
                 loop_fn.compile(sig)
         except NumbaError:  # a user plant function numba cannot compile: say which
             plant, _ = _PLANT_OF_ENTRY.get(id(loop_fn), (None, False))
