@@ -15,6 +15,7 @@ import sys
 import types
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from aiofl.engine import compile, instances
@@ -310,3 +311,47 @@ def test_numba_inlining_copies_a_callee_with_one_memo():
     nested = [c for c in ic.InlineWorker.inline_ir.__code__.co_consts if hasattr(c, "co_name")]
     copy_ir = next(c for c in nested if c.co_name == "copy_ir")
     assert "memo" in copy_ir.co_varnames
+
+
+def test_the_probe_batch_compiles_the_signature_of_real_batches():
+    """The background compile (aiofl.engine.prepare) is useful only if its probe batch has
+    the numba types of the batches simulate_batch packs, continuous and sampled alike."""
+    import numba
+
+    from aiofl.config import load_config
+    from aiofl.controller import controller_batch
+    from aiofl.engine import prepare
+    from aiofl.engine.discrete import Sampling, sampling_rows
+    from aiofl.engine.simulation import pack
+
+    cfg = load_config("frontier-s1-ladrc")
+    groups, batch, out = prepare.probe(cfg.plant)
+    packed = controller_batch([cfg.controller] * 3)
+    for disc in (None, sampling_rows(packed, [Sampling(1e-3)] * 3, cfg.dt)):
+        for store in (False, True):
+            rec, res = pack(
+                cfg.plant,
+                packed,
+                [cfg.scenario] * 3,
+                disc,
+                dt=cfg.dt,
+                method="rk4",
+                store=store,
+                decimation=10,
+                divergence_threshold=1e10,
+            )
+            assert numba.typeof(rec) == numba.typeof(batch)
+            assert numba.typeof(res) == numba.typeof(out)
+    assert numba.typeof(groups) == numba.typeof(np.zeros((2, 32), dtype=np.int64))
+
+
+def test_prepare_specs_and_a_disabled_cache(monkeypatch):
+    from aiofl.engine import prepare
+
+    assert prepare.parse_spec("c32") == (32, False) and prepare.parse_spec("s1") == (1, True)
+    for bad in ("x1", "c", "c7", "s-1"):
+        with pytest.raises(ValueError, match="allowed"):
+            prepare.parse_spec(bad)
+    assert prepare.main(["slfjm", "c9"]) == 2
+    monkeypatch.setenv("AIOFL_NO_CACHE", "1")
+    assert prepare.prepare_in_background("slfjm", [(32, False)]) is None

@@ -475,6 +475,19 @@ def _engine_settings(cases: Sequence[Case], n_batches: int) -> dict[str, str]:
     }
 
 
+def _prepare_later_instances(cases: list[Case], *, sampled: bool) -> None:
+    """Compile, in a second process, the instances of the cases' plants this run needs
+    after its first simulation (:mod:`aiofl.engine.prepare`): the width-1 sampled one for
+    the sampling limits and the width-32 one for the robustness draws (sampled when every
+    design is); the first simulation compiles the width-1 one meanwhile."""
+    from aiofl.engine.prepare import prepare_in_background
+    from aiofl.plants.registry import available_plants
+
+    names = {c.config.plant.name for c in cases} & set(available_plants())
+    for name in sorted(names):
+        prepare_in_background(name, [(1, True), (32, sampled)])
+
+
 def compute(
     *,
     available: Iterable[str] | None = None,
@@ -489,6 +502,7 @@ def compute(
     if ts is not None:  # every design sampled at ts (raises ConfigError for a bad ts)
         cases = [replace(c, config=c.config.with_sample_time(ts)) for c in cases]
     n_batches = len({_batch_key(c.config) for c in cases})
+    _prepare_later_instances(cases, sampled=ts is not None)
     stage(f"simulating {len(cases)} cases in {n_batches} batched call(s) (first call compiles)")
     t1 = time.perf_counter()
     runs = run_cases(cases)

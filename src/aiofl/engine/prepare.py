@@ -1,0 +1,146 @@
+"""Compiling instances ahead of need, in a second process: both cores busy on a cold cache.
+
+numba compiles on one core, and a command that needs several instances of a plant's time
+loop (``aiofl reproduce``: the width-1 continuous one for its single runs, the width-1
+sampled one for the sampling limits, the width-32 continuous one for the robustness draws)
+compiles them one after the other.  :func:`prepare_in_background` starts a second Python
+process that compiles the instances the command will need *later* into the disk cache
+while the command compiles (and runs) what it needs now.  The two meet through the cache
+and its compile lock (:func:`aiofl.engine.compile.compile_lock`): whichever process reaches
+an instance second waits for the first and loads it, so nothing is compiled twice and a
+wrong guess costs only the second core's time.
+
+The background process compiles with a probe batch of one member whose array types are
+those of every real batch (:func:`probe`), so the signature it compiles is the one the
+command will look up.  It is stopped when the command's process exits.  With the cache
+disabled nothing is started.
+
+``python -m aiofl.engine.prepare PLANT SPEC...`` is that process: ``PLANT`` a registered
+plant's name or a plant file, each ``SPEC`` an instance as ``c1``, ``c32``, ``s1``, ``s32``
+(continuous or sampled, lane width).
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import os
+import subprocess
+import sys
+from collections.abc import Sequence
+
+import numpy as np
+from numpy.typing import NDArray
+
+from aiofl import layout as L
+from aiofl.cache import cache_enabled
+from aiofl.engine.batch import Batch, Outputs
+from aiofl.engine.discrete import N_DISC
+from aiofl.engine.instances import instance_for, run_groups
+from aiofl.plants.base import Plant
+
+__all__ = ["parse_spec", "prepare", "prepare_in_background", "probe"]
+
+
+def parse_spec(text: str) -> tuple[int, bool]:
+    """``"c32"`` -> (32, False), ``"s1"`` -> (1, True); raises ValueError otherwise."""
+    if len(text) < 2 or text[0] not in "cs" or not text[1:].isdigit():
+        raise ValueError(f"instance spec {text!r}; allowed: c1, c32, s1, s32")
+    width = int(text[1:])
+    if width not in (1, 32):
+        raise ValueError(f"instance spec {text!r}: lane width {width}; allowed: 1, 32")
+    return width, text[0] == "s"
+
+
+def probe(plant: Plant) -> tuple[NDArray[np.int64], Batch, Outputs]:
+    """A one-member batch (groups, batch, outputs) with the array types of every batch
+    :func:`aiofl.engine.simulation.simulate_batch` packs, for compiling an instance."""
+    n, n_p = plant.n_states, len(plant.params)
+    one = np.zeros(1, dtype=np.int64)
+    batch = Batch(
+        ints=np.zeros((1, L.N_INT), dtype=np.int64),
+        floats=np.zeros((1, L.N_FLOAT)),
+        p_before=np.zeros((1, n_p)),
+        p_after=np.zeros((1, n_p)),
+        p_nom=np.zeros((1, n_p)),
+        scen=np.zeros((1, L.N_SCEN)),
+        x0=np.zeros((1, n)),
+        ref_table=np.zeros((1, 2)),
+        ref_row=one,
+        noise_table=np.zeros((1, 1)),
+        noise_row=one.copy(),
+        disc=np.zeros((1, N_DISC)),
+        dt=1e-3,
+        n_steps=1,
+        method=L.METHOD_RK4,
+        decimation=1,
+        store=False,
+        threshold=1e10,
+    )
+    out = Outputs(
+        metrics=np.zeros((1, L.N_METRIC)),
+        status=np.zeros(1, dtype=np.int64),
+        t_div=np.zeros(1),
+        traj=np.empty((1, 0, len(L.trajectory_columns(n)))),
+    )
+    return np.zeros((1, 1), dtype=np.int64), batch, out
+
+
+def prepare(plant: Plant, specs: Sequence[tuple[int, bool]]) -> None:
+    """Compile (or load) the instances ``specs`` (lane width, sampled) of ``plant``."""
+    groups, batch, out = probe(plant)
+    for width, sampled_data in specs:
+        inst = instance_for(plant, width, sampled_data=sampled_data)
+        run_groups(inst.entry, groups, batch, out, compile_only=True)
+
+
+def prepare_in_background(
+    plant: str, specs: Sequence[tuple[int, bool]]
+) -> subprocess.Popen[bytes] | None:
+    """Start a process compiling the instances ``specs`` of the plant named ``plant`` (a
+    registered name or a plant file) into the disk cache, in that order; None when the
+    cache is off or nothing is asked.  The process is stopped when this one exits."""
+    if not cache_enabled() or not specs:
+        return None
+    args = [f"{'s' if s else 'c'}{w}" for w, s in specs]
+    try:
+        proc = subprocess.Popen(
+            [sys.executable, "-m", "aiofl.engine.prepare", plant, *args],
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            env=os.environ.copy(),
+        )
+    except OSError:
+        return None
+    atexit.register(_stop, proc)
+    return proc
+
+
+def _stop(proc: subprocess.Popen[bytes]) -> None:
+    if proc.poll() is None:
+        proc.terminate()
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            proc.wait(timeout=5)
+
+
+def main(argv: Sequence[str]) -> int:
+    """``python -m aiofl.engine.prepare PLANT SPEC...`` (see the module notes)."""
+    if len(argv) < 2:
+        print("usage: python -m aiofl.engine.prepare PLANT SPEC...", file=sys.stderr)
+        return 2
+    from aiofl.plants.plant_cache import plant_from_file
+    from aiofl.plants.registry import get_plant
+
+    try:
+        specs = [parse_spec(a) for a in argv[1:]]
+    except ValueError as exc:
+        print(f"aiofl.engine.prepare: {exc}", file=sys.stderr)
+        return 2
+    name = argv[0]
+    prepare(plant_from_file(name) if name.endswith(".toml") else get_plant(name), specs)
+    return 0
+
+
+if __name__ == "__main__":  # pragma: no cover - run as a process
+    raise SystemExit(main(sys.argv[1:]))
