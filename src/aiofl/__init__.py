@@ -5,7 +5,8 @@ controllers for nonlinear SISO plants, and reproduce Abdul-Adheem & Ibraheem,
 "On the Active Input-Output Feedback Linearization of Single-Link Flexible Joint
 Manipulator: an Extended State Observer Approach" (arXiv 1805.00222).
 
-Importing :mod:`aiofl` is cheap: numba compiles a plant's kernel on its first simulation.
+Importing :mod:`aiofl` is cheap: the names in ``__all__`` (and ``dir(aiofl)``) are
+imported on first use, and numba compiles a plant's kernel on its first simulation.
 """
 
 from __future__ import annotations
@@ -38,3 +39,10 @@ def __getattr__(name: str) -> Any:
     if name in _LAZY:
         return getattr(import_module(_LAZY[name]), name)
     raise AttributeError(f"module 'aiofl' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    """The public names (imported on first use) and the loaded submodules, so ``dir(aiofl)``
+    and a notebook's completion list them without importing anything."""
+    subs = {k for k, v in globals().items() if getattr(v, "__name__", "") == f"aiofl.{k}"}
+    return sorted(set(__all__) | subs)

@@ -362,7 +362,8 @@ def loop_figure(
 
     The crossovers of the reported margins are marked; the Nyquist panel shows L(jω) for
     ω > 0 (solid) and its mirror ω < 0 (dashed) within a window around −1, with the circle
-    of radius :math:`1/M_s` about −1 that the curve touches.
+    of radius :math:`1/M_s` about −1 that the curve touches.  ``title`` (it holds a
+    config's name) is drawn as plain text: a ``$`` in it is no mathtext.
     """
     import control
     from matplotlib.figure import Figure
@@ -425,7 +426,7 @@ def loop_figure(
     ax_ny.set_ylabel("Im L")
     ax_ny.legend(loc="upper right", fontsize=8)
     ax_ny.set_title("Nyquist (window around −1)", fontsize=10)
-    fig.suptitle(title, fontsize=11)
+    fig.suptitle(title, fontsize=11, parse_math=False)  # holds the config's name: plain text
     return fig
 
 

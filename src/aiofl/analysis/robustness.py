@@ -437,28 +437,70 @@ def simulate_designs(cfgs: Sequence[Any], draws: Draws) -> list[DesignDraws]:
     return [out[i] for i in range(len(cfgs))]
 
 
-def robustness_figure(res: RobustnessResult) -> Any:
-    """ECDF of ITAE, the envelope of :math:`y - r` across draws, and ITAE against the two
-    most influential drawn quantities (a matplotlib ``Figure``; diverged draws drawn as
-    red crosses at the top)."""
-    from matplotlib.figure import Figure
+LOG_SPAN = 100.0
+"""A metric axis is logarithmic when its positive values span at least this ratio (two
+decades: at least two labelled decade ticks); a narrower spread is drawn on a linear axis
+with a few ticks, whose labels do not run into each other."""
 
-    fig = Figure(figsize=(12, 8), layout="constrained")
-    axes = fig.subplots(2, 2).ravel()
-    k = len(res.itae)
-    finite = np.sort(res.itae[np.isfinite(res.itae)])
-    ax = axes[0]
+
+def _metric_scale(ax: Any, which: str, values: NDArray[np.float64]) -> None:
+    """Log or linear ``which`` ("x" or "y") axis for a metric's finite ``values`` (see
+    :data:`LOG_SPAN`); on a log axis only the decades are labelled."""
+    from matplotlib.ticker import MaxNLocator, NullFormatter
+
+    v = values[np.isfinite(values)]
+    axis = ax.xaxis if which == "x" else ax.yaxis
+    if v.size and v.min() > 0 and v.max() >= LOG_SPAN * v.min():
+        (ax.set_xscale if which == "x" else ax.set_yscale)("log")
+        axis.set_minor_formatter(NullFormatter())
+    else:
+        axis.set_major_locator(MaxNLocator(nbins=4))
+
+
+def _no_data(ax: Any, text: str) -> None:
+    ax.text(0.5, 0.5, text, transform=ax.transAxes, ha="center", va="center", color="0.4")
+
+
+def _ecdf(ax: Any, res: RobustnessResult, values: NDArray[np.float64], name: str) -> None:
+    """The ECDF of one metric over the draws (a diverged draw counts as +inf: the curve
+    stops at the stable fraction), with the nominal plant's value."""
+    k = len(values)
+    finite = np.sort(values[np.isfinite(values)])
     if finite.size:
-        ax.step(finite, np.arange(1, finite.size + 1) / k, where="post")
-        ax.set_xscale("log")
+        ax.step(finite, np.arange(1, finite.size + 1) / k, where="post", label=f"{name} ECDF")
+        _metric_scale(ax, "x", finite)
+    else:
+        _no_data(ax, "every draw diverged")
     ax.set_ylim(0, 1.02)
     ax.axhline(res.stable_fraction, color="0.6", ls=":", label="stable fraction")
-    if res.nominal["itae"] is not None:
-        ax.axvline(res.nominal["itae"], color="k", ls="--", label="nominal")
-    ax.set(xlabel="ITAE", ylabel="fraction of draws", title=f"ECDF of ITAE ({k} draws)")
-    ax.legend(loc="lower right")
+    nominal = res.nominal.get(name.lower())
+    if nominal is not None:
+        ax.axvline(nominal, color="k", ls="--", label="nominal")
+    ax.set(xlabel=name, ylabel="fraction of draws", title=f"ECDF of {name} ({k} draws)")
+    ax.legend(loc="lower right", fontsize=8)
 
-    ax = axes[1]
+
+def robustness_figure(res: RobustnessResult) -> Any:
+    """A matplotlib ``Figure`` of a robustness run, in two rows of three panels.
+
+    Top: the ECDFs of ITAE and of ISU over the draws (with the stable fraction and the
+    nominal plant's value) and the envelope of :math:`y - r` across the stable draws;
+    bottom: ITAE against the two most influential drawn quantities and ISU against ITAE
+    per draw (diverged draws drawn as red crosses at the top).  A metric axis is
+    logarithmic only when its values span two decades (:data:`LOG_SPAN`), so tick labels
+    never overlap; a panel without data (every draw diverged) says so instead of being
+    left empty, and no matplotlib warning is raised.  The title (the config's name) is
+    plain text, not mathtext.
+    """
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(15, 8), layout="constrained")
+    axes = fig.subplots(2, 3).ravel()
+    k = len(res.itae)
+    _ecdf(axes[0], res, res.itae, "ITAE")
+    _ecdf(axes[1], res, res.isu, "ISU")
+
+    ax = axes[2]
     err = res.error.astype(np.float64)
     ok = ~res.diverged
     if ok.any():
@@ -466,27 +508,43 @@ def robustness_figure(res: RobustnessResult) -> Any:
         lo, hi = np.quantile(e, [0.05, 0.95], axis=0)
         ax.fill_between(res.t, e.min(axis=0), e.max(axis=0), color="C0", alpha=0.2, label="min-max")
         ax.fill_between(res.t, lo, hi, color="C0", alpha=0.5, label="5-95 %")
+        ax.legend(loc="upper right", fontsize=8)
+    else:
+        _no_data(ax, "every draw diverged: no envelope")
     ax.set(xlabel="t [s]", ylabel="y - r", title="tracking error across stable draws")
-    ax.legend(loc="upper right")
 
+    finite = np.isfinite(res.itae) & np.isfinite(res.isu)
     ranked = [n for n, r in res.influence() if r is not None][:2]
     cols = res.draws.columns()
-    for ax, name in zip(axes[2:], ranked, strict=False):
-        x = cols[name]
-        ok = np.isfinite(res.itae)
-        ax.scatter(x[ok], res.itae[ok], s=8, alpha=0.6)
-        if (~ok).any():
-            top = finite.max() * 2 if finite.size else 1.0
-            ax.scatter(x[~ok], np.full((~ok).sum(), top), marker="x", color="r", label="diverged")
-            ax.legend(loc="upper left")
-        if finite.size:
-            ax.set_yscale("log")
-        r = dict(res.influence())[name]
-        ax.set(xlabel=name + (" factor" if name in res.draws.factors else ""), ylabel="ITAE")
-        ax.set_title(f"ITAE vs {name} (Spearman {r:+.2f})")
-    for ax in axes[2 + len(ranked) :]:
+    panels = [(name, cols[name], res.itae, "ITAE") for name in ranked]
+    panels.append(("ITAE", res.itae, res.isu, "ISU"))
+    slots = [*axes[3 : 3 + len(ranked)], axes[5]]
+    for ax in axes[3 + len(ranked) : 5]:
         ax.set_axis_off()
-    fig.suptitle(
-        f"{res.name}: stable {100 * res.stable_fraction:.1f} % of {k} draws (seed {res.draws.seed})"
+    for ax, (xname, x, y, yname) in zip(slots, panels, strict=True):
+        if finite.any():
+            ax.scatter(x[finite], y[finite], s=8, alpha=0.6)
+            top = float(y[finite].max()) * 2
+            _metric_scale(ax, "y", y[finite])
+            if xname == "ITAE":
+                _metric_scale(ax, "x", x[finite])
+        else:
+            top = 1.0
+            _no_data(ax, "every draw diverged")
+        if (~finite).any() and xname != "ITAE":
+            n_bad = int((~finite).sum())
+            ax.scatter(x[~finite], np.full(n_bad, top), marker="x", color="r", label="diverged")
+            ax.legend(loc="upper left", fontsize=8)
+        if xname == "ITAE":
+            title = "ISU against ITAE per stable draw"
+        else:
+            title = f"ITAE vs {xname} (Spearman {dict(res.influence())[xname]:+.2f})"
+        label = xname + (" factor" if xname in res.draws.factors else "")
+        ax.set(xlabel=label, ylabel=yname)
+        ax.set_title(title, parse_math=False)
+    fig.suptitle(  # the config's name: plain text, never mathtext
+        f"{res.name}: stable {100 * res.stable_fraction:.1f} % of {k} draws "
+        f"(seed {res.draws.seed})",
+        parse_math=False,
     )
     return fig

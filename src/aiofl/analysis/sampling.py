@@ -265,7 +265,8 @@ def sampling_limits(cfg: RunConfig, **kwargs: Any) -> SamplingLimits:
 
 def sampling_figure(lim: SamplingLimits) -> Any:
     """ITAE against Ts (log-log): the runs, the continuous ITAE and its allowance, the
-    limits; diverged runs are marked at the top.  Returns a matplotlib Figure."""
+    limits; diverged runs are marked at the top.  The title (the config's name) is plain
+    text, not mathtext.  Returns a matplotlib Figure."""
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(7.0, 4.2), dpi=110)
@@ -287,7 +288,7 @@ def sampling_figure(lim: SamplingLimits) -> Any:
             ax.axvline(val, color=col, lw=1, ls=":", label=f"{name} = {val:.3g} s")
     ax.set_xlabel("sample time Ts [s]")
     ax.set_ylabel("ITAE")
-    ax.set_title(f"{lim.name}: ITAE against the sample time")
+    ax.set_title(f"{lim.name}: ITAE against the sample time", parse_math=False)  # user text
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=8, loc="upper left")
     fig.tight_layout()

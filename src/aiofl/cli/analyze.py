@@ -115,9 +115,16 @@ def analyze_command(
                 format_linearization_text,
                 linearize_closed_loop,
             )
-            from aiofl.config import load_config
+            from aiofl.config import ConfigError, PlantFileGiven, load_config
 
-            cfg = load_config(target)
+            try:
+                cfg = load_config(target)
+            except PlantFileGiven:
+                raise ConfigError(
+                    f"{target} is a plant file; --closed-loop wants a run config (one that "
+                    "names the plant and sets [scenario], [controller] and [simulation]); "
+                    f"`aiofl analyze {target}` without --closed-loop analyses the plant itself"
+                ) from None
             lin = linearize_closed_loop(cfg, amplitude=amplitude, r_op=r_op)
             # the default operating point also gets the verdict per error amplitude
             info = (

@@ -6,14 +6,15 @@ Commands
     List the shipped presets.
 ``aiofl show NAME``
     Print a preset's TOML verbatim (copy it, edit it, pass the file to ``simulate``).
-``aiofl simulate CONFIG.toml|PRESET --out DIR``
+``aiofl simulate CONFIG.toml|PRESET --out DIR`` (or ``--check``: validate only)
     One run: ``DIR/metrics.json``, ``DIR/trajectory.csv`` (a header of column names, then a
     ``# name [unit],...`` line with the plant's units, then the data) and ``DIR/figure.png``
     (output vs reference, tracking error, control; axes in the plant's units).
 ``aiofl reproduce --out DIR``
     The paper's Tables I–III and Figures 3–5, and a self-contained HTML report.
-``aiofl tune CONFIG --out DIR``
-    GA tuning from the config's ``[tune]`` table (:mod:`aiofl.cli.tune`).
+``aiofl tune CONFIG --out DIR`` (or ``--check``)
+    Tuning (GA, DE, CMA-ES, or NSGA-II for a Pareto front) from the config's ``[tune]``
+    table (:mod:`aiofl.cli.tune`).
 ``aiofl analyze PLANT|CONFIG [--closed-loop]``
     Symbolic plant analysis or closed-loop linearisation (:mod:`aiofl.cli.analyze`).
 
@@ -26,13 +27,15 @@ written to ``DIR``.  Heavy modules (numba, matplotlib) are imported inside the c
 from __future__ import annotations
 
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Annotated, Any, Literal
 
 import typer
 from typer.core import TyperCommand, TyperGroup
 
-from aiofl.cli.errors import _check_out, bad_input_exits
+from aiofl.cli.errors import _check_out, _out_or_check, bad_input_exits
 
 __all__ = ["EXAMPLES", "app", "main"]
 
@@ -46,18 +49,83 @@ def _flags_without_type(params: list[Any]) -> list[Any]:
     return params
 
 
+def _reflow(text: str) -> str:
+    """Help text with every paragraph on one line (a docstring's line breaks are not
+    sentence breaks; the terminal wraps).  A paragraph starting with ``\\b`` (click's
+    "keep my lines") is kept as it is."""
+    import inspect
+
+    paragraphs = inspect.cleandoc(text).split("\n\n")
+    return "\n\n".join(
+        p if p.startswith("\b") else " ".join(line.strip() for line in p.splitlines())
+        for p in paragraphs
+    )
+
+
+def _shown_help(text: str) -> str:
+    """What rich's help must be given to print ``text`` as written: reflowed, and with rich
+    markup escaped, so ``[uncertainty]``, ``[s]`` or ``[controller.discrete]`` are printed
+    instead of being taken as style tags and dropped."""
+    from rich.markup import escape
+
+    return escape(_reflow(text))
+
+
+_HELP_ATTRS = ("help", "short_help", "epilog")
+
+
+@contextmanager
+def _help_as_written(command: Any, ctx: Any) -> Iterator[None]:
+    """While ``command``'s help is printed by typer's rich formatter, give it (and its
+    parameters, and a group's commands) help text that rich prints verbatim
+    (:func:`_shown_help`); restored afterwards.  Plain click help (``TYPER_USE_RICH=0``)
+    prints the text as it is and needs nothing."""
+    import typer.core
+
+    if not typer.core.HAS_RICH or getattr(command, "rich_markup_mode", None) != "rich":
+        yield
+        return
+    objects = [command, *command.get_params(ctx)]
+    if isinstance(command, TyperGroup):
+        subs = (command.get_command(ctx, name) for name in command.list_commands(ctx))
+        objects += [sub for sub in subs if sub is not None]
+    saved = [
+        (obj, key, getattr(obj, key))
+        for obj in objects
+        for key in _HELP_ATTRS
+        if isinstance(getattr(obj, key, None), str)
+    ]
+    try:
+        for obj, key, text in saved:
+            setattr(obj, key, _shown_help(text))
+        yield
+    finally:
+        for obj, key, text in saved:
+            setattr(obj, key, text)
+
+
 class _Command(TyperCommand):
-    """Every ``aiofl`` command: flags shown without a type (see :func:`_flags_without_type`)."""
+    """Every ``aiofl`` command: flags shown without a type (see :func:`_flags_without_type`),
+    help text printed as written (see :func:`_help_as_written`)."""
 
     def get_params(self, ctx: Any) -> list[Any]:
         return _flags_without_type(super().get_params(ctx))
+
+    def format_help(self, ctx: Any, formatter: Any) -> None:
+        with _help_as_written(self, ctx):
+            super().format_help(ctx, formatter)
 
 
 class _Group(TyperGroup):
-    """The ``aiofl`` group: flags shown without a type (``--version``, ``-h/--help``)."""
+    """The ``aiofl`` group: flags shown without a type (``--version``, ``-h/--help``), its
+    commands' help printed as written."""
 
     def get_params(self, ctx: Any) -> list[Any]:
         return _flags_without_type(super().get_params(ctx))
+
+    def format_help(self, ctx: Any, formatter: Any) -> None:
+        with _help_as_written(self, ctx):
+            super().format_help(ctx, formatter)
 
 
 app = typer.Typer(
@@ -237,7 +305,9 @@ def simulation_record(cfg: Any, result: Any, source_name: str) -> dict[str, Any]
     ``scenario`` is the paper scenario number when a shipped preset was run whose name
     encodes it (``paper-s2-leso`` -> 2), and null for a config file (its scenario may have
     been edited); ``scenario_name`` is always the config's ``[scenario] name``.
-    ``source`` is ``"config"``.
+    ``source`` is ``"config"``.  ``config`` is what was run, as given (the preset's name,
+    or the file's path: a preset copied to ``my.toml`` and edited is ``"my.toml"``, not the
+    preset), ``name`` the config's own ``name``.
     """
     from aiofl.config import list_presets
     from aiofl.reporting.cases import computed_record, scenario_number
@@ -252,31 +322,47 @@ def simulation_record(cfg: Any, result: Any, source_name: str) -> dict[str, Any]
         extra=True,
     )
     rec["scenario_name"] = cfg.scenario.name
-    rec["config"] = cfg.name
+    rec["config"] = source_name
+    rec["name"] = cfg.name
     rec["sample_time"] = cfg.sampling.ts if cfg.sampling is not None else None
     return rec
+
+
+def _run_label(config: str, name: str) -> str:
+    """A run's name in its figure: the config's ``name``, with the file it came from when
+    that is named otherwise (a copied preset: ``"paper-s1-leso (my.toml)"``)."""
+    from aiofl.config import list_presets
+
+    if config in list_presets() or Path(config).stem == name:
+        return name
+    return f"{name} ({config})"
 
 
 @app.command("simulate")
 def simulate_command(
     config: Annotated[str, typer.Argument(help="A TOML config file or a preset name.")],
-    out: Annotated[Path, typer.Option("--out", "-o", help="Output directory.")],
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", "-o", help="Output directory (required unless --check)."),
+    ] = None,
     dt: Annotated[
-        float | None, typer.Option(help="Override the fixed step \\[s] (0 < dt <= 0.1).")
+        float | None, typer.Option(help="Override the fixed step [s] (0 < dt <= 0.1).")
     ] = None,
     method: Annotated[
         Literal["rk4", "euler"] | None, typer.Option(help="Override the integrator.")
     ] = None,
     t_final: Annotated[
         float | None,
-        typer.Option("--t-final", help="Override the horizon \\[s] (0 < t_final <= 1e4)."),
+        typer.Option("--t-final", help="Override the horizon [s] (0 < t_final <= 1e4)."),
     ] = None,
     force: Annotated[
         bool, typer.Option("--force", help="Replace an existing non-empty OUT.")
     ] = False,
     check: Annotated[
         bool,
-        typer.Option("--check", help="Only validate CONFIG and OUT; run and write nothing."),
+        typer.Option(
+            "--check", help="Only validate CONFIG (and OUT if given); run and write nothing."
+        ),
     ] = False,
     ts: Annotated[
         float | None,
@@ -292,7 +378,8 @@ def simulate_command(
     A run that diverges is reported as diverged with the time (metrics null); it is not
     an error.  An existing non-empty OUT is refused unless --force (then it is replaced
     as a whole).  --dt, --t-final and --method pass the same checks as the config's values.
-    With --ts (or a [controller.discrete] table) the controller runs sampled.
+    With --ts (or a [controller.discrete] table) the controller runs sampled.  --check
+    only validates CONFIG, the overrides and OUT (if given) and prints what would run.
     """
     import json
 
@@ -301,7 +388,9 @@ def simulate_command(
 
     console = _stderr_console()
     with bad_input_exits():
-        _check_out(out, force=force)
+        out = _out_or_check(out, check)
+        if out is not None:
+            _check_out(out, force=force)
         cfg = load_config(config)
         if method is not None and method not in ("rk4", "euler"):
             raise ConfigError(f"--method = {method!r}; allowed: rk4, euler")
@@ -313,7 +402,7 @@ def simulate_command(
             )
         cfg = cfg.with_sample_time(ts) if ts is not None else cfg
         cfg.check_sampling()  # Ts must stay a multiple of an overridden dt
-    if check:
+    if check or out is None:
         steps = round(cfg.scenario.t_final / cfg.dt)
         typer.echo(
             f"{config}: valid; {steps} {cfg.method} steps of {cfg.dt:g} s over "
@@ -332,7 +421,10 @@ def simulate_command(
         )
         from aiofl.reporting.figures import figure_png, result_figure, scenario_events
 
-        title = f"{cfg.name}: output vs reference, tracking error and control signal"
+        title = (
+            f"{_run_label(config, cfg.name)}: output vs reference, tracking error and "
+            "control signal"
+        )
         fig = result_figure(
             result,
             title,
@@ -346,6 +438,22 @@ def simulate_command(
         atomic_write_bytes(stage / "figure.png", figure_png(fig))
     _print_records([record], title=f"aiofl simulate {config}")
     typer.echo(f"wrote {out}/metrics.json, trajectory.csv, figure.png")
+    note = units_note(cfg.plant)
+    if note:
+        typer.echo(f"aiofl: note: {note}", err=True)
+
+
+def units_note(plant: Any) -> str | None:
+    """Why figure.png and trajectory.csv carry no units, if the plant declares none of
+    ``output_unit``/``input_unit``; None when it declares them."""
+    missing = [k for k in ("output_unit", "input_unit") if not getattr(plant, k)]
+    if not missing:
+        return None
+    return (
+        f"plant {plant.name!r} declares no {' or '.join(missing)}, so figure.png and "
+        'trajectory.csv leave those signals without units; add e.g. output_unit = "rad" '
+        'and input_unit = "N·m" to its plant file (Python: Plant(..., output_unit=...))'
+    )
 
 
 # -------------------------------------------------------------------------- reproduce

@@ -42,6 +42,16 @@ def _check_out(out: Path, *, force: bool = True) -> None:
     check_replaceable(out, force=force)
 
 
+def _out_or_check(out: Path | None, check: bool) -> Path | None:
+    """``--out``, which only ``--check`` (validate, run and write nothing) may leave out;
+    raises ``ValueError`` naming ``--out`` when it is missing otherwise."""
+    if out is None and not check:
+        raise ValueError(
+            "--out / -o: missing; give the output directory (or --check to only validate)"
+        )
+    return out
+
+
 @contextmanager
 def bad_input_exits(*, run: bool = False) -> Iterator[None]:
     """Turn bad-input exceptions into one message on stderr and exit status 2.

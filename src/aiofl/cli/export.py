@@ -11,7 +11,7 @@ by :func:`aiofl.export.c_text.comment_text` inside :func:`aiofl.export.export_c`
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 import typer
 
@@ -28,7 +28,8 @@ def export_command(
         typer.Option("--ts", help="Sample time [s] (default: the config's [controller.discrete])."),
     ] = None,
     precision: Annotated[
-        str, typer.Option("--precision", help="Arithmetic of the C code: double or float.")
+        Literal["double", "float"],
+        typer.Option("--precision", help="Arithmetic of the C code (C double or float)."),
     ] = "double",
 ) -> None:
     """Export the config's controller, sampled at Ts, as C99 (aiofl_controller.h/.c in OUT)."""

@@ -3,9 +3,9 @@
 Runs the design of CONFIG over the draws of its ``[uncertainty]`` table
 (:func:`aiofl.analysis.robustness.run_robustness`) and writes ``DIR/robustness.json``
 (stable fraction, ITAE/ISU quantiles, the worst draw, the nominal run) and
-``DIR/robustness.png`` (ECDF of ITAE, the envelope of y - r, ITAE against the two most
-influential parameters), all or nothing.  A config without ``[uncertainty]``, a bad table
-or option exits with status 2 and writes nothing.
+``DIR/robustness.png`` (ECDFs of ITAE and ISU, the envelope of y - r, ITAE against the
+two most influential parameters, ISU against ITAE), all or nothing.  A config without
+``[uncertainty]``, a bad table or option exits with status 2 and writes nothing.
 """
 
 from __future__ import annotations

@@ -12,18 +12,23 @@ fast.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
-from aiofl.cli.errors import _check_out, bad_input_exits
+from aiofl.cli.errors import _check_out, _out_or_check, bad_input_exits
 
 __all__ = ["tune_command"]
 
 
 def tune_command(
-    config: Annotated[str, typer.Argument(help="A TOML config (or preset) with a tune table.")],
-    out: Annotated[Path, typer.Option("--out", "-o", help="Output directory.")],
+    config: Annotated[
+        str, typer.Argument(help="A TOML config file (or preset) with a [tune] table.")
+    ],
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", "-o", help="Output directory (required unless --check)."),
+    ] = None,
     resume: Annotated[
         bool, typer.Option("--resume", help="Continue from OUT/checkpoint.npz (same result).")
     ] = False,
@@ -46,6 +51,14 @@ def tune_command(
         int | None, typer.Option("--population", help="Override tune.population.")
     ] = None,
     quiet: Annotated[bool, typer.Option("--quiet", help="No progress bar.")] = False,
+    check: Annotated[
+        bool,
+        typer.Option(
+            "--check",
+            help="Only validate CONFIG, its [tune] table, the overrides and OUT (if given) "
+            "and print the search; run and write nothing.",
+        ),
+    ] = False,
     ts: Annotated[
         float | None,
         typer.Option(
@@ -53,14 +66,19 @@ def tune_command(
         ),
     ] = None,
 ) -> None:
-    """Tune a controller with a GA (pymoo) on the OPI of eq. (22), per the config's tune table.
+    """Tune a controller's parameters per the config's [tune] table (pymoo: GA, DE, CMA-ES
+    or NSGA-II).
 
-    Writes OUT/best.toml (runs with `aiofl simulate`), history.csv, evaluations.csv,
-    convergence.png and summary.json (with algorithm = "nsga2" also the Pareto front,
-    front.csv and front.png, best.toml being the design picked by `choose`);
+    The [tune] table names the parameters and their bounds, the algorithm (ga, de, cmaes:
+    one objective, by default the OPI of eq. (22); nsga2: a Pareto front over 2-3
+    objectives under constraints), the budget and the horizon.  Writes OUT/best.toml (runs
+    with `aiofl simulate`), history.csv, evaluations.csv, convergence.png and summary.json
+    (with algorithm = "nsga2" also the Pareto front, front.csv and front.png, best.toml
+    being the design picked by `choose`);
     OUT/checkpoint.npz is updated after every generation so `--resume` continues a killed
     run with the same final result.  The results are written before the figures; a figure
-    or marker that cannot be made is left out with a note.
+    or marker that cannot be made is left out with a note.  --check only validates and
+    prints the search it would run.
     """
     from aiofl.tuning.checkpoint import CHECKPOINT, load_checkpoint
     from aiofl.tuning.results import write_outputs
@@ -71,17 +89,24 @@ def tune_command(
             raise ValueError("give --scheduler or --dask-workers, not both")
         if dask_workers is not None and dask_workers < 1:
             raise ValueError(f"--dask-workers = {dask_workers}; allowed: >= 1")
-        _check_out(out)
+        out = _out_or_check(out, check)
+        if resume and out is None:
+            raise ValueError("--resume needs --out (the folder holding checkpoint.npz)")
+        if out is not None:
+            _check_out(out)
         target = config
         if ts is not None:  # the sampled controller is tuned (and written to best.toml)
             from aiofl.config import load_config
 
             target = load_config(config).with_sample_time(ts)
         prep = prepare(target, None, seed=seed, generations=generations, population=population)
-        if resume and (out / CHECKPOINT).exists():
+        if resume and out is not None and (out / CHECKPOINT).exists():
             load_checkpoint(out / CHECKPOINT, prep.fingerprint)  # a damaged one: exit 2 now
         elif resume:
             typer.echo(f"aiofl: no checkpoint in {out}; starting from scratch", err=True)
+    if check or out is None:
+        typer.echo(f"{config}: valid; {check_text(prep)}; nothing run or written")
+        return
     with bad_input_exits(run=True):
         try:
             result = tune(
@@ -103,6 +128,60 @@ def tune_command(
             )
             raise typer.Exit(130) from None
         summary = write_outputs(result, out)
+    for note in summary["notes"]:
+        typer.echo(f"aiofl: note: {note}", err=True)
+    typer.echo(summary_text(result, summary, out))
+
+
+def check_text(prep: Any) -> str:
+    """What ``aiofl tune --check`` prints after "CONFIG: valid;": the search that would run
+    (algorithm, budget, simulations, objective(s), parameters, horizon and step)."""
+    st = prep.settings
+    candidates = st.population * st.generations
+    sims = candidates * (1 + st.robust.draws) if st.robust is not None else candidates
+    if st.objectives:
+        goal = f"objectives {', '.join(st.objectives)}"
+        goal += f" under {', '.join(st.constraints)}" if st.constraints else ""
+        goal += f", chosen by {st.choose}"
+    else:
+        obj = st.objective
+        if not isinstance(obj, str):  # a weighted sum, e.g. itae + 0.1·isu
+            obj = " + ".join(("" if w == 1 else f"{w:g}·") + k for k, w in obj.items())
+        goal = f"objective {obj}"
+    if st.robust is not None:
+        goal += f", robust ({st.robust.aggregate} over nominal + {st.robust.draws} draws)"
+    return (
+        f"{st.budget()}: up to {candidates} candidates ({sims} simulations of "
+        f"{st.t_final:g} s at dt = {prep.spec.dt:g}, {prep.spec.method}); {goal}; "
+        f"parameters {', '.join(prep.space.names)}"
+    )
+
+
+def summary_text(result: Any, summary: dict[str, Any], out: Path) -> str:
+    """The lines ``aiofl tune`` prints at the end (:class:`aiofl.tuning.search.TuneResult`
+    and the summary of :func:`aiofl.tuning.results.write_outputs`).
+
+    The numbers are the progress bar's: its "best" is the best objective (with NSGA-II
+    its "lowest <first objective>", printed here next to the chosen design's objectives),
+    its eval/s the whole run's :attr:`~aiofl.tuning.search.TuneResult.evals_per_second`.
+    """
+    import math
+
+    rate = result.evals_per_second
+    speed = f"{rate:.1f} eval/s" if math.isfinite(rate) else "all replayed from the checkpoint"
+    counts = f"({result.n_evaluations} evaluations, {int(result.diverged.sum())} diverged, {speed})"
+    front = result.front
+    if front is None:
+        head = f"best objective {result.best_objective:.6g} {counts}"
+    else:
+        chosen = ", ".join(
+            f"{q} {v:.6g}" for q, v in zip(front.objectives, front.F[front.chosen], strict=True)
+        )
+        head = (
+            f"chosen design ({front.rule}, from a {front.F.shape[0]}-design Pareto front): "
+            f"{chosen}; lowest {front.objectives[0]} on the front "
+            f"{float(front.F[:, 0].min()):.6g} {counts}"
+        )
     full = summary["full_horizon"]
     if full is None:
         status = "not computed (see the note)"
@@ -114,11 +193,6 @@ def tune_command(
             f"OPI {full['opi']:.4g}"
         )
     horizon = f"{full['t_final']:g} s" if full is not None else "its own horizon"
-    for note in summary["notes"]:
-        typer.echo(f"aiofl: note: {note}", err=True)
-    typer.echo(
-        f"best objective {result.best_objective:.6g} ({result.n_evaluations} evaluations, "
-        f"{int(result.diverged.sum())} diverged, {result.evals_per_second:.1f} eval/s)\n"
-        f"best config over {horizon}: {status}\n"
-        f"wrote {out}/{', '.join(summary['files'])}"
-    )
+    which = "best" if front is None else "chosen"
+    files = ", ".join(summary["files"])
+    return f"{head}\n{which} config over {horizon}: {status}\nwrote {out}/{files}"

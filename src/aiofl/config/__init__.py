@@ -8,6 +8,7 @@ every table is :mod:`aiofl.config.schema`; reading and checking is
 """
 
 from aiofl.config.run_config import (
+    PlantFileGiven,
     RunConfig,
     list_presets,
     load_config,
@@ -20,6 +21,7 @@ from aiofl.config.schema import REQUIRED_KEYS, ConfigError
 __all__ = [
     "REQUIRED_KEYS",
     "ConfigError",
+    "PlantFileGiven",
     "RunConfig",
     "list_presets",
     "load_config",

@@ -91,6 +91,7 @@ __all__ = [
     "MAX_TRAJECTORY_BYTES",
     "REQUIRED_KEYS",
     "ConfigError",
+    "PlantFileGiven",
     "RunConfig",
     "check_run_size",
     "list_presets",
@@ -326,6 +327,22 @@ def resolve_plant(name_or_file: str, base_dir: str | Path | None = None) -> Plan
     return _FILE_PLANTS[key]
 
 
+class PlantFileGiven(ConfigError):
+    """A plant file (states, f, g, h, [params]) given where a run config is wanted."""
+
+
+_PLANT_FILE_KEYS = ("states", "f", "g", "h")
+_CONFIG_TABLES = ("plant", "scenario", "controller", "simulation")
+
+
+def _plant_file_keys(data: dict[str, Any]) -> list[str]:
+    """The plant-file keys ``data`` sets if it looks like a plant file rather than a run
+    config (two or more of states, f, g, h and none of plant, [scenario], [controller],
+    [simulation]); empty otherwise."""
+    keys = [k for k in _PLANT_FILE_KEYS if k in data]
+    return keys if len(keys) >= 2 and not any(k in data for k in _CONFIG_TABLES) else []
+
+
 def parse_config(
     data: dict[str, Any], source: str = "<dict>", base_dir: str | Path | None = None
 ) -> RunConfig:
@@ -333,11 +350,19 @@ def parse_config(
 
     ``base_dir`` resolves a relative ``plant = "file.toml"`` (defaults to the working folder).
     Types are strict (no bool or string coercion into numbers), the :data:`REQUIRED_KEYS`
-    must be set, and the run's size is bounded before anything is allocated
-    (:func:`check_run_size`).
+    must be set (a plant file is refused as such: :class:`PlantFileGiven`), and the run's
+    size is bounded before anything is allocated (:func:`check_run_size`).
     """
     if not isinstance(data, dict):
         raise ConfigError(f"invalid config {source}: a TOML table expected, got {type(data)}")
+    plant_keys = _plant_file_keys(data)
+    if plant_keys:
+        raise PlantFileGiven(
+            f"invalid config {source}: this is a plant file (it sets {', '.join(plant_keys)}), "
+            'not a run config; a run config names it (plant = "file.toml", relative to the '
+            "config's folder) and sets [scenario], [controller] and [simulation] (see "
+            "`aiofl show tank-ladrc` for the format)"
+        )
     missing = _missing_keys(data)
     note = "\n" + _missing_text(missing) if missing else ""
     try:

@@ -5,6 +5,9 @@ Each run gets one row of three panels: (left) the output y against the reference
 and (right) the control signal u, each axis in the plant's own units
 (:attr:`aiofl.plants.base.Plant.output_unit`, ``input_unit``).  One legend for the whole
 figure, above the panels, says which line is which, so nothing is printed over the curves.
+Panels are lettered (a), (b), ... (z), (aa), ... (:func:`panel_letter`); the figure's title,
+a run's label and the units are drawn as plain text (a ``$`` in a config's name is no
+mathtext).
 
 A run that diverged is drawn up to the divergence time, which is marked (a dotted line and
 the time in the panel titles); its output and error panels are clipped to a few reference
@@ -44,6 +47,7 @@ if TYPE_CHECKING:
 __all__ = [
     "Panel",
     "figure_png",
+    "panel_letter",
     "result_figure",
     "runs_figure",
     "scenario_events",
@@ -117,7 +121,18 @@ def _symlog_ticks(ax: Axes, peak: float) -> None:
     )
 
 
-def _draw_row(axes: Sequence[Axes], p: Panel, letters: str) -> None:
+def panel_letter(i: int) -> str:
+    """The letter of panel ``i`` (from 0): a..z, then aa, ab, ... (a figure of more than
+    eight runs has more than 26 panels; no letter repeats)."""
+    out = ""
+    i += 1
+    while i > 0:
+        i, r = divmod(i - 1, 26)
+        out = chr(ord("a") + r) + out
+    return out
+
+
+def _draw_row(axes: Sequence[Axes], p: Panel, letters: Sequence[str]) -> None:
     ax_y, ax_e, ax_u = axes
     res = p.result
     t, r, y, u = res.t, res["r"], res["y"], res["u"]
@@ -131,10 +146,13 @@ def _draw_row(axes: Sequence[Axes], p: Panel, letters: str) -> None:
     ax_e.axhline(0.0, color="0.25", lw=0.8, ls="--")
     ax_e.plot(t, e, color=p.color, lw=1.0)
     ax_u.plot(t, u, color=p.color, lw=0.8)
-    ax_y.set_ylabel(unit_label("y, r", p.output_unit))
-    ax_e.set_ylabel(unit_label("e = y − r", p.output_unit))
-    ax_u.set_ylabel(unit_label("u", p.input_unit))
-    ax_y.set_title(f"({letters[0]}) {p.label}", fontsize=9.5, loc="left", fontweight="bold")
+    # the plant's units and the run's label are user text: plain, never mathtext
+    ax_y.set_ylabel(unit_label("y, r", p.output_unit), parse_math=False)
+    ax_e.set_ylabel(unit_label("e = y − r", p.output_unit), parse_math=False)
+    ax_u.set_ylabel(unit_label("u", p.input_unit), parse_math=False)
+    ax_y.set_title(
+        f"({letters[0]}) {p.label}", fontsize=9.5, loc="left", fontweight="bold", parse_math=False
+    )
     ax_e.set_title(f"({letters[1]}) tracking error", fontsize=9.5, loc="left")
     ax_u.set_title(f"({letters[2]}) control signal", fontsize=9.5, loc="left")
     if res.diverged:
@@ -145,12 +163,15 @@ def _draw_row(axes: Sequence[Axes], p: Panel, letters: str) -> None:
             for ax in (ax_y, ax_e):
                 ax.set_ylim(-lim, lim)
             ax_y.set_title(
-                f"|y| reaches {y_peak:.3g}{_u(p.output_unit)}", fontsize=8.5, loc="right"
+                f"|y| reaches {y_peak:.3g}{_u(p.output_unit)}",
+                fontsize=8.5,
+                loc="right",
+                parse_math=False,
             )
         u_peak = float(np.max(np.abs(u))) if u.size else 0.0
         if u_peak > 100.0:
             _symlog_ticks(ax_u, u_peak)
-            ax_u.set_ylabel(unit_label("u", p.input_unit) + " (symlog)")
+            ax_u.set_ylabel(unit_label("u", p.input_unit) + " (symlog)", parse_math=False)
         at = res.diverged_at if res.diverged_at is not None else float(t[-1]) if t.size else 0.0
         for ax in (ax_y, ax_e, ax_u):
             ax.axvline(at, **DIVERGED_STYLE)
@@ -228,7 +249,9 @@ def runs_figure(panels: Sequence[Panel], title: str) -> Figure:
             "hspace": gap / (row - gap),
         },
     )
-    fig.suptitle(title, fontsize=12, fontweight="bold", y=1.0 - 0.1 / height, va="top")
+    fig.suptitle(  # a config's name or path: plain text
+        title, fontsize=12, fontweight="bold", y=1.0 - 0.1 / height, va="top", parse_math=False
+    )
     fig.legend(
         handles,
         labels,
@@ -238,10 +261,8 @@ def runs_figure(panels: Sequence[Panel], title: str) -> Figure:
         fontsize=8.5,
         frameon=False,
     )
-    letters = "abcdefghijklmnopqrstuvwxyz"
     for i, p in enumerate(panels):
-        tags = "".join(letters[(3 * i + k) % 26] for k in range(3))
-        _draw_row(axes[i], p, tags)
+        _draw_row(axes[i], p, [panel_letter(3 * i + k) for k in range(3)])
     for ax in axes[-1]:
         ax.set_xlabel("time t [s]")
     return fig

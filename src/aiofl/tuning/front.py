@@ -39,6 +39,7 @@ __all__ = [
     "NoFeasibleDesign",
     "choose",
     "front_csv",
+    "front_figure",
     "front_index",
     "front_of_run",
     "front_png",
@@ -166,29 +167,29 @@ def front_csv(front: Front) -> str:
     return buf.getvalue()
 
 
-def front_png(
+def front_figure(
     front: Front,
     title: str,
     markers: Sequence[tuple[str, float, float]] = (),
     isu_floor: float | None = None,
     notes: Sequence[str] = (),
-) -> bytes:
-    """``front.png``: objective 1 against objective 2 (log axes where all values are > 0).
+) -> Any:
+    """The figure of ``front.png`` (a matplotlib ``Figure``): objective 1 against objective 2.
 
     ``markers`` are labelled reference points (the paper's printed designs, the y ≡ 0
     controller); ``isu_floor`` draws the exact-tracking ISU floor as a vertical line when
     the second objective is an ISU (or a horizontal one when the first is); ``notes`` are
     printed under the title, one per line (e.g. why the paper's designs or the floor are
-    not shown).  Title and notes are plain text, never mathtext: a ``$`` in a config's path
-    or an error message cannot break the figure.
+    not shown).  An axis is logarithmic where all its values are > 0; one holding a zero
+    (the y ≡ 0 controller's ISU) is symmetric-log starting at 0, so no negative decades
+    are drawn to place it.  Title, notes and axis labels are plain text, never mathtext: a
+    ``$`` in a config's path or an error message cannot break the figure.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     x, y = front.F[:, 1], front.F[:, 0]
-    fig, ax = plt.subplots(figsize=(7, 4.8), dpi=110)
+    fig = Figure(figsize=(7, 4.8), dpi=110)
+    ax = fig.add_subplot(1, 1, 1)
     order = np.argsort(x)
     ax.plot(x[order], y[order], "o-", ms=4, lw=1, label=f"Pareto front ({x.size} designs)")
     c = front.chosen
@@ -206,21 +207,50 @@ def front_png(
         elif front.objectives[0].split(":")[0] == "isu":
             ax.axhline(isu_floor, ls="--", color="k", lw=1, label="exact-tracking ISU floor")
             ys.append(isu_floor)
-    if min(xs) > 0:
-        ax.set_xscale("log")
-    else:  # a zero (the y ≡ 0 controller's ISU) cannot sit on a log axis
-        ax.set_xscale("symlog", linthresh=max(1e-6, min(v for v in xs if v > 0) / 10))
-    if min(ys) > 0:
-        ax.set_yscale("log")
-    ax.set_xlabel(front.objectives[1])
-    ax.set_ylabel(front.objectives[0])
+    _objective_scale(ax, "x", xs)
+    _objective_scale(ax, "y", ys)
+    ax.set_xlabel(front.objectives[1], parse_math=False)
+    ax.set_ylabel(front.objectives[0], parse_math=False)
     # one line per note, wrapped; the text (a path, an error message) is not mathtext
     lines = [title, *(ln for note in notes for ln in textwrap.wrap(note, 110))]
     ax.set_title("\n".join(lines), fontsize=8, parse_math=False)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7, loc="best")
     fig.tight_layout()
+    return fig
+
+
+def _objective_scale(ax: Any, which: str, values: Sequence[float]) -> None:
+    """Log axis where every value is > 0; with a zero (and no negative value) a
+    symmetric-log axis from 0, linear below the smallest positive value / 10; linear if
+    a value is negative."""
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    set_scale, set_lim = (
+        (ax.set_xscale, ax.set_xlim) if which == "x" else (ax.set_yscale, ax.set_ylim)
+    )
+    if v.size == 0 or v.min() < 0:
+        return
+    if v.min() > 0:
+        set_scale("log")
+        return
+    pos = v[v > 0]
+    set_scale("symlog", linthresh=max(1e-6, pos.min() / 10) if pos.size else 1.0)
+    set_lim(0.0, None)  # a zero is the axis's start: no negative decades
+
+
+def front_png(
+    front: Front,
+    title: str,
+    markers: Sequence[tuple[str, float, float]] = (),
+    isu_floor: float | None = None,
+    notes: Sequence[str] = (),
+) -> bytes:
+    """``front.png``: :func:`front_figure` rendered to PNG bytes (Agg, no pyplot state)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = front_figure(front, title, markers, isu_floor, notes)
+    FigureCanvasAgg(fig)
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
-    plt.close(fig)
     return buf.getvalue()

@@ -55,6 +55,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "best_toml",
+    "convergence_figure",
     "convergence_png",
     "full_horizon_record",
     "reference_markers",
@@ -114,16 +115,20 @@ def _evaluations_csv(result: TuneResult) -> str:
     return buf.getvalue()
 
 
-def convergence_png(result: TuneResult) -> bytes:
-    """The convergence plot: best-so-far, generation best and median vs generation."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+def convergence_figure(result: TuneResult) -> Any:
+    """The convergence plot (a matplotlib ``Figure``): best-so-far, generation best and
+    median vs generation, and the diverged members per generation as bars on a second axis
+    from 0.  When no member diverged there is no such axis (an empty one would run from
+    −0.04 to 0.04); the legend says "no member diverged" instead.  The title (the config's
+    path) is plain text, never mathtext."""
+    from matplotlib.figure import Figure
+    from matplotlib.lines import Line2D
+    from matplotlib.ticker import MaxNLocator
 
     h = result.history
     gen = [r["generation"] for r in h]
-    fig, ax = plt.subplots(figsize=(7, 4.2), dpi=110)
+    fig = Figure(figsize=(7, 4.2), dpi=110)
+    ax = fig.add_subplot(1, 1, 1)
     ax.plot(gen, [r["best_so_far"] for r in h], lw=2, label="best so far")
     ax.plot(gen, [r["best"] for r in h], ".", ms=4, label="generation best")
     ax.plot(gen, [r["median"] for r in h], lw=1, alpha=0.7, label="generation median (stable)")
@@ -136,21 +141,35 @@ def convergence_png(result: TuneResult) -> bytes:
     ax.set_ylabel(f"objective ({obj}, t_f = {st.t_final:g} s)")
     ax.set_title(f"{result.source}: {st.budget()}", fontsize=9, parse_math=False)  # a path
     ax.grid(True, alpha=0.3)
-    ax2 = ax.twinx()
-    ax2.bar(gen, [r["diverged"] for r in h], alpha=0.15, color="red", label="diverged")
-    ax2.set_ylabel("diverged members")
-    ax.set_zorder(ax2.get_zorder() + 1)  # lines over the bars
-    ax.patch.set_visible(False)
-    from matplotlib.ticker import MaxNLocator
-
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-    lines = ax.get_legend_handles_labels()
-    bars = ax2.get_legend_handles_labels()
-    ax.legend(lines[0] + bars[0], lines[1] + bars[1], fontsize=8, loc="upper right")
+    handles, labels = ax.get_legend_handles_labels()
+    diverged = [r["diverged"] for r in h]
+    if any(diverged):
+        ax2 = ax.twinx()
+        ax2.bar(gen, diverged, alpha=0.15, color="red", label="diverged")
+        ax2.set_ylabel("diverged members")
+        ax2.set_ylim(0, max(diverged) * 1.1)
+        ax2.yaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.set_zorder(ax2.get_zorder() + 1)  # lines over the bars
+        ax.patch.set_visible(False)
+        bars = ax2.get_legend_handles_labels()
+        handles, labels = handles + bars[0], labels + bars[1]
+    else:
+        handles.append(Line2D([], [], lw=0))
+        labels.append("no member diverged")
+    ax.legend(handles, labels, fontsize=8, loc="upper right")
     fig.tight_layout()
+    return fig
+
+
+def convergence_png(result: TuneResult) -> bytes:
+    """``convergence.png``: :func:`convergence_figure` rendered to PNG bytes (Agg)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    fig = convergence_figure(result)
+    FigureCanvasAgg(fig)
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
-    plt.close(fig)
     return buf.getvalue()
 
 

@@ -39,6 +39,7 @@ from aiofl.tuning.checkpoint import (
     load_checkpoint,
     save_checkpoint,
 )
+from aiofl.tuning.progress import TuneProgress
 from aiofl.tuning.space import (
     SearchSpace,
     TuneSettings,
@@ -457,8 +458,9 @@ def tune(
     ev = evaluator or _make_evaluator(scheduler, n_workers, st.chunks)
     gens: list[dict[str, Any]] = []
     history: list[dict[str, float]] = []
-    state = {"best": np.inf, "total": 0, "live_n": 0, "live_s": 0.0}
-    bar = _Progress(st, ev, enabled=progress)
+    state = {"best": np.inf, "lowest": np.inf, "total": 0, "live_n": 0, "live_s": 0.0}
+    first = prep.objectives[0].text() if prep.objectives else None
+    bar = TuneProgress(st, ev, enabled=progress, first_objective=first)
 
     def evaluate(s: NDArray[np.float64]) -> NDArray[np.float64]:
         g = len(gens)
@@ -487,6 +489,10 @@ def tune(
         )
         state["total"] += obj.size
         state["best"] = min(state["best"], float(obj.min()))
+        if prep.objectives:  # the lowest first objective of a feasible design: the front's
+            ok = (scores["G"] <= 0).all(axis=1) & np.isfinite(scores["F"]).all(axis=1)
+            if ok.any():
+                state["lowest"] = min(state["lowest"], float(scores["F"][ok, 0].min()))
         history.append(
             _generation_row(len(gens), obj, cand_div, state["total"], state["best"], secs)
         )
@@ -495,7 +501,8 @@ def tune(
             state["live_s"] += secs
             if ckpt is not None:
                 save_checkpoint(ckpt, prep.fingerprint, gens)
-        bar.update(len(gens), state["best"], obj.size, secs, live)
+        shown = state["lowest"] if prep.objectives else state["best"]
+        bar.update(len(gens), shown, int(state["live_n"]), float(state["live_s"]))
         return (scores["F"], scores["G"]) if prep.objectives else obj
 
     try:
@@ -592,52 +599,3 @@ def _scores(
             alpha,
         )
     return {"objective": obj, "candidate_diverged": cand_div}
-
-
-class _Progress:
-    """A rich progress bar on stderr: generation, best objective, evaluations per second."""
-
-    def __init__(self, st: TuneSettings, ev: Any, *, enabled: bool) -> None:
-        self.enabled = enabled
-        self.total = st.generations
-        where = getattr(ev, "description", "")
-        self.desc = f"{st.algorithm.upper()} {st.population}x{st.generations}" + (
-            " dask" if where.startswith("dask") else ""
-        )
-        self._p: Any = None
-        self._task: Any = None
-
-    def __enter__(self) -> _Progress:
-        if self.enabled:
-            from rich.console import Console
-            from rich.progress import (
-                BarColumn,
-                MofNCompleteColumn,
-                Progress,
-                TextColumn,
-                TimeElapsedColumn,
-                TimeRemainingColumn,
-            )
-
-            self._p = Progress(
-                TextColumn("[bold]{task.description}"),
-                BarColumn(),
-                MofNCompleteColumn(),
-                TextColumn("gen · best {task.fields[best]} · {task.fields[rate]} eval/s"),
-                TimeElapsedColumn(),
-                TimeRemainingColumn(),
-                console=Console(stderr=True),
-            )
-            self._p.__enter__()
-            self._task = self._p.add_task(self.desc, total=self.total, best="—", rate="—")
-        return self
-
-    def update(self, gen: int, best: float, n: int, secs: float, live: bool) -> None:
-        if self._p is None:
-            return
-        rate = f"{n / secs:.1f}" if live and secs > 0 else "replayed"
-        self._p.update(self._task, completed=gen, best=f"{best:.6g}", rate=rate)
-
-    def __exit__(self, *exc: Any) -> None:
-        if self._p is not None:
-            self._p.__exit__(*exc)
