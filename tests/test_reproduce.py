@@ -258,3 +258,36 @@ def test_every_computed_record_carries_its_robustness_row(reproduced) -> None:
     assert "## Robustness: every design over the same ±20 % model errors" in md
     assert "16 draws (seed 0)" in md
     assert "## Pareto fronts: which structure tracks best at equal control energy?" in md
+
+
+def test_reproduce_prints_one_line_per_stage_when_not_on_a_terminal(reproduced) -> None:
+    # the CliRunner's stderr is not a terminal: plain lines, as in a log file
+    lines = [line for line in reproduced.stderr.splitlines() if line.strip()]
+    stages = [re.fullmatch(r"\[\s*(\d+\.\d) s\] (.+)", line) for line in lines]
+    assert all(stages), lines  # nothing else: no spinner, no ✓ lines
+    elapsed = [float(m[1]) for m in stages if m]
+    names = [m[2] for m in stages if m]
+    assert elapsed == sorted(elapsed) and len(set(names)) == len(names)
+    assert names[0] == "loading presets" and names[-1] == "done"
+    robust = [n for n in names if n.startswith("robustness")]
+    assert [n.split(" (")[0] for n in robust] == [f"robustness, scenario {s}" for s in (1, 2, 3)]
+    assert all("16 draws" in n for n in robust)
+    for stage in ("simulating", "closed-loop analysis", "sampling limits", "drawing figures"):
+        assert sum(n.startswith(stage) for n in names) == 1, stage
+
+
+def test_stage_progress_on_a_terminal_ticks_each_stage_with_its_seconds() -> None:
+    import io
+
+    from rich.console import Console
+
+    from aiofl.cli.progress import StageProgress
+
+    buf = io.StringIO()
+    with StageProgress(Console(file=buf, force_terminal=True, width=100)) as progress:
+        progress.stage("first")
+        progress.stage("second")
+        progress.done()
+    out = re.sub(r"\x1b\[[0-9;?]*[a-zA-Z]", "", buf.getvalue())
+    assert re.search(r"✓ first \(\d+\.\d s\)", out) and re.search(r"✓ second \(\d+\.\d s\)", out)
+    assert not re.search(r"^\[\s*\d", out, flags=re.M)  # no log lines on a terminal

@@ -58,7 +58,8 @@ def reproduce(
     available
         Preset names to draw the cases from (default: all shipped presets).
     on_stage
-        Progress callback, called with a short description of each stage.
+        Progress callback, called with a short description of each stage as it starts
+        (the robustness draws: one stage per scenario).
     ts
         Run every design as a sampled controller at this sample time [s] (default:
         continuous, or as the presets say).
@@ -76,9 +77,7 @@ def reproduce(
         raise ValueError(f"draws = {draws}; allowed: 0 <= draws <= {MAX_DRAWS} (0 = skip)")
     rep = compute(available=available, on_stage=stage, ts=ts)
     t0 = time.perf_counter()
-    if draws:
-        stage(f"robustness: {len(rep.runs)} designs × {draws} draws of ±20 % model error")
-    table = compute_robustness([r.case for r in rep.runs], draws=draws, seed=seed)
+    table = compute_robustness([r.case for r in rep.runs], draws=draws, seed=seed, on_stage=stage)
     t1 = time.perf_counter()
     stage("reading the shipped Pareto fronts")
     rep = replace(
