@@ -336,6 +336,17 @@ def test_figure_axes_are_in_the_plants_units() -> None:
     assert [ax.get_ylabel() for ax in bare.axes] == ["y, r", "e = y − r", "u"]
 
 
+@pytest.mark.slow
+def test_front_figure_axes_carry_the_metrics_units(rep) -> None:
+    from dataclasses import replace
+
+    from aiofl.reporting.fronts import front_figure, load_fronts
+
+    (ax,) = front_figure(replace(rep, fronts=load_fronts()), 1, None).axes
+    assert ax.get_xlabel() == "ISU = ∫ u² dt [V²·s]"
+    assert ax.get_ylabel() == "ITAE = ∫ t|y − r| dt [rad·s²]"
+
+
 @pytest.mark.parametrize("t_event", [1e7, -3.0, math.inf, 2.5])
 def test_events_outside_the_horizon_neither_fail_nor_stretch_the_figure(t_event) -> None:
     from aiofl.reporting.figures import figure_png, result_figure, scenario_events
