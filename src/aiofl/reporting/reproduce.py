@@ -29,6 +29,7 @@ from aiofl.reporting.robust_rows import (
     robust_markdown,
     with_robustness,
 )
+from aiofl.reporting.summary import summary_markdown
 from aiofl.reporting.tables import tables_markdown
 from aiofl.uncertainty import MAX_DRAWS
 
@@ -119,7 +120,14 @@ def reproduce(
         t1 = time.perf_counter()
         rep = replace(rep, timings={**rep.timings, "figures": t1 - t0})
         stage("writing tables and report")
-        md = tables_markdown(rep) + "\n" + robust_markdown(rep) + "\n" + fronts_markdown(rep)
+        md = "\n".join(
+            [
+                summary_markdown(rep),
+                tables_markdown(rep),
+                robust_markdown(rep),
+                fronts_markdown(rep),
+            ]
+        )
         atomic_write_text(stage_dir / "tables.md", md)
         atomic_write_text(stage_dir / "report.html", html_report(rep, figures))
     return rep
