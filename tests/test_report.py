@@ -336,6 +336,58 @@ def test_figure_axes_are_in_the_plants_units() -> None:
     assert [ax.get_ylabel() for ax in bare.axes] == ["y, r", "e = y − r", "u"]
 
 
+@pytest.mark.slow
+def test_front_figure_axes_carry_the_metrics_units(rep) -> None:
+    from dataclasses import replace
+
+    from aiofl.reporting.fronts import front_figure, load_fronts
+
+    (ax,) = front_figure(replace(rep, fronts=load_fronts()), 1, None).axes
+    assert ax.get_xlabel() == "ISU = ∫ u² dt [V²·s]"
+    assert ax.get_ylabel() == "ITAE = ∫ t|y − r| dt [rad·s²]"
+
+
+def _diverge(rep, scenario: int, structures: set[str]):
+    """The reproduction with every computed record of these structures in a scenario
+    diverged (at t = 1 s)."""
+    from dataclasses import replace
+
+    gone = {"diverged": True, "diverged_at": 1.0, "itae": None, "isu": None}
+    return replace(
+        rep,
+        records=[
+            {**r, **gone}
+            if "preset" in r and r["scenario"] == scenario and r["structure"] in structures
+            else r
+            for r in rep.records
+        ],
+    )
+
+
+@pytest.mark.slow
+def test_the_claim_is_judged_on_both_sides_and_a_near_trivial_win_is_named(rep) -> None:
+    from aiofl.reporting.summary import best_design, claim_text
+
+    # scenario 1 as run: the printed LESO diverges, the printed INLESO barely moves
+    inleso = next(r for r in rep.records if r.get("preset") == "paper-s1-inleso")
+    share = 100 * inleso["itae"] / rep.trivial[1]
+    assert claim_text(rep, 1).startswith(
+        f"printed sets: holds (LESO diverges; INLESO's ITAE is {share:.0f} % of y ≡ 0's)"
+    )
+    # every INLESO design diverges: the claim fails on both counts; every design: untested
+    assert claim_text(_diverge(rep, 1, {"INLESO"}), 1) == (
+        "printed sets: untested (both diverge); best of each structure: fails (INLESO diverges)"
+    )
+    both = _diverge(rep, 1, {"INLESO", "LESO"})
+    assert claim_text(both, 1).endswith("best of each structure: untested (both diverge)")
+    # every LESO design of scenario 3 diverges: the best INLESO wins by default
+    assert claim_text(_diverge(rep, 3, {"LESO"}), 3).endswith(
+        "best of each structure: holds (LESO diverges)"
+    )
+    # IOFL is not an ESO-based design, so it is never the scenario's best design
+    assert all(best_design(both, s)[0].case.structure != "IOFL" for s in (1, 2, 3))
+
+
 @pytest.mark.parametrize("t_event", [1e7, -3.0, math.inf, 2.5])
 def test_events_outside_the_horizon_neither_fail_nor_stretch_the_figure(t_event) -> None:
     from aiofl.reporting.figures import figure_png, result_figure, scenario_events

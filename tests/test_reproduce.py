@@ -5,6 +5,7 @@
 
 from __future__ import annotations
 
+import html
 import itertools
 import json
 import math
@@ -258,3 +259,166 @@ def test_every_computed_record_carries_its_robustness_row(reproduced) -> None:
     assert "## Robustness: every design over the same ±20 % model errors" in md
     assert "16 draws (seed 0)" in md
     assert "## Pareto fronts: which structure tracks best at equal control energy?" in md
+
+
+# ------------------------------------------------------------- the page's layout
+def _page(reproduced) -> str:
+    return (reproduced.out / "report.html").read_text()
+
+
+def _unfolded(page: str) -> str:
+    """The page without its ``<details>`` blocks (none is nested in another): what a
+    reader sees before opening anything, apart from each block's one summary line."""
+    return re.sub(r"<details>.*?</details>", "", page, flags=re.S)
+
+
+def _text(fragment: str) -> str:
+    return " ".join(html.unescape(re.sub(r"<[^>]+>", " ", fragment)).split())
+
+
+def _summary_table_rows(page: str) -> list[list[str]]:
+    """Rows (cell texts) of the summary's tables, in order."""
+    (section,) = re.findall(r'<section class="summary">(.*?)</section>', page, flags=re.S)
+    return [
+        [_text(c) for c in re.findall(r"<td>(.*?)</td>", row, flags=re.S)]
+        for row in re.findall(r"<tr>(.*?)</tr>", section, flags=re.S)
+        if "<td>" in row
+    ]
+
+
+def test_report_leads_with_a_one_screen_summary(reproduced) -> None:
+    page = _page(reproduced)
+    assert re.findall(r"<h2[^>]*>(.*?)</h2>", page)[0] == "Summary"
+    # what is open above Table I: the title, the summary and one paragraph on the tables
+    head = _unfolded(page[page.index("<body>") : page.index("<h2>Table I:")])
+    assert "<img" not in head
+    assert head.count("<table") == 2 and head.count("<tr") <= 12
+    assert len(_text(head)) <= 4000  # ~850 px at 1400 px wide, estimated (no browser here)
+    (section,) = re.findall(r'<section class="summary">(.*?)</section>', page, flags=re.S)
+    assert "<details" not in section and "<ul" not in section
+
+
+def test_summary_answers_each_scenario_from_metrics_json(reproduced) -> None:
+    recs = [r for r in _records(reproduced) if r["source"] != "paper"]
+    rows = _summary_table_rows(_page(reproduced))
+    by_scenario = {int(r[0].split(":")[0]): r for r in rows[:3]}
+    per_structure = {r[0].split(" (")[0]: r[1:] for r in rows[3:]}
+    assert set(by_scenario) == {1, 2, 3}
+
+    def best(candidates: list[dict]) -> dict | None:
+        ok = [r for r in candidates if not r["diverged"]]
+        return min(ok, key=lambda r: r["itae"]) if ok else None
+
+    for s, row in by_scenario.items():
+        mine = [r for r in recs if r["scenario"] == s]
+        # the best design: lowest ITAE among the ESO-based designs that do not diverge
+        top = best([r for r in mine if r["structure"] != "IOFL"])
+        assert f"{top['preset']}: ITAE {top['itae']:.3g}" in row[3]
+        # the most robust: lowest ITAE 95 % among those stable on every draw
+        stable = [
+            r
+            for r in mine
+            if r["structure"] != "IOFL" and not r["diverged"] and r["robustness"]["diverged"] == 0
+        ]
+        robust = min(stable, key=lambda r: r["robustness"]["itae"]["q95"])
+        assert f"{robust['preset']}: ITAE 95 % {robust['robustness']['itae']['q95']:.3g}" in row[4]
+        # what the printed parameter sets do
+        for r in mine:
+            if r["source"] == "printed":
+                what = (
+                    f"diverges at t = {r['diverged_at']:.2f} s"
+                    if r["diverged"]
+                    else f"ITAE {r['itae']:.4g}"
+                )
+                assert f"{r['structure']} " in row[2] and what in row[2]
+        # the paper's claim (its lower-ITAE structure tracks better) between the best designs
+        win, lose = sorted(PAPER_TABLES[s], key=lambda k: PAPER_TABLES[s][k]["itae"])
+        assert row[1].startswith(f"{win}:")
+        bw = best([r for r in mine if r["structure"] == win])
+        bl = best([r for r in mine if r["structure"] == lose])
+        holds = bw is not None and (bl is None or bw["itae"] < bl["itae"])
+        assert f"best of each structure: {'holds' if holds else 'fails'}" in row[5]
+        # the best design of each structure
+        for structure, cells in per_structure.items():
+            b = best([r for r in mine if r["structure"] == structure])
+            if b is not None:
+                assert cells[s - 1] == f"{b['preset']}: {b['itae']:.3g}"
+
+
+def test_per_case_prose_figures_and_linearisation_sentences_are_folded(reproduced) -> None:
+    page = _page(reproduced)
+    shown = _unfolded(page)
+    md = (reproduced.out / "tables.md").read_text()
+    for rec in _records(reproduced):
+        if rec["source"] == "paper":
+            continue
+        # the note on each case under its table starts "LABEL [preset]: ..."
+        note = f"[{rec['preset']}]: "
+        assert note in page and note not in shown, rec["preset"]
+        # the linearisation-vs-simulation sentence (the last cell of its tables.md row)
+        row = next(line for line in md.splitlines() if line.startswith(f"| {rec['preset']}"))
+        sentence = re.split(r"(?<!\\)\| ", row.rstrip(" |"))[-1].replace("\\|", "|")
+        assert html.escape(sentence) in page and html.escape(sentence) not in shown
+    # no clause on what a run did (notes and linearisation sentences alike) is left open
+    assert not re.search(r"the simulation(?:'s error| tracks| diverges| stays)", shown)
+    for n in (3, 4, 5):  # the tall figures are folded, the fronts' stay open
+        assert f'alt="Figure {n}' in page and f'alt="Figure {n}' not in shown
+    assert shown.count("<img") == len(list(reproduced.out.glob("fronts-s*.png")))
+
+
+def test_report_embeds_smaller_figures(reproduced) -> None:
+    import base64
+    import io
+
+    from PIL import Image
+
+    page = _page(reproduced)
+    embedded = re.findall(r'<img alt="([^"]*)" src="data:image/png;base64,([^"]*)"', page)
+    files = {f"Figure {n}": f"fig{n}.png" for n in (3, 4, 5)} | {
+        f"Pareto fronts, scenario {s}": f"fronts-s{s}.png" for s in (1, 3)
+    }
+    total_file = total_page = 0
+    for alt, data in embedded:
+        png = base64.b64decode(data)
+        name = next(f for a, f in files.items() if alt.startswith(a))
+        written = (reproduced.out / name).read_bytes()
+        with Image.open(io.BytesIO(png)) as im, Image.open(io.BytesIO(written)) as full:
+            assert im.mode == "P" and im.size == full.size  # a palette, same pixels size
+        total_file += len(written)
+        total_page += len(png)
+    assert len(embedded) == 3 + len(list(reproduced.out.glob("fronts-s*.png")))
+    assert total_page < 0.5 * total_file  # 2.6x smaller at the time of writing
+    assert len(page.encode()) < 1.5e6  # 2.66 MB before
+
+
+def test_reproduce_prints_one_line_per_stage_when_not_on_a_terminal(reproduced) -> None:
+    # the CliRunner's stderr is not a terminal: plain lines, as in a log file
+    lines = [line for line in reproduced.stderr.splitlines() if line.strip()]
+    stages = [re.fullmatch(r"\[\s*(\d+\.\d) s\] (.+)", line) for line in lines]
+    assert all(stages), lines  # nothing else: no spinner, no ✓ lines
+    elapsed = [float(m[1]) for m in stages if m]
+    names = [m[2] for m in stages if m]
+    assert elapsed == sorted(elapsed) and len(set(names)) == len(names)
+    assert names[0] == "loading presets" and names[-1] == "done"
+    robust = [n for n in names if n.startswith("robustness")]
+    assert [n.split(" (")[0] for n in robust] == [f"robustness, scenario {s}" for s in (1, 2, 3)]
+    assert all("16 draws" in n for n in robust)
+    for stage in ("simulating", "closed-loop analysis", "sampling limits", "drawing figures"):
+        assert sum(n.startswith(stage) for n in names) == 1, stage
+
+
+def test_stage_progress_on_a_terminal_ticks_each_stage_with_its_seconds() -> None:
+    import io
+
+    from rich.console import Console
+
+    from aiofl.cli.progress import StageProgress
+
+    buf = io.StringIO()
+    with StageProgress(Console(file=buf, force_terminal=True, width=100)) as progress:
+        progress.stage("first")
+        progress.stage("second")
+        progress.done()
+    out = re.sub(r"\x1b\[[0-9;?]*[a-zA-Z]", "", buf.getvalue())
+    assert re.search(r"✓ first \(\d+\.\d s\)", out) and re.search(r"✓ second \(\d+\.\d s\)", out)
+    assert not re.search(r"^\[\s*\d", out, flags=re.M)  # no log lines on a terminal

@@ -513,33 +513,16 @@ def reproduce_command(
     """
     import time
 
-    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
-
+    from aiofl.cli.progress import StageProgress
     from aiofl.reporting.reproduce import reproduce
 
     t0 = time.perf_counter()
-    progress = Progress(
-        SpinnerColumn(),
-        TextColumn("{task.description}"),
-        TimeElapsedColumn(),
-        console=_stderr_console(),
-        transient=False,
-    )
     with bad_input_exits():
         _check_out(out)
-    with bad_input_exits(run=True), progress:
-        task = progress.add_task("starting", total=None)
-        last: list[str] = []
-
-        def on_stage(msg: str) -> None:
-            if last:
-                progress.console.print(f"  [green]✓[/green] {last[-1]}")
-            last.append(msg)
-            progress.update(task, description=msg)
-
-        rep = reproduce(out, on_stage=on_stage, ts=ts, draws=draws)
-        on_stage("done")
-        progress.remove_task(task)
+    # a spinner on a terminal; one line per stage (with elapsed seconds) in a log
+    with bad_input_exits(run=True), StageProgress(_stderr_console()) as progress:
+        rep = reproduce(out, on_stage=progress.stage, ts=ts, draws=draws)
+        progress.done()
     _print_records(rep.records, title="aiofl reproduce: paper vs computed")
     fronts = "".join(f"fronts-s{s}.png, " for s in sorted({k[0] for k in rep.fronts.fronts}))
     typer.echo(

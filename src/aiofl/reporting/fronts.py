@@ -31,7 +31,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl.reporting.cases import Reproduction
-from aiofl.reporting.tables import fmt
+from aiofl.reporting.tables import fmt, metric_units
 
 __all__ = [
     "FRONT_SCENARIOS",
@@ -479,9 +479,10 @@ _COLORS = {"leso": "C0", "inleso": "C1", "ladrc": "C2"}
 
 
 def front_figure(rep: Reproduction, scenario: int, isu_floor: float | None) -> Any:
-    """ITAE against ISU (log axes): one colour per structure's front, its chosen design
-    ringed; this run's printed paper designs (squares) and frontier presets (stars); the
-    exact-tracking ISU floor (dashed) and the budget (dotted).  A matplotlib ``Figure``."""
+    """ITAE against ISU (log axes, in the metrics' units from the scenario's plant): one
+    colour per structure's front, its chosen design ringed; this run's printed paper
+    designs (squares) and frontier presets (stars); the exact-tracking ISU floor (dashed)
+    and the budget (dotted).  A matplotlib ``Figure``."""
     from matplotlib.figure import Figure
 
     sf: ShippedFronts | None = rep.fronts
@@ -543,7 +544,12 @@ def front_figure(rep: Reproduction, scenario: int, isu_floor: float | None) -> A
     if xs and ys:
         ax.set_xscale("log")
         ax.set_yscale("log")
-    ax.set(xlabel="ISU = ∫ u² dt", ylabel="ITAE = ∫ t|y − r| dt")
+    runs = rep.scenario_runs(scenario)
+    units = metric_units(runs[0].case.config.plant) if runs else {"isu": "", "itae": ""}
+    ax.set(
+        xlabel="ISU = ∫ u² dt" + (f" [{units['isu']}]" if units["isu"] else ""),
+        ylabel="ITAE = ∫ t|y − r| dt" + (f" [{units['itae']}]" if units["itae"] else ""),
+    )
     missing = [m for m in (sf.missing if sf else []) if m.startswith(f"s{scenario}-")]
     title = f"Scenario {scenario}: shipped Pareto fronts (ITAE vs ISU)"
     if missing:

@@ -1,9 +1,12 @@
 """The self-contained HTML report of ``aiofl reproduce`` (inline CSS, figures as base64 PNG).
 
-The page shows the findings (:mod:`aiofl.reporting.findings`), Tables I–III with their
-notes and figures, every case's closed-loop verdict beside what its simulation did, the
-settings the paper leaves open and the engine's settings; the rows are those of
-:mod:`aiofl.reporting.tables`.
+The page leads with a one-screen summary (:mod:`aiofl.reporting.summary`: the paper's
+question answered per scenario, the best design per structure, what the printed parameter
+sets do), then Tables I–III, the robustness rows, the Pareto fronts and every case's
+closed-loop verdict beside what its simulation did.  The long parts (the findings of
+:mod:`aiofl.reporting.findings`, the notes on each case, Figures 3–5, the linearisation
+sentences, the settings the paper leaves open and the engine's settings) are folded in
+``<details>`` blocks.  The rows are those of :mod:`aiofl.reporting.tables`.
 """
 
 from __future__ import annotations
@@ -13,7 +16,7 @@ import datetime as _dt
 import html
 from collections.abc import Mapping, Sequence
 
-from aiofl.reporting.cases import Reproduction
+from aiofl.reporting.cases import CaseRun, Reproduction
 from aiofl.reporting.findings import findings
 from aiofl.reporting.fronts import (
     ISU_BUDGET,
@@ -25,6 +28,13 @@ from aiofl.reporting.fronts import (
 )
 from aiofl.reporting.paper import SCENARIOS
 from aiofl.reporting.robust_rows import ROBUST_HEADER, robust_notes, robust_rows
+from aiofl.reporting.summary import (
+    structure_header,
+    structure_rows,
+    summary_header,
+    summary_intro,
+    summary_rows,
+)
 from aiofl.reporting.tables import (
     CONTEXT_ROWS,
     VERDICT_HEADER,
@@ -38,7 +48,7 @@ from aiofl.reporting.tables import (
     verdict_rows,
 )
 
-__all__ = ["html_report"]
+__all__ = ["PAGE_COLOURS", "html_report", "page_png"]
 
 CSS = """
 body{font-family:system-ui,-apple-system,Segoe UI,Roboto,sans-serif;max-width:1180px;
@@ -49,21 +59,34 @@ th,td{border:1px solid #ccd;padding:.3em .6em;text-align:right;vertical-align:to
 th{background:#eef2f7}td:first-child,td:nth-child(2),th:first-child{text-align:left}
 tr.context td{color:#555;font-style:italic;background:#fafafa}
 td.div{color:#b00020;font-weight:600}
-.settings td{text-align:left}.verdicts td:last-child{text-align:left;min-width:28em}
+.settings td,.summary td,.summary th{text-align:left}
+.verdicts td:last-child{text-align:left;min-width:16em}
 .muted{color:#666;font-size:.9em}
 img{max-width:100%;border:1px solid #eee;margin:.5em 0}
 ul.notes li,ul.findings li{margin:.3em 0}code{background:#f3f3f3;padding:0 .2em}
+details{margin:.4em 0}summary{cursor:pointer;color:#1a4f8a}
+summary h2{display:inline-block;margin:1em 0 .2em;border:0}
+section.summary{border:1px solid #ccd;background:#f7f9fc;padding:0 1em .4em;margin:1em 0}
+section.summary h2{margin-top:.6em}
 """
+
+#: colours of a PNG embedded in the page (the files beside it keep every colour)
+PAGE_COLOURS = 256
+
+
+class _Raw(str):
+    """Text that is already HTML (not escaped again by :func:`_e`)."""
 
 
 def _e(s: object) -> str:
-    return html.escape(str(s))
+    return s if isinstance(s, _Raw) else html.escape(str(s))
 
 
 def _html_table(
     header: Sequence[str], rows: Sequence[Sequence[str]], *, cls: str = "", context_rows: int = 0
 ) -> str:
-    """An HTML table; the last ``context_rows`` rows are styled as context (not results)."""
+    """An HTML table; the last ``context_rows`` rows are styled as context (not results).
+    A cell that is :class:`_Raw` is inserted as HTML."""
     parts = [f'<table class="{cls}"><thead><tr>']
     parts += [f"<th>{_e(h)}</th>" for h in header]
     parts.append("</tr></thead><tbody>")
@@ -71,8 +94,9 @@ def _html_table(
         ctx = ' class="context"' if i >= len(rows) - context_rows else ""
         parts.append(f"<tr{ctx}>")
         for cell in row:
-            c = ' class="div"' if cell.startswith("diverged") else ""
-            parts.append(f"<td{c}>{_e(cell)}</td>")
+            div = cell.startswith("diverged") and not isinstance(cell, _Raw)
+            attr = ' class="div"' if div else ""
+            parts.append(f"<td{attr}>{_e(cell)}</td>")
         parts.append("</tr>")
     parts.append("</tbody></table>")
     return "".join(parts)
@@ -82,11 +106,75 @@ def _list(items: Sequence[str], cls: str) -> str:
     return f'<ul class="{cls}">' + "".join(f"<li>{_e(i)}</li>" for i in items) + "</ul>"
 
 
+def _details(summary: str, body: Sequence[str], *, heading: bool = False) -> str:
+    """A collapsed ``<details>`` block; ``summary`` is plain text (an ``<h2>`` when
+    ``heading``), ``body`` HTML."""
+    head = f"<h2>{_e(summary)}</h2>" if heading else _e(summary)
+    return f"<details><summary>{head}</summary>" + "".join(body) + "</details>"
+
+
+def page_png(data: bytes, colours: int = PAGE_COLOURS) -> bytes:
+    """A figure's PNG as embedded in the page: flattened on white and reduced to a palette
+    of ``colours`` (median cut, no dithering; line plots have few colours, so the change is
+    hardly visible), or the original bytes when that is not smaller.
+
+    Parameters
+    ----------
+    data
+        PNG bytes (as written beside the page).
+    colours
+        Palette size, 2–256.
+
+    Returns
+    -------
+    bytes
+        PNG bytes.
+    """
+    import io
+
+    from PIL import Image
+
+    with Image.open(io.BytesIO(data)) as im:
+        rgba = im.convert("RGBA")
+    flat = Image.alpha_composite(Image.new("RGBA", rgba.size, "white"), rgba).convert("RGB")
+    pal = flat.quantize(colors=colours, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE)
+    buf = io.BytesIO()
+    pal.save(buf, format="PNG", optimize=True)
+    return buf.getvalue() if buf.tell() < len(data) else data
+
+
 def _img(figures: Mapping[str, bytes], name: str, alt: str) -> list[str]:
     if name not in figures:
         return []
-    data = base64.b64encode(figures[name]).decode("ascii")
+    data = base64.b64encode(page_png(figures[name])).decode("ascii")
     return [f'<img alt="{_e(alt)}" src="data:image/png;base64,{data}">']
+
+
+def _summary_section(rep: Reproduction) -> list[str]:
+    """The one-screen summary (:mod:`aiofl.reporting.summary`)."""
+    return [
+        '<section class="summary"><h2 id="summary">Summary</h2>',
+        f"<p>{_e(summary_intro(rep))}</p>",
+        _html_table(summary_header(rep), summary_rows(rep), cls="summary"),
+        _html_table(structure_header(rep), structure_rows(rep), cls="summary"),
+        '<p class="muted">Below: Tables I–III, robustness, Pareto fronts and the '
+        "linearisation; the notes on each case, Figures 3–5 and the long explanations are "
+        "folded (click a ▸ line to open it).</p></section>",
+    ]
+
+
+def _verdict_cell(run: CaseRun, sentence: str) -> _Raw:
+    """The long linearisation-vs-simulation sentence folded under a short summary: what the
+    run did and whether the two agree."""
+    kind = run.behaviour.kind
+    did = (
+        f"diverges at t = {run.behaviour.diverged_at:.2f} s"
+        if kind == "diverged" and run.behaviour.diverged_at is not None
+        else kind
+    )
+    tail = sentence.rsplit(" — ", 1)[1] if " — " in sentence else ""
+    short = did + (f"; {tail.split(':')[0].rstrip('.')}" if tail else "")
+    return _Raw(_details(short, [_e(sentence)]))
 
 
 def _robust_sections(rep: Reproduction, figures: Mapping[str, bytes]) -> list[str]:
@@ -95,9 +183,11 @@ def _robust_sections(rep: Reproduction, figures: Mapping[str, bytes]) -> list[st
     rows = robust_rows(rep)
     if rows:
         body.append(_html_table(ROBUST_HEADER, rows))
-    body.append(_list(robust_notes(rep), "notes"))
+    body.append(
+        _details("How these rows were computed, per scenario", [_list(robust_notes(rep), "notes")])
+    )
     body.append("<h2>Pareto fronts: which structure tracks best at equal control energy?</h2>")
-    body.append(_list(front_notes(rep), "notes"))
+    body.append(_details("Where the fronts come from", [_list(front_notes(rep), "notes")]))
     for s, sentences in front_scenarios(rep).items():
         body.append(f"<h3>Scenario {s} (ISU ≤ {ISU_BUDGET[s]:g})</h3>")
         if has_front_content(rep, s):
@@ -110,12 +200,22 @@ def _robust_sections(rep: Reproduction, figures: Mapping[str, bytes]) -> list[st
 def html_report(rep: Reproduction, figures: Mapping[str, bytes]) -> str:
     """``report.html``: one self-contained page (inline CSS, figures as base64 PNG).
 
+    The page leads with a one-screen summary (:mod:`aiofl.reporting.summary`), then Tables
+    I–III, the robustness rows, the Pareto fronts and the linearisation; the notes on each
+    case, Figures 3–5, the linearisation sentences and the settings are folded in
+    ``<details>`` blocks.  Figures are embedded as palette PNGs (:func:`page_png`).
+
     Parameters
     ----------
     rep
         The reproduction.
     figures
         PNG bytes by file name (``fig3.png`` ...).
+
+    Returns
+    -------
+    str
+        The page.
     """
     now = _dt.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
     body = [
@@ -124,6 +224,8 @@ def html_report(rep: Reproduction, figures: Mapping[str, bytes]) -> str:
         "Feedback Linearization of Single-Link Flexible Joint Manipulator: an Extended "
         f"State Observer Approach</em> (arXiv 1805.00222). Generated by "
         f"<code>aiofl reproduce</code> on {_e(now)}.</p>",
+        *_summary_section(rep),
+        _details("What we found", [_list(findings(rep), "findings")], heading=True),
         "<p>Each table puts the paper's printed ITAE and ISU beside what this code computes "
         "from the paper's printed parameters (presets <code>paper-s*-*</code>, shown with "
         "<code>aiofl show NAME</code>). A run that diverged has no metrics; its divergence "
@@ -132,45 +234,52 @@ def html_report(rep: Reproduction, figures: Mapping[str, bytes]) -> str:
         "measured output, ρ and b0; an IOFL row says what the model-based law is given. "
         "The run-level numbers (metrics, divergence times, tracking errors, verdicts) are "
         "those of <code>metrics.json</code>.</p>",
-        "<h2>What we found</h2>",
-        _list(findings(rep), "findings"),
     ]
     for s, info in SCENARIOS.items():
         body.append(f"<h2>Table {info.table}: scenario {s}, {_e(info.title)}</h2>")
         body.append(
             _html_table(table_header(rep, s), table_rows(rep, s), context_rows=len(CONTEXT_ROWS))
         )
-        body.append(_list(scenario_notes(rep, s), "notes"))
+        notes = scenario_notes(rep, s)
+        what = f"Notes on the rows of Table {info.table} ({len(notes)})"
+        body.append(_details(what, [_list(notes, "notes")]))
         name = f"fig{info.figure}.png"
-        if name in figures:
-            data = base64.b64encode(figures[name]).decode("ascii")
-            body.append(
-                f'<img alt="Figure {info.figure}: scenario {s}" src="data:image/png;base64,{data}">'
-            )
+        img = _img(figures, name, f"Figure {info.figure}: scenario {s}")
+        if img:
+            n = len(rep.scenario_runs(s))
+            what = f"Figure {info.figure} (reproduced): output, tracking error and control of "
+            body.append(_details(what + f"the {n} designs ({name})", img))
     body += _robust_sections(rep, figures)
     para = sampling_text(rep)
     if para:
-        body.append("<h2>What the sample-time limits mean</h2>")
-        body.append(f"<p>{_e(para)}</p>")
+        body.append(
+            _details("What the sample-time limits mean", [f"<p>{_e(para)}</p>"], heading=True)
+        )
     body.append("<h2>Closed-loop linearisation beside the simulation</h2>")
-    body.append(f"<p>{_e(VERDICT_INTRO)}</p>")
-    body.append(_html_table(VERDICT_HEADER, verdict_rows(rep), cls="verdicts"))
+    body.append(_details("What the columns mean", [f"<p>{_e(VERDICT_INTRO)}</p>"]))
+    rows = verdict_rows(rep)
+    for run, row in zip(rep.runs, rows, strict=True):
+        row[-1] = _verdict_cell(run, row[-1])
+    header = [*VERDICT_HEADER[:-1], "The simulation (open a row for the sentence)"]
+    body.append(_html_table(header, rows, cls="verdicts"))
     how = verdict_notes(rep)
     if how:
-        body.append("<p>How each loop was linearised (non-smooth elements, ε sweep):</p>")
-        body.append(_html_table(["Case", "Linearisation notes"], how, cls="settings"))
-    body.append("<h2>Settings the paper leaves open and the choice made</h2>")
-    body.append(
-        _html_table(
-            ["Setting", "The paper", "Choice made"],
-            [list(t) for t in open_settings(rep)],
-            cls="settings",
+        table = _html_table(["Case", "Linearisation notes"], how, cls="settings")
+        body.append(
+            _details("How each loop was linearised (non-smooth elements, ε sweep)", [table])
         )
+    settings = _html_table(
+        ["Setting", "The paper", "Choice made"],
+        [list(t) for t in open_settings(rep)],
+        cls="settings",
     )
-    body.append("<h2>Engine settings</h2>")
+    body.append(
+        _details("Settings the paper leaves open and the choice made", [settings], heading=True)
+    )
     timing = ", ".join(f"{k} {v:.2f} s" for k, v in rep.timings.items())
     eng = [*rep.engine.items(), ("wall time", timing)]
-    body.append(_html_table(["Setting", "Value"], [list(r) for r in eng], cls="settings"))
+    engine = _html_table(["Setting", "Value"], [list(r) for r in eng], cls="settings")
+    body.append(_details("Engine settings", [engine], heading=True))
     return (
         '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
         "<title>AIOFL reproduction report</title>"

@@ -29,6 +29,7 @@ from aiofl.reporting.robust_rows import (
     robust_markdown,
     with_robustness,
 )
+from aiofl.reporting.summary import summary_markdown
 from aiofl.reporting.tables import tables_markdown
 from aiofl.uncertainty import MAX_DRAWS
 
@@ -58,7 +59,8 @@ def reproduce(
     available
         Preset names to draw the cases from (default: all shipped presets).
     on_stage
-        Progress callback, called with a short description of each stage.
+        Progress callback, called with a short description of each stage as it starts
+        (the robustness draws: one stage per scenario).
     ts
         Run every design as a sampled controller at this sample time [s] (default:
         continuous, or as the presets say).
@@ -76,9 +78,7 @@ def reproduce(
         raise ValueError(f"draws = {draws}; allowed: 0 <= draws <= {MAX_DRAWS} (0 = skip)")
     rep = compute(available=available, on_stage=stage, ts=ts)
     t0 = time.perf_counter()
-    if draws:
-        stage(f"robustness: {len(rep.runs)} designs × {draws} draws of ±20 % model error")
-    table = compute_robustness([r.case for r in rep.runs], draws=draws, seed=seed)
+    table = compute_robustness([r.case for r in rep.runs], draws=draws, seed=seed, on_stage=stage)
     t1 = time.perf_counter()
     stage("reading the shipped Pareto fronts")
     rep = replace(
@@ -120,7 +120,14 @@ def reproduce(
         t1 = time.perf_counter()
         rep = replace(rep, timings={**rep.timings, "figures": t1 - t0})
         stage("writing tables and report")
-        md = tables_markdown(rep) + "\n" + robust_markdown(rep) + "\n" + fronts_markdown(rep)
+        md = "\n".join(
+            [
+                summary_markdown(rep),
+                tables_markdown(rep),
+                robust_markdown(rep),
+                fronts_markdown(rep),
+            ]
+        )
         atomic_write_text(stage_dir / "tables.md", md)
         atomic_write_text(stage_dir / "report.html", html_report(rep, figures))
     return rep

@@ -18,7 +18,7 @@ exactly the statistics of ``aiofl robustness``.
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -102,13 +102,18 @@ class RobustTable:
 
 
 def compute_robustness(
-    cases: Sequence[Case], *, draws: int = DEFAULT_DRAWS, seed: int = DEFAULT_SEED
+    cases: Sequence[Case],
+    *,
+    draws: int = DEFAULT_DRAWS,
+    seed: int = DEFAULT_SEED,
+    on_stage: Callable[[str], None] | None = None,
 ) -> RobustTable | None:
     """Run every case over the same ``draws`` draws of :func:`robust_spec` (None if 0).
 
     A case whose plant lacks one of :data:`ROBUST_PARAMETERS`, or whose scenario changes
     the plant at t > 0, is listed in ``skipped`` with the reason instead of failing the
-    report.
+    report.  The cases run scenario by scenario (designs of different scenarios never
+    share an engine call), and ``on_stage`` is called with a description before each.
     """
     from aiofl.analysis.robustness import simulate_designs
 
@@ -127,17 +132,28 @@ def compute_robustness(
             skipped[case.preset] = str(exc).split("\n")[0]
             continue
         run.append(case)
+    stage = on_stage or (lambda _msg: None)
+    scenarios = sorted({c.scenario for c in run})
+    results: dict[str, dict[str, Any]] = {}
+    n_calls = 0
     t0 = time.perf_counter()
-    res = simulate_designs([c.config for c in run], d)
+    for i, s in enumerate(scenarios, 1):
+        group = [c for c in run if c.scenario == s]
+        stage(
+            f"robustness, scenario {s} ({i} of {len(scenarios)}): {len(group)} designs × "
+            f"{draws} draws of ±{100 * ROBUST_SPREAD:g} % model error"
+        )
+        res = simulate_designs([c.config for c in group], d)
+        n_calls += sum({r.group: r.engine_calls for r in res}.values())
+        results.update({c.preset: r.to_dict() for c, r in zip(group, res, strict=True)})
     seconds = time.perf_counter() - t0
-    calls = {r.group: r.engine_calls for r in res}
     return RobustTable(
         draws=draws,
         seed=seed,
         uncertainty=spec.model_dump(exclude_none=True),
-        results={c.preset: r.to_dict() for c, r in zip(run, res, strict=True)},
+        results={c.preset: results[c.preset] for c in run},
         skipped=skipped,
-        engine_calls=sum(calls.values()),
+        engine_calls=n_calls,
         seconds=seconds,
     )
 
