@@ -185,7 +185,7 @@ def _blk_law(v, xi_ext, b0, u_min, u_max, u):  # pragma: no cover - compiled
 def _blk_iofl(z, iq, q, pn, rr, ri, o_td, rff, u):  # pragma: no cover - compiled
     """The classical IOFL law on the nominal model, lane by lane (not vectorized)."""
     for l in range(_W):
-        nfx = _PNF(z[:_N, l].copy(), pn[:, l].copy())
+        nfx = _PNF(_COLUMN(z, l), _COLUMN(pn, l))  # views: no allocation per lane
         ul = _IOFL_COMMAND(iq, q[:, l], rr[:, :, l], ri, z[:, l], o_td, nfx, rff[l])
         u[l] = _SATURATE(ul, q[L.F_UMIN, l], q[L.F_UMAX, l])
 

@@ -99,7 +99,7 @@ N_CS = C_SCR + L.RHO_MAX
 # placeholders bound per instance (see _bind and aiofl.engine.instances)
 _W = 32
 _N = _N_P = 1
-_PNF = _MEMBER_SETUP = _LEADING_ROWS = _IOFL_COMMAND = None
+_PNF = _MEMBER_SETUP = _LEADING_ROWS = _IOFL_COMMAND = _COLUMN = None
 _CTRL_INIT = _CTRL_STEP = None
 _SATURATE = None
 _BLK_OUTPUT = _BLK_PLANT_OUTPUT = _BLK_PLANT = _BLK_DISTURBANCE = _BLK_METRICS = None
@@ -232,7 +232,7 @@ def _tpl_sample(k, z, p, pn, s, rrs, rl, iq, q, ctrl):  # pragma: no cover - com
             _CTRL_INIT(iq, cs, yl)
         u_before = cs[C_UPREV]
         if iofl:
-            nfx = _PNF(z[:_N, l].copy(), pn[:, l].copy())
+            nfx = _PNF(_COLUMN(z, l), _COLUMN(pn, l))
             uc = _IOFL_COMMAND(iq, q[l], rl, 0, cs, C_PROF, nfx, rl[0, rho])
             uc = _SATURATE(uc, q[l, L.F_UMIN], q[l, L.F_UMAX])
             cs[C_UPREV] = uc
