@@ -102,9 +102,10 @@ _SAMPLED = False
 _N = 1
 _N_P = 1
 _NZ = 1
+_CONTROLLER_SIZE = 1  # row length of the discrete controller's state (sampled instances)
 _PH = None
 _UNMANAGED = _KEEP_ALIVE = _RHS = _SETUP = _SAMPLE = _CONTROLLER_BAD = None
-_STORE_CONTROLLER = _REFERENCE = _STEP_INPUTS = None
+_STORE_ROW = _STORE_CONTROLLER = _REFERENCE = _STEP_INPUTS = None
 _ASSIGN_LANES = _LOAD_LANES = _START_MEMBERS = _STOP_LANE = _FINISH_LANES = None
 _BLK_STAGE = _BLK_OUT_OF_RANGE = _BLK_COPY = _BLK_FILL = _BLK_INPUTS = None
 _BLK_SINE = _BLK_SINE_DERIVATIVE = _BLK_STEP = None
@@ -203,7 +204,7 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
                 zt[o_eso, l] = z[o_eso, l]
         for st in range(n_stages):
             c = STAGE_TIME[method, st]
-            ri = int(2.0 * c)
+            ri = int(2.0 * c)  # the reference slot of t_k + c dt: 0, 1 (mid-step), 2 (end)
             _RHS((k + c) * dt, zt, kd, iq, q, p, pn, rrs, ri, s, dany)
             if st == 0:
                 if store and save_in == 0:
@@ -235,10 +236,6 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
     _KEEP_ALIVE(lane_owner, real_owner, live_owner, rows_owner, switched_owner, iq_owner)
     _KEEP_ALIVE(q_owner, qt_owner, ctrl_owner, rl_owner, z_owner, p_owner)
     _KEEP_ALIVE(sc_owner, s_owner, rr_owner, rrow_owner, nrow_owner, nrow_owner)
-
-
-_CONTROLLER_SIZE = 1  # placeholder: the sampled instance binds aiofl.engine.sampled's size
-_STORE_ROW = None
 
 
 def _tpl_store_row(row, t, lanes, live, rows, z, s, rrs, iq, ctrl, tr):  # pragma: no cover
