@@ -12,7 +12,6 @@ import json
 import os
 import subprocess
 import sys
-import types
 from pathlib import Path
 
 import numpy as np
@@ -20,6 +19,7 @@ import pytest
 
 from aiofl.engine import compile, instances
 from aiofl.plants import get_plant
+from reachable import reachable_compiled
 
 SRC = Path(__file__).resolve().parents[1] / "src" / "aiofl"
 
@@ -39,36 +39,13 @@ def _recipes() -> dict[str, compile.Recipe]:
 
 
 def _code_files(recipe: compile.Recipe) -> set[str]:
-    """The aiofl source files whose code a recipe's kernel can run: its templates and,
-    transitively, every compiled function, intrinsic and module reachable from its bindings
-    and their functions' globals."""
-    from numba.core.dispatcher import Dispatcher
-    from numba.core.extending import _Intrinsic
-
-    files: set[str] = set()
-    spaces: list[dict] = [dict(recipe.bindings)]
-    done: set[int] = set()
-
-    def add(fn: types.FunctionType) -> None:
-        files.add(fn.__code__.co_filename)
-        spaces.append(fn.__globals__)
-
-    for tpl in (*recipe.templates, recipe.entry):
-        add(tpl.function)
-    while spaces:
-        space = spaces.pop()
-        if id(space) in done:
-            continue
-        done.add(id(space))
-        for obj in list(space.values()):
-            if isinstance(obj, types.ModuleType) and obj.__name__.startswith("aiofl."):
-                spaces.append(vars(obj))
-            elif isinstance(obj, Dispatcher):
-                add(obj.py_func)
-            elif isinstance(obj, _Intrinsic):
-                files.add(obj._defn.__code__.co_filename)
-            # (a plain Python function in the globals cannot be called from compiled code)
-    return {f for f in files if f.startswith(str(SRC))}
+    """The aiofl source files whose code a recipe's kernel can run: its templates' and
+    every compiled function's and intrinsic's reachable from its bindings and their
+    globals."""
+    templates = [tpl.function for tpl in (*recipe.templates, recipe.entry)]
+    found = reachable_compiled(dict(recipe.bindings), *(fn.__globals__ for fn in templates))
+    funcs = [*templates, *(getattr(obj, "py_func", None) or obj._defn for obj in found)]
+    return {f.__code__.co_filename for f in funcs if f.__code__.co_filename.startswith(str(SRC))}
 
 
 @pytest.mark.parametrize("name", list(_recipes()))

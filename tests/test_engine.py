@@ -22,6 +22,7 @@ from aiofl.engine.simulation import closed_loop_rhs, simulate, simulate_batch
 from aiofl.plants import get_plant
 from aiofl.plants.base import Plant, PlantError
 from aiofl.scenario import Reference, Scenario, noise_sequence
+from reachable import reachable_compiled
 
 BETA_SLFJM = 1.61 * 0.00767 * 70.0 / (0.0059 * 0.0021 * 2.6)  # Ks Km Kg / (Jl Jh Rm)
 
@@ -196,29 +197,6 @@ def test_engine_fal_is_continuous_at_delta(slfjm):
         assert us[-1] == pytest.approx(side * delta1 ** rc.controller.value("sef.alpha1"))
 
 
-def _reachable_dispatchers(ns: dict) -> list:
-    """Every numba dispatcher a kernel compiled from the globals ``ns`` can call: those in
-    ``ns``, in the modules it names, and, transitively, in their functions' globals."""
-    import types
-
-    from numba.core.dispatcher import Dispatcher
-
-    seen: dict[int, Dispatcher] = {}
-    spaces, done = [ns], set()
-    while spaces:
-        space = spaces.pop()
-        if id(space) in done:
-            continue
-        done.add(id(space))
-        for obj in list(space.values()):
-            if isinstance(obj, types.ModuleType) and obj.__name__.startswith("aiofl."):
-                spaces.append(vars(obj))
-            elif isinstance(obj, Dispatcher) and id(obj) not in seen:
-                seen[id(obj)] = obj
-                spaces.append(obj.py_func.__globals__)
-    return list(seen.values())
-
-
 def test_kernel_links_no_component_from_numbas_per_function_cache(slfjm):
     """numba keys a ``cache=True`` function's disk cache on its own file only, so a cached
     ``feedback.linear_sef_gain`` keeps an old ``fastmath.binomial_power`` linked in after
@@ -231,7 +209,9 @@ def test_kernel_links_no_component_from_numbas_per_function_cache(slfjm):
     # the sampled instance binds every component, the law dispatch and the discrete update;
     # the scalar variant keeps the components' own flags and libm (bitwise the public ones)
     ns = dict(instances.recipe(slfjm, 1, sampled_data=True, variant="scalar").bindings)
-    found = _reachable_dispatchers(ns)
+    from numba.core.dispatcher import Dispatcher
+
+    found = [d for d in reachable_compiled(ns) if isinstance(d, Dispatcher)]
     component = [d for d in found if d.py_func.__module__.startswith("aiofl.components.")]
     names = {d.py_func.__name__ for d in component}
     # the kernel's own functions, the components it binds and what they call across modules

@@ -42,11 +42,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from numba.core.caching import CompileResultCacheImpl, FunctionCache, _CacheLocator
+
 from aiofl.cache import subdir
 from aiofl.plants.base import Plant
 
 __all__ = [
     "Instance",
+    "KernelCache",
     "Recipe",
     "Template",
     "build",
@@ -331,57 +334,44 @@ def share_scope_when_inlining() -> bool:
 
 
 # -------------------------------------------------------------------- numba's disk cache
-def _kernel_cache_classes() -> tuple[type, type]:
-    """numba cache classes that store an entry in aiofl's kernel folder with the
-    fingerprint as its freshness stamp (numba's own locators stamp the source file)."""
-    from numba.core.caching import CompileResultCacheImpl, FunctionCache, _CacheLocator
+class _KernelLocator(_CacheLocator):
+    """numba's cache locator for a kernel: aiofl's kernel folder, and the fingerprint as the
+    freshness stamp (numba's own locators stamp the template's source file, which does not
+    change when a plant or a component does)."""
 
-    class Locator(_CacheLocator):
-        def __init__(self, folder: str, stamp: str) -> None:
-            self._folder = folder
-            self._stamp = stamp
+    def __init__(self, folder: str, stamp: str) -> None:
+        self._folder = folder
+        self._stamp = stamp
 
-        def get_cache_path(self) -> str:
-            return self._folder
+    def get_cache_path(self) -> str:
+        return self._folder
 
-        def get_source_stamp(self) -> str:
-            return self._stamp
+    def get_source_stamp(self) -> str:
+        return self._stamp
 
-        def get_disambiguator(self) -> str:
-            return "k"
+    def get_disambiguator(self) -> str:
+        return "k"
 
-        @classmethod
-        def from_function(cls, py_func: Any, py_file: str) -> Any:
-            where = getattr(py_func, "_aiofl_cache", None)
-            return None if where is None else cls(*where)
-
-    class Impl(CompileResultCacheImpl):
-        _locator_classes = [Locator]  # noqa: RUF012 - numba's class attribute
-
-    class Cache(FunctionCache):
-        _impl_class = Impl
-
-        @classmethod
-        def for_function(cls, py_func: Any, folder: Path, stamp: str) -> Any:
-            py_func._aiofl_cache = (str(folder), stamp)
-            return cls(py_func)
-
-    return Locator, Cache
+    @classmethod
+    def from_function(cls, py_func: Any, py_file: str) -> Any:
+        where = getattr(py_func, "_aiofl_cache", None)
+        return None if where is None else cls(*where)
 
 
-class _LazyKernelCache:
-    """:class:`numba.core.caching.FunctionCache` for aiofl's kernel folder, built on first
-    use (numba is not imported at aiofl's import)."""
-
-    _cls: Any = None
-
-    def for_function(self, py_func: Any, folder: Path, stamp: str) -> Any:
-        if self._cls is None:
-            type(self)._cls = _kernel_cache_classes()[1]
-        return self._cls.for_function(py_func, folder, stamp)
+class _KernelCacheImpl(CompileResultCacheImpl):
+    _locator_classes = [_KernelLocator]  # noqa: RUF012 - numba's class attribute
 
 
-KernelCache = _LazyKernelCache()
+class KernelCache(FunctionCache):
+    """numba's disk cache of a kernel entry, in aiofl's kernel folder (:func:`build`)."""
+
+    _impl_class = _KernelCacheImpl
+
+    @classmethod
+    def for_function(cls, py_func: Any, folder: Path, stamp: str) -> KernelCache:
+        """The cache of ``py_func`` in ``folder``, fresh while the fingerprint is ``stamp``."""
+        py_func._aiofl_cache = (str(folder), stamp)
+        return cls(py_func)
 
 
 @contextlib.contextmanager

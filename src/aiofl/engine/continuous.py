@@ -143,13 +143,12 @@ def _tpl_deriv(t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - c
 
 def _tpl_setup(lanes, batch, q, qt, iq, ctrl):  # pragma: no cover - compiled
     """Per-lane constants ``q[:, l]`` of the group's members
-    (:func:`aiofl.engine.member._tpl_setup`); ``iq`` from its first lane (kinds and sizes
-    are uniform within a group).  Returns 0 (no samples)."""
+    (:func:`aiofl.engine.member._tpl_setup`) and the group's ``iq`` (kinds and sizes are
+    uniform within a group, so every lane writes the same).  Returns 0 (no samples)."""
     for l in range(_W):
         _MEMBER_SETUP(batch.ints[lanes[l]], batch.floats[lanes[l]], qt, iq)
         for i in range(N_Q):
             q[i, l] = qt[i]
-    _MEMBER_SETUP(batch.ints[lanes[0]], batch.floats[lanes[0]], qt, iq)
     return 0
 
 

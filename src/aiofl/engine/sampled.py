@@ -198,15 +198,14 @@ def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri):  # pragma: no cover - compil
 # ---------------------------------------------------- in the time loop, lane by lane
 def _tpl_setup(lanes, batch, q, qt, iq, ctrl):  # pragma: no cover - compiled
     """Per-member constants of the group's lanes, one row per lane (``q[l]``, read by the
-    scalar controller update), and their discrete rows (``ctrl[0, l]``); ``iq`` from the
-    first lane (kinds are uniform within a group).  Returns the steps per sample N
-    (uniform within a group)."""
+    scalar controller update), their discrete rows (``ctrl[0, l]``) and the group's ``iq``
+    (kinds are uniform within a group, so every lane writes the same).  Returns the steps
+    per sample N (uniform within a group)."""
     for l in range(_W):
         mi = lanes[l]
         _MEMBER_SETUP(batch.ints[mi], batch.floats[mi], q[l], iq)
         for j in range(N_DISC):
             ctrl[0, l, j] = batch.disc[mi, j]
-    _MEMBER_SETUP(batch.ints[lanes[0]], batch.floats[lanes[0]], qt, iq)
     return int(ctrl[0, 0, D_STEPS])
 
 

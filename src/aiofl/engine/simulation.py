@@ -420,7 +420,6 @@ def closed_loop_rhs(
     batch = controller_batch(controller)
     p_nom = plant.param_vector()
     p = plant.param_vector(scenario.plant_overrides, scenario.plant_scale) if changed else p_nom
-    samples = list(scenario.reference.samples) or [0.0, 0.0]
     nz = n + L.N_METRIC + 2 * L.RHO_MAX + 1
     z = np.zeros(nz)
     z[:n] = np.asarray(x, dtype=float)
@@ -434,27 +433,18 @@ def closed_loop_rhs(
     z[o_eso : o_eso + xi_v.size] = xi_v
     dz = np.zeros(nz)
     sig = np.zeros(5)
-    one = np.zeros(1, dtype=np.int64)
-    rec = Batch(
-        ints=batch.ints,
-        floats=batch.floats,
-        p_before=p_nom[None, :],
-        p_after=p[None, :],  # the parameters the right-hand side is evaluated with
-        p_nom=p_nom[None, :],
-        scen=scenario.row()[None, :],
-        x0=np.zeros((1, n)),
-        ref_table=np.asarray([samples], dtype=float),
-        ref_row=one,
-        noise_table=np.zeros((1, 1)),
-        noise_row=one,
-        disc=np.zeros((1, N_DISC)),
-        dt=1.0,
-        n_steps=0,
-        method=0,
-        decimation=1,
+    rec, _ = pack(
+        plant,
+        batch,
+        [scenario],
+        None,
+        dt=scenario.t_final,
+        method="rk4",
         store=False,
-        threshold=1.0,
+        decimation=1,
+        divergence_threshold=1.0,
     )
+    rec = rec._replace(p_after=p[None, :])  # the parameters the right-hand side sees
     evaluate(rec, float(t), z, float(noise), dz, sig)
     return {
         "dx": dz[:n].copy(),

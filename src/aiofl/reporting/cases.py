@@ -170,6 +170,11 @@ class CaseRun:
         """The plant's output unit (``"rad"`` for the SLFJM)."""
         return self.case.config.plant.output_unit
 
+    @property
+    def unit_suffix(self) -> str:
+        """``" rad"``, to write after a value of the output; empty when undeclared."""
+        return f" {self.unit}" if self.unit and self.unit != "-" else ""
+
 
 def _batch_key(cfg: RunConfig) -> tuple[Any, ...]:
     return (
@@ -445,6 +450,14 @@ class Reproduction:
     def config(self, preset: str) -> RunConfig:
         """The config of a case by preset name."""
         return next(r.case.config for r in self.runs if r.case.preset == preset)
+
+    def records_by_preset(self) -> dict[str, dict[str, Any]]:
+        """The computed records by preset (those written to metrics.json); a run without a
+        record (a Reproduction built without verdicts) gives its plain record."""
+        by = {rec["preset"]: rec for rec in self.records if "preset" in rec}
+        for run in self.runs:
+            by.setdefault(run.case.preset, {**run.record, "preset": run.case.preset})
+        return by
 
 
 def _engine_settings(cases: Sequence[Case], n_batches: int) -> dict[str, str]:

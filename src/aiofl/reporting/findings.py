@@ -33,22 +33,9 @@ __all__ = ["MAX_FINDINGS", "findings"]
 MAX_FINDINGS = 8
 
 
-def _records(rep: Reproduction) -> dict[str, dict[str, Any]]:
-    """The computed records by preset (those written to metrics.json)."""
-    by = {rec["preset"]: rec for rec in rep.records if "preset" in rec}
-    for run in rep.runs:  # a Reproduction built without verdicts: plain records
-        by.setdefault(run.case.preset, {**run.record, "preset": run.case.preset})
-    return by
-
-
-def _u(run: CaseRun) -> str:
-    unit = run.unit
-    return f" {unit}" if unit and unit != "-" else ""
-
-
 def _err(run: CaseRun, rec: dict[str, Any]) -> str:
     e = (rec.get("tracking") or {}).get("max_abs_error")
-    return f"max |e| = {fmt(e, 3)}{_u(run)}" if e is not None else ""
+    return f"max |e| = {fmt(e, 3)}{run.unit_suffix}" if e is not None else ""
 
 
 def _printed_divergence(rep: Reproduction, recs: dict[str, dict[str, Any]]) -> str | None:
@@ -94,11 +81,11 @@ def _how_runs_end(rep: Reproduction, recs: dict[str, dict[str, Any]]) -> str | N
     parts = []
     if "tracks" in groups:
         g = sorted(groups["tracks"], key=lambda p: p[1]["tracking"]["max_abs_error"])
-        lo, hi = g[0], g[-1]
+        (lo_run, lo), (hi_run, hi) = g[0], g[-1]
+        lo_e, hi_e = lo["tracking"]["max_abs_error"], hi["tracking"]["max_abs_error"]
         span = (
-            f"max |e| from {fmt(lo[1]['tracking']['max_abs_error'], 3)}{_u(lo[0])} "
-            f"({lo[0].case.preset}) to {fmt(hi[1]['tracking']['max_abs_error'], 3)}{_u(hi[0])} "
-            f"({hi[0].case.preset})"
+            f"max |e| from {fmt(lo_e, 3)}{lo_run.unit_suffix} ({lo_run.case.preset}) "
+            f"to {fmt(hi_e, 3)}{hi_run.unit_suffix} ({hi_run.case.preset})"
         )
         parts.append(f"{len(g)} of {len(tracked)} runs track ({span})")
     for kind, what in (
@@ -223,7 +210,7 @@ def findings(rep: Reproduction) -> list[str]:
     Every number in a finding is a value of the records written to ``metrics.json`` (or a
     count of them).
     """
-    recs = _records(rep)
+    recs = rep.records_by_preset()
     makers: Sequence[Any] = (
         _printed_divergence,
         _printed_vs_paper,

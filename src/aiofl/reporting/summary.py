@@ -54,20 +54,8 @@ ROBUST_CRITERION = (
 Pick = tuple[CaseRun, dict[str, Any]]
 
 
-def _records(rep: Reproduction) -> dict[str, dict[str, Any]]:
-    """The computed records by preset (those written to metrics.json)."""
-    by = {rec["preset"]: rec for rec in rep.records if "preset" in rec}
-    for run in rep.runs:  # a Reproduction built without verdicts: plain records
-        by.setdefault(run.case.preset, {**run.record, "preset": run.case.preset})
-    return by
-
-
-def _u(run: CaseRun) -> str:
-    return f" {run.unit}" if run.unit and run.unit != "-" else ""
-
-
 def _candidates(rep: Reproduction, scenario: int, structure: str | None) -> list[Pick]:
-    recs = _records(rep)
+    recs = rep.records_by_preset()
     return [
         (r, recs[r.case.preset])
         for r in rep.scenario_runs(scenario)
@@ -129,12 +117,12 @@ def _does(run: CaseRun, rec: dict[str, Any]) -> str:
     tr = rec.get("tracking") or {}
     kind, err = tr.get("behaviour"), tr.get("max_abs_error")
     what = {"tracks": "tracks", "bounded": "stays bounded", "growing": "grows"}.get(kind, "runs")
-    return what + (f" (max |e| {fmt(err, 3)}{_u(run)})" if err is not None else "")
+    return what + (f" (max |e| {fmt(err, 3)}{run.unit_suffix})" if err is not None else "")
 
 
 def _printed(rep: Reproduction, scenario: int) -> str:
     """What the paper's printed parameter sets do in this run, with the printed ITAE."""
-    recs = _records(rep)
+    recs = rep.records_by_preset()
     paper = PAPER_TABLES.get(scenario, {})
     parts = []
     for run in rep.scenario_runs(scenario):
@@ -182,7 +170,7 @@ def claim_text(rep: Reproduction, scenario: int) -> str:
     if wl is None:
         return "—"
     w, lo = wl
-    recs = _records(rep)
+    recs = rep.records_by_preset()
     printed = {
         r.case.structure: (r, recs[r.case.preset])
         for r in rep.scenario_runs(scenario)
