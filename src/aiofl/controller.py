@@ -142,6 +142,14 @@ class Controller:
     eso_init
         ``"zero"``: :math:`\hat\xi(0) = 0`; ``"output"``: :math:`\hat\xi_1(0) = y_m(0)`, the
         first measurement, the other states 0 (no initial output-estimate error).
+    eso_model
+        What the observer is given besides ρ and b0 (:data:`aiofl.layout.ESO_MODEL_KINDS`):
+        ``"none"`` (model-free, eq. 5: :math:`\hat\xi_{\rho+1}` estimates the whole total
+        disturbance) or ``"nominal"`` (model-assisted: the ρ-th observer equation and the
+        law carry the plant's nominal :math:`\alpha_0(\hat x) + \beta_0(\hat x)u` at
+        :math:`\hat x = \Phi^{-1}(\hat\xi)`, and :math:`\hat\xi_{\rho+1}` estimates
+        only what the model misses; :func:`aiofl.components.law.model_assisted_law`).  Needs
+        a plant with ``alpha_beta_of_xi`` (symbolic plants with ρ = n have it).
     allow_rho_mismatch
         Let :meth:`check_plant` accept a ρ different from the plant's known relative degree
         (e.g. to study a reduced-order design); refused otherwise.
@@ -159,6 +167,7 @@ class Controller:
     values: Mapping[str, float] = field(default_factory=dict)
     structure: str = "custom"
     eso_init: str = "zero"
+    eso_model: str = "none"
     allow_rho_mismatch: bool = False
     allow_b0_sign_mismatch: bool = False
 
@@ -169,11 +178,17 @@ class Controller:
             ("sef", L.SEF_KINDS),
             ("law", L.LAW_KINDS),
             ("eso_init", L.ESO_INIT_KINDS),
+            ("eso_model", L.ESO_MODEL_KINDS),
         ):
             if getattr(self, kind) not in table:
                 raise ValueError(
                     f"controller.{kind} = {getattr(self, kind)!r}; allowed: {', '.join(table)}"
                 )
+        if self.eso_model != "none" and self.law != "aiofl":
+            raise ValueError(
+                f"controller.eso_model = {self.eso_model!r} with law = {self.law!r}: the "
+                "model-assisted observer belongs to the active law; allowed: law = 'aiofl'"
+            )
         if isinstance(self.rho, bool) or not isinstance(self.rho, (int, np.integer)):
             raise ValueError(f"controller.rho = {self.rho!r}; allowed: an integer 1..{L.RHO_MAX}")
         if not 1 <= self.rho <= L.RHO_MAX:
@@ -304,6 +319,21 @@ class Controller:
         """
         rd = plant.relative_degree
         name = plant.name
+        if self.eso_model == "nominal":
+            if getattr(plant, "alpha_beta_of_xi", None) is None or rd is None:
+                raise ValueError(
+                    f"controller.eso.model = 'nominal' needs the plant's normal form in its own "
+                    f"coordinates, (α, β)(Φ⁻¹(ξ̂)); plant {name!r} has none (a plain Python "
+                    "plant without alpha_beta_of_xi, or one with internal dynamics, ρ < n, "
+                    "whose state the observer's ξ̂ does not determine): use a symbolic plant "
+                    "file or give Plant(alpha_beta_of_xi=...), or eso.model = 'none'"
+                )
+            if rd != self.rho:
+                raise ValueError(
+                    f"controller.rho = {self.rho} but plant {name!r} has relative degree {rd}; "
+                    "the model-assisted observer carries the plant's normal form and needs "
+                    f"them equal (set controller.rho = {rd})"
+                )
         if self.law == "iofl":
             if plant.normal_form is None or rd is None:
                 raise ValueError(
@@ -364,6 +394,7 @@ class Controller:
         row[L.I_RHO] = self.rho
         row[L.I_NFB] = self.n_feedback
         row[L.I_ESO_INIT] = L.ESO_INIT_KINDS[self.eso_init]
+        row[L.I_ESO_MODEL] = L.ESO_MODEL_KINDS[self.eso_model]
         return row
 
     def float_row(self) -> NDArray[np.float64]:

@@ -42,6 +42,10 @@ ESO_INIT_ZERO = 0  #: ξ̂(0) = 0
 ESO_INIT_OUTPUT = 1  #: ξ̂_1(0) = y_meas(0), the first measurement; ξ̂_2..ξ̂_{ρ+1}(0) = 0
 ESO_INIT_KINDS = MappingProxyType({"zero": ESO_INIT_ZERO, "output": ESO_INIT_OUTPUT})
 
+ESO_MODEL_NONE = 0  #: model-free: the ESO's ρ-th equation carries b0 u only, eq. (5)
+ESO_MODEL_NOMINAL = 1  #: model-assisted: it carries the nominal α(x̂) + β(x̂) u, x̂ = Φ⁻¹(ξ̂)
+ESO_MODEL_KINDS = MappingProxyType({"none": ESO_MODEL_NONE, "nominal": ESO_MODEL_NOMINAL})
+
 LAW_AIOFL = 0  #: u = v - ξ̂_{ρ+1}/b0, eq. (14)
 LAW_IOFL = 1  #: classical model-based IOFL, u = (-α(x) + v)/β(x)
 LAW_KINDS = MappingProxyType({"aiofl": LAW_AIOFL, "iofl": LAW_IOFL})
@@ -59,8 +63,8 @@ STATUS_OK = 0
 STATUS_DIVERGED = 1
 
 # --------------------------------------------------------------------- integer row
-I_ESO, I_TD, I_SEF, I_LAW, I_RHO, I_NFB, I_ESO_INIT = range(7)
-N_INT = 7
+I_ESO, I_TD, I_SEF, I_LAW, I_RHO, I_NFB, I_ESO_INIT, I_ESO_MODEL = range(8)
+N_INT = 8
 INT_NAMES = (
     "eso.kind",
     "td.kind",
@@ -69,6 +73,7 @@ INT_NAMES = (
     "rho",
     "sef.n_feedback",
     "eso.init",
+    "eso.model",
 )
 
 

@@ -134,6 +134,8 @@ class ClosedLoop:
         self.plant, self.controller, self.scenario = plant, c, scenario
         self.mode, self.amplitude = mode, float(amplitude)
         self.rho, self.m = c.rho, c.n_feedback
+        if c.eso_model == "nominal":
+            c.check_plant(plant, scenario.x0 or None)  # it has (α, β)(Φ⁻¹(ξ)), ρ = n
         if c.law == "iofl" and plant.normal_form is None:
             raise ValueError(f"the IOFL law needs plant {plant.name!r}'s normal form; it has none")
         if c.law == "iofl" and plant.relative_degree not in (None, c.rho):
@@ -369,7 +371,12 @@ class ClosedLoop:
             prof[:] = td[:rho]
         p_true = self.p_true
         y = self._plant("h", x, p_true)[0]
-        if c.law == "aiofl":
+        model = c.law == "aiofl" and c.eso_model == "nominal"
+        if model:  # the nominal (α, β) at x̂ = Φ⁻¹(ξ̂), model-assisted law
+            a_hat, b_hat = self._plant("alpha_beta_of_xi", xi[:rho], self.p_nom)
+            e = prof[:m] - xi[:m]
+            u = (self.b0 * self._sef(e, rff) - a_hat - xi[rho]) / b_hat
+        elif c.law == "aiofl":
             e = prof[:m] - xi[:m]
             u = self._sef(e, rff) - xi[rho] / self.b0
         else:
@@ -380,7 +387,7 @@ class ClosedLoop:
         inj = self._injection(y + noise - xi[0])
         o = self.o_eso
         dz[o : o + rho] = xi[1 : rho + 1] + self.betas[:rho] * inj
-        dz[o + rho - 1] += self.b0 * u
+        dz[o + rho - 1] += a_hat + b_hat * u if model else self.b0 * u
         dz[o + rho] = self.betas[rho] * inj
         u_in = u if u_plant is None else u_plant
         dz[:n] = self._plant("f", x, p_true) + self._plant("g", x, p_true) * u_in

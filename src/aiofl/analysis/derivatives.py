@@ -145,7 +145,7 @@ def _call_complex(cfn: Callable[..., Any], x: NDArray[Any], p: NDArray[np.float6
 
 
 class PlantDerivatives:
-    r"""A plant's functions ``f, g, h, bd, normal_form`` on complex states.
+    r"""A plant's functions ``f, g, h, bd, normal_form, alpha_beta_of_xi`` on complex states.
 
     ``evaluate(name, x, p)`` returns the function's value as an array; for a complex x it
     is the complex-step extension :math:`\phi(\operatorname{Re}x) + i\,J_\phi\,\operatorname{Im}x`
@@ -159,7 +159,7 @@ class PlantDerivatives:
         A :class:`aiofl.plants.base.Plant`.
     """
 
-    NAMES = ("f", "g", "h", "bd", "normal_form")
+    NAMES = ("f", "g", "h", "bd", "normal_form", "alpha_beta_of_xi")
 
     def __init__(self, plant: Any) -> None:
         self.plant = plant

@@ -15,6 +15,10 @@ r"""Linearizing control laws: the active law (AIOFL, eq. 14) and classical IOFL 
 
   which needs the full model.
 
+* Model-assisted AIOFL (:func:`model_assisted_law`): the nominal model's
+  :math:`\alpha_0, \beta_0` at the observer's state estimate, and the ESO's extended state
+  for what the model misses.
+
 Both optionally saturate to the actuator range,
 :math:`u \leftarrow \min(\max(u, u_{min}), u_{max})` (:func:`saturate_range`; the engine's
 default range is :math:`u_{min} = -u_{max}`, :math:`u_{max} = \infty`, i.e. none).
@@ -26,7 +30,7 @@ from numba import njit
 
 from aiofl.components.fastmath import JIT_OPTIONS
 
-__all__ = ["aiofl_law", "iofl_law", "saturate", "saturate_range"]
+__all__ = ["aiofl_law", "iofl_law", "model_assisted_law", "saturate", "saturate_range"]
 
 
 @njit(**JIT_OPTIONS)
@@ -56,6 +60,26 @@ def saturate_range(u: float, u_min: float, u_max: float) -> float:
 def aiofl_law(v: float, xi_hat_ext: float, b0: float) -> float:
     r"""Active linearizing law, eq. (14): :math:`u = v - \hat\xi_{\rho+1}/b_0`."""
     return v - xi_hat_ext / b0
+
+
+@njit(**JIT_OPTIONS)
+def model_assisted_law(
+    v: float, xi_hat_ext: float, b0: float, alpha_hat: float, beta_hat: float
+) -> float:
+    r"""Model-assisted active law: :math:`u = (b_0 v - \hat\alpha - \hat\xi_{\rho+1})/\hat\beta`.
+
+    With the model-assisted ESO (S. Zhao and Z. Gao's model-assisted ADRC, which gives the
+    observer the known part of the model; Sira-Ramírez's GPI observers are the same idea)
+    the ρ-th observer equation carries the nominal normal form,
+    :math:`\dot{\hat\xi}_\rho = \hat\xi_{\rho+1} + \hat\alpha + \hat\beta u + \beta_\rho e`
+    with :math:`\hat\alpha = \alpha_0(\hat x)`, :math:`\hat\beta = \beta_0(\hat x)`,
+    :math:`\hat x = \Phi^{-1}(\hat\xi)`, and :math:`\hat\xi_{\rho+1}` estimates only the
+    residual :math:`y^{(\rho)} - \alpha_0 - \beta_0 u`.  This law cancels all three, so
+    :math:`y^{(\rho)} \approx b_0 v`: the same chain (14) as :func:`aiofl_law`, whose v (and
+    SEF gains) it keeps.  With :math:`\hat\alpha = 0`, :math:`\hat\beta = b_0` it is
+    :func:`aiofl_law`.
+    """
+    return (b0 * v - alpha_hat - xi_hat_ext) / beta_hat
 
 
 @njit(**JIT_OPTIONS)

@@ -35,6 +35,8 @@ is bounded before anything is allocated (:mod:`aiofl.limits`).  A bad file raise
     omega0 = 513.8283
     alpha = [8.772, 0.1946, 0.7384, 9.6881e-3, 2.2651e-6]   # default "binomial" (Gao)
     init = "zero"                    # or "output": xi_hat_1(0) = the first measurement
+    model = "none"                   # or "nominal": model-assisted (alpha + beta u of the
+                                     # nominal plant at x_hat = Phi^-1(xi_hat))
     [controller.td]
     R = 2408.6918
     [controller.sef]

@@ -119,6 +119,9 @@ class ESOModel(_Model):
     g_beta: Annotated[float, Field(ge=0, le=2)] = 0.0
     # "zero": xi_hat(0) = 0; "output": xi_hat_1(0) = y_meas(0), the first measurement
     init: Literal["zero", "output"] = "zero"
+    # what the observer is given besides rho and b0: "none" (model-free, eq. 5) or
+    # "nominal" (model-assisted: the plant's nominal alpha + beta u at x_hat = Phi^-1(xi_hat))
+    model: Literal["none", "nominal"] = "none"
 
 
 class TDModel(_Model):
@@ -225,6 +228,7 @@ class ControllerModel(_Model):
         eso = self.eso.model_dump()
         alphas = eso.pop("alpha")
         eso_init = eso.pop("init")
+        eso_model = eso.pop("model")
         for key, val in eso.items():
             values[f"eso.{key}"] = val
         if alphas == "binomial":
@@ -260,6 +264,7 @@ class ControllerModel(_Model):
             values=values,
             structure=self.structure or "custom",
             eso_init=eso_init,
+            eso_model=eso_model,
             allow_rho_mismatch=self.allow_rho_mismatch,
             allow_b0_sign_mismatch=self.allow_b0_sign_mismatch,
         )

@@ -101,6 +101,7 @@ def component_functions(variant: str = "scalar") -> dict[str, Any]:
         "_ESO_UPDATE": ob.eso_update,
         "_INLESO": ob.inleso_injection,
         "_AIOFL_LAW": law.aiofl_law,
+        "_MODEL_ASSISTED_LAW": law.model_assisted_law,
         "_IOFL_LAW": law.iofl_law,
         "_SATURATE": law.saturate_range,
     }

@@ -64,7 +64,7 @@ __all__ = [
     "sources_changed",
 ]
 
-PLANT_FUNCTIONS = ("f", "g", "h", "bd", "normal_form")
+PLANT_FUNCTIONS = ("f", "g", "h", "bd", "normal_form", "alpha_beta_of_xi")
 """The plant's functions a kernel may call, in the order of ``Plant.compiled``."""
 
 

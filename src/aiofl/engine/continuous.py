@@ -23,11 +23,24 @@ from __future__ import annotations
 import numpy as np
 
 from aiofl import layout as L
-from aiofl.engine.loop import N_S, S_D, S_E, S_NOISE, S_RFF, S_U, S_V, S_Y, S_YM
+from aiofl.engine.loop import (
+    N_S,
+    S_AHAT,
+    S_BHAT,
+    S_D,
+    S_E,
+    S_NOISE,
+    S_RFF,
+    S_U,
+    S_V,
+    S_Y,
+    S_YM,
+)
 from aiofl.engine.member import (
     IQ_ESO,
     IQ_LAW,
     IQ_M,
+    IQ_MODEL,
     IQ_NZ,
     IQ_OESO,
     IQ_OTD,
@@ -53,7 +66,7 @@ _BLK_HAN = _BLK_ITD = _BLK_PREFILTER_START = _BLK_PREFILTER_TERM = _BLK_COPY = N
 _BLK_FILL = _BLK_OUTPUT = _BLK_ERROR = _BLK_FAL = _BLK_INLSEF = _BLK_LINEAR_TERM = None
 _BLK_INLSEF_LIMIT = _BLK_LINEAR_SEF = _BLK_LAW = _BLK_IOFL = _BLK_ESO_ERROR = None
 _BLK_INLESO_ERROR = _BLK_ESO_ROW = _BLK_ESO_INPUT = _BLK_ESO_LAST = _BLK_PLANT = None
-_BLK_DISTURBANCE = _BLK_METRICS = None
+_BLK_DISTURBANCE = _BLK_METRICS = _BLK_MODEL = _BLK_MODEL_LAW = _BLK_MODEL_INPUT = None
 
 
 def _tpl_deriv(t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - compiled
@@ -64,14 +77,18 @@ def _tpl_deriv(t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - c
     measurement :math:`y_m = h(x) + n`, the SEF (17), (20) or linear on
     :math:`e_i = r_i - \hat\xi_i` and the law :math:`u = v - \hat\xi_{\rho+1}/b_0`
     (14), saturated (or the classical IOFL law on the nominal model), the ESO (5)/(16) or
-    (19), the plant :math:`\dot x = f(x) + g(x)u + b_d(x)\tau_d` and the integrands of
-    eq. (22).  Each formula is a lane block (:mod:`aiofl.engine.lane_blocks`)."""
+    (19) (model-assisted: its ρ-th equation and the law carry the nominal
+    :math:`\hat\alpha + \hat\beta u` at :math:`\hat x = \Phi^{-1}(\hat\xi)`,
+    :func:`aiofl.components.law.model_assisted_law`), the plant
+    :math:`\dot x = f(x) + g(x)u + b_d(x)\tau_d` and the integrands of eq. (22).  Each
+    formula is a lane block (:mod:`aiofl.engine.lane_blocks`)."""
     rho = iq[IQ_RHO]
     m = iq[IQ_M]
     o_td = iq[IQ_OTD]
     o_eso = iq[IQ_OESO]
     td_kind = iq[IQ_TD]
     exact = td_kind == L.TD_EXACT
+    model = iq[IQ_MODEL] == L.ESO_MODEL_NOMINAL
     r = rr[ri, 0]
     rff = s[S_RFF]
     e = s[S_E]
@@ -111,7 +128,13 @@ def _tpl_deriv(t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - c
             _BLK_INLSEF_LIMIT(q[L.F_SEF_V_LIMIT], v)
         elif sef_kind == L.SEF_LINEAR:
             _BLK_LINEAR_SEF(q[L.F_B0], rff, v)
-        _BLK_LAW(v, z[o_eso + rho], q[L.F_B0], q[L.F_UMIN], q[L.F_UMAX], u)
+        if model:  # the nominal normal form at x̂ = Φ⁻¹(ξ̂), then its law
+            _BLK_MODEL(z, o_eso, rho, pn, s[S_AHAT], s[S_BHAT])
+            _BLK_MODEL_LAW(
+                v, z[o_eso + rho], q[L.F_B0], s[S_AHAT], s[S_BHAT], q[L.F_UMIN], q[L.F_UMAX], u
+            )
+        else:
+            _BLK_LAW(v, z[o_eso + rho], q[L.F_B0], q[L.F_UMIN], q[L.F_UMAX], u)
     else:
         _BLK_IOFL(z, iq, q, pn, rr, ri, o_td, rff, u)
 
@@ -130,7 +153,10 @@ def _tpl_deriv(t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - c
         _BLK_ESO_ERROR(s[S_YM], z[o_eso], e)
     for i in range(rho):
         _BLK_ESO_ROW(z[o_eso + i + 1], q[Q_BETA + i], e, dz[o_eso + i])
-    _BLK_ESO_INPUT(q[L.F_B0], u, dz[o_eso + rho - 1])
+    if model:  # dξ̂_ρ += α̂ + β̂ u
+        _BLK_MODEL_INPUT(s[S_AHAT], s[S_BHAT], u, dz[o_eso + rho - 1])
+    else:  # dξ̂_ρ += b0 u, eq. (5)
+        _BLK_ESO_INPUT(q[L.F_B0], u, dz[o_eso + rho - 1])
     _BLK_ESO_LAST(q[Q_BETA + rho], e, dz[o_eso + rho])
 
     dx = _LEADING_ROWS(dz, _N)

@@ -171,10 +171,11 @@ def recipe(
     fns = plant.compiled
     if variant == "guarded":
         n = plant.n_states
-        f, g, h, bd, nf = (bindings.guarded(fn, k, n) for k, fn in enumerate(fns))
+        f, g, h, bd, nf, ab = (bindings.guarded(fn, k, n) for k, fn in enumerate(fns))
     else:
         f, g, h, bd = (_plant_function(fn, variant) for fn in (plant.f, plant.g, plant.h, fns[3]))
         nf = _plant_function(fns[4], "scalar")
+        ab = _plant_function(fns[5], variant)  # the model-assisted ESO's, lane by lane
     # the templates' modules' globals (layout constants, placeholders), without the modules
     # and compiled functions they import: an instance calls only what is bound below
     merged = {**vars(lane_blocks), **vars(continuous), **vars(sampled), **vars(loop)}
@@ -193,6 +194,7 @@ def recipe(
         _PH=h,
         _PBD=bd,
         _PNF=nf,
+        _PAB=ab,
         _MEMBER_SETUP=member_setup,
         _IOFL_COMMAND=ns_member["_iofl_command"],
         _UNMANAGED=views.unmanaged_intrinsic(),
@@ -221,6 +223,7 @@ def recipe(
     if sampled_data:
         # the controller's update, compiled as the blocks are, in the members' namespace
         ns_ctrl = dict(ns_member)
+        ns_ctrl["_PAB"] = ab
         sampled._bind(ns_ctrl, bindings.private_components(private)["discrete"])
         ns["_CTRL_INIT"] = compile_.instantiate(sampled._tpl_ctrl_init, ns_ctrl, variant, **opts)
         ns["_CTRL_STEP"] = compile_.instantiate(sampled._tpl_ctrl_step, ns_ctrl, variant, **opts)

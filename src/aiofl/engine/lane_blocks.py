@@ -27,10 +27,11 @@ from aiofl.engine.member import (
 # Placeholders for what an instance binds (see aiofl.engine.instances).
 _W = 32
 _N = 1
-_PF = _PG = _PH = _PBD = _PNF = None  # the plant's functions, inlined, vector math
+_PF = _PG = _PH = _PBD = _PNF = _PAB = None  # the plant's functions, inlined, vector math
 _IOFL_COMMAND = _UNMANAGED = _COLUMN = _SIN = _COS = None
 _HAN_TD = _ITD = _FAL = _FAL_POWER_NEEDED = _FAL_LINEAR = None
 _INLSEF_TERM = _INLSEF_LIMIT = _LINEAR_SEF = _INLESO = _AIOFL_LAW = _SATURATE = None
+_MODEL_ASSISTED_LAW = None
 
 
 def _blk_sine(t, a, w, phase, offset, with_cos, r, sn, cs, amp):  # pragma: no cover
@@ -180,6 +181,29 @@ def _blk_law(v, xi_ext, b0, u_min, u_max, u):  # pragma: no cover - compiled
     """u = sat(v - ξ̂_{ρ+1}/b0), eq. (14) and the actuator range."""
     for l in range(_W):
         u[l] = _SATURATE(_AIOFL_LAW(v[l], xi_ext[l], b0[l]), u_min[l], u_max[l])
+
+
+def _blk_model(z, o_eso, rho, pn, a_hat, b_hat):  # pragma: no cover - compiled
+    """The nominal normal form at the observer's state, :math:`(\\hat\\alpha, \\hat\\beta)
+    = (\\alpha_0, \\beta_0)(\\Phi^{-1}(\\hat\\xi))` (the plant's ``alpha_beta_of_xi`` with the
+    nominal parameters), lane by lane."""
+    for l in range(_W):
+        ab = _PAB(_COLUMN(z, l)[o_eso : o_eso + rho], _COLUMN(pn, l))
+        a_hat[l] = ab[0]
+        b_hat[l] = ab[1]
+
+
+def _blk_model_law(v, xi_ext, b0, a_hat, b_hat, u_min, u_max, u):  # pragma: no cover
+    """u = sat((b0 v - α̂ - ξ̂_{ρ+1})/β̂), the model-assisted law and the actuator range."""
+    for l in range(_W):
+        ul = _MODEL_ASSISTED_LAW(v[l], xi_ext[l], b0[l], a_hat[l], b_hat[l])
+        u[l] = _SATURATE(ul, u_min[l], u_max[l])
+
+
+def _blk_model_input(a_hat, b_hat, u, dxi):  # pragma: no cover - compiled
+    """dξ̂_ρ += α̂ + β̂ u (the model-assisted observer's ρ-th equation)."""
+    for l in range(_W):
+        dxi[l] += a_hat[l] + b_hat[l] * u[l]
 
 
 def _blk_iofl(z, iq, q, pn, rr, ri, o_td, rff, u):  # pragma: no cover - compiled

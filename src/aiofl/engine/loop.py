@@ -94,7 +94,9 @@ S_SIN = 8  #: sin of the reference's phase (for its derivatives)
 S_COS = 9  #: cos of the reference's phase
 S_AMP = 10  #: amplitude times ω^k of the reference's k-th derivative
 S_BAD = 11  #: the number of the lane's states out of range (divergence)
-N_S = 12
+S_AHAT = 12  #: model-assisted observer: the nominal α at x̂ = Φ⁻¹(ξ̂)
+S_BHAT = 13  #: model-assisted observer: the nominal β at x̂
+N_S = 14
 
 # Placeholders for what an instance binds (see aiofl.engine.instances).
 _W = WIDTH

@@ -43,7 +43,8 @@ N_Q = Q_ITD_BC + 2
 # Per-member integers: kinds, ρ, m, offsets of the TD and ESO blocks in z, active length,
 # and how the ESO starts (layout.ESO_INIT_*).
 IQ_ESO, IQ_TD, IQ_SEF, IQ_LAW, IQ_RHO, IQ_M, IQ_OTD, IQ_OESO, IQ_NZ, IQ_NTD, IQ_EINIT = range(11)
-N_IQ = 11
+IQ_MODEL = 11  #: what the observer is given (layout.ESO_MODEL_*)
+N_IQ = 12
 N_SIG = 6  # t, r, y, y_meas, u, d
 SWITCH_RTOL = 1e-12
 """A switching time t_s (step disturbance, parameter change, step reference) acts from the
@@ -64,7 +65,7 @@ _ITD_CONSTANTS = _PREFILTER_COEF = _FAL_SLOPE = _LINEAR_SEF_GAIN = _ESO_GAIN = N
 # They depend on no plant function, so they are compiled once, here, and inlined (numba IR
 # inlining) where called, so each caller compiles to the code it had with them in place.
 @njit(inline="always", fastmath=FASTMATH, error_model="numpy")
-def _aiofl_command(iq, q, rr, ri, ref, o_ref, xh, o_x, rff):  # pragma: no cover - compiled
+def _aiofl_command(iq, q, rr, ri, ref, o_ref, xh, o_x, rff, a_hat, b_hat):  # pragma: no cover
     r"""The AIOFL command before saturation: SEF (17), (20) or linear, then law (14).
 
     With :math:`e_i = r_i - \hat\xi_i`, i = 1..m, the nonlinear SEF (17)
@@ -72,7 +73,9 @@ def _aiofl_command(iq, q, rr, ri, ref, o_ref, xh, o_x, rff):  # pragma: no cover
     :math:`v = v_{lim}\tanh\big(\sum_i (k_i + k_{b,i}/(1 + e^{\mu_i e_i^2}))
     |e_i|^{\alpha_i}\operatorname{sign} e_i \,/\, v_{lim}\big)` or the linear feedback of
     the chain :math:`v = (\sum_i k_i e_i + r^{(\rho)})/b_0`, and
-    :math:`u = v - \hat\xi_{\rho+1}/b_0` (14).
+    :math:`u = v - \hat\xi_{\rho+1}/b_0` (14), or with the model-assisted observer
+    :math:`u = (b_0 v - \hat\alpha - \hat\xi_{\rho+1})/\hat\beta` with ``a_hat``,
+    ``b_hat`` = :math:`\hat\alpha, \hat\beta` (:func:`aiofl.components.law.model_assisted_law`).
 
     :math:`r_i` is ``rr[ri, i-1]`` for the exact TD (the reference's derivatives), else
     ``ref[o_ref + i-1]`` (the differentiator's profile); :math:`\hat\xi_i` is
@@ -103,6 +106,8 @@ def _aiofl_command(iq, q, rr, ri, ref, o_ref, xh, o_x, rff):  # pragma: no cover
         for i in range(m):
             acc += q[Q_FEEDBACK_GAIN + i] * ((rr[ri, i] if exact else ref[o_ref + i]) - xh[o_x + i])
         v = _fb.linear_sef(acc, rff, b0)
+    if iq[IQ_MODEL] == L.ESO_MODEL_NOMINAL:
+        return _law.model_assisted_law(v, xh[o_x + rho], b0, a_hat, b_hat)
     return _law.aiofl_law(v, xh[o_x + rho], b0)  # eq. (14)
 
 
@@ -162,3 +167,4 @@ def _tpl_setup(ip, fp, q, iq):  # pragma: no cover - compiled
     iq[IQ_NZ] = _N + L.N_METRIC + ntd + rho + 1
     iq[IQ_NTD] = ntd
     iq[IQ_EINIT] = ip[L.I_ESO_INIT]
+    iq[IQ_MODEL] = ip[L.I_ESO_MODEL]

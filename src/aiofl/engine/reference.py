@@ -22,6 +22,11 @@ The loop, with :math:`e_i = r_i - \hat\xi_i` and :math:`y_m = h(x) + n(t)`:
 * state error feedback: NLSEF :math:`\sum k_i\,\mathrm{fal}(e_i,\alpha_i,\delta_i)` (17, the
   continuous form), INLSEF (20), or linear :math:`v = (\sum_i k_ie_i + r^{(\rho)})/b_0`
   with :math:`k_i=\binom{\rho}{i-1}\omega_c^{\rho-i+1}`;
+* model-assisted observer (``eso_model = "nominal"``): the ρ-th equation carries
+  :math:`\alpha(\hat x) + \beta(\hat x)u` instead of :math:`b_0u`, where :math:`\hat x`
+  solves :math:`\Phi(\hat x) = \hat\xi` numerically (``scipy.optimize.root`` on the
+  plant's ``normal_form``, warm-started; not the generated closed-form inverse the engine
+  uses), and the law is :math:`u = (b_0v - \alpha(\hat x) - \hat\xi_{\rho+1})/\beta(\hat x)`;
 * law: AIOFL :math:`u = v - \hat\xi_{\rho+1}/b_0` (14) or classical IOFL
   :math:`u = (-\alpha(x) + v)/\beta(x)`, clipped to the actuator range
   :math:`[u_{min}, u_{max}]` (``law.u_min`` omitted: :math:`-u_{max}`);
@@ -52,6 +57,7 @@ from math import comb, exp
 import numpy as np
 from numpy.typing import NDArray
 from scipy.integrate import solve_ivp
+from scipy.optimize import root
 
 from aiofl.controller import Controller
 from aiofl.plants.base import Plant
@@ -89,6 +95,7 @@ class LoopSetup:
     prefilter_poly: NDArray[np.float64]
     p_nominal: NDArray[np.float64]
     p_changed: NDArray[np.float64]
+    x_hat: NDArray[np.float64]  # the model-assisted observer's last Φ⁻¹(ξ̂), a warm start
 
     @property
     def size(self) -> int:
@@ -122,7 +129,30 @@ def setup_loop(plant: Plant, controller: Controller, scenario: Scenario) -> Loop
         prefilter_poly=prefilter_poly,
         p_nominal=plant.param_vector(),
         p_changed=plant.param_vector(scenario.plant_overrides, scenario.plant_scale),
+        x_hat=np.zeros(plant.n_states),
     )
+
+
+def _nominal_model_at(s: LoopSetup, xi: NDArray[np.float64]) -> tuple[float, float]:
+    r""":math:`(\alpha, \beta)(\hat x)` with :math:`\Phi(\hat x) = \hat\xi_{1..\rho}`, solved
+    numerically from the plant's ``normal_form`` (nominal parameters)."""
+    nf = s.plant.normal_form
+    assert nf is not None  # Controller.check_plant refused the model otherwise
+    rho = s.rho
+
+    def residual(x: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.asarray(nf(x, s.p_nominal), dtype=float)[:rho] - xi[:rho]
+
+    tol = 1e-10 * (1.0 + float(np.max(np.abs(xi[:rho]))))
+    for start, method in ((s.x_hat, "hybr"), (np.zeros_like(s.x_hat), "hybr"), (s.x_hat, "lm")):
+        sol = root(residual, np.where(np.abs(start) < 1e-200, 0.0, start), method=method)
+        if np.all(np.isfinite(sol.x)) and np.max(np.abs(residual(sol.x))) <= tol:
+            break
+    else:
+        raise RuntimeError(f"Φ(x) = ξ̂ has no solution found near {s.x_hat.tolist()}: {sol.message}")
+    s.x_hat[:] = sol.x
+    out = np.asarray(nf(sol.x, s.p_nominal), dtype=float)
+    return float(out[rho]), float(out[rho + 1])
 
 
 def _reference_derivatives(scenario: Scenario, t: float, count: int, step_on: bool) -> list[float]:
@@ -233,7 +263,11 @@ def closed_loop(
             v = v_limit * np.tanh(total / v_limit)
         else:
             v = (sum(s.k_lin[i] * e[i] for i in range(s.m)) + r_feedforward) / b0
-        u = v - xi[rho] / b0
+        if c.eso_model == "nominal":
+            a_hat, b_hat = _nominal_model_at(s, xi)
+            u = (b0 * v - a_hat - xi[rho]) / b_hat
+        else:
+            u = v - xi[rho] / b0
     else:
         nf = np.asarray(s.plant.normal_form(x, s.p_nominal), dtype=float)  # type: ignore[misc]
         v = r_feedforward + sum(s.k_lin[i] * (profile[i] - nf[i]) for i in range(s.m))
@@ -253,7 +287,10 @@ def closed_loop(
         err = ka * abs(err) ** ga * _sign(err) + kb * abs(err) ** gb * err
     for i in range(rho):
         dxi[i] = xi[i + 1] + s.betas[i] * err
-    dxi[rho - 1] += b0 * u
+    if c.law == "aiofl" and c.eso_model == "nominal":
+        dxi[rho - 1] += a_hat + b_hat * u
+    else:
+        dxi[rho - 1] += b0 * u
     dxi[rho] = s.betas[rho] * err
 
     # ---------------------------------------------------------------- plant, metrics

@@ -73,6 +73,7 @@ from aiofl.engine.member import (
     IQ_EINIT,
     IQ_ESO,
     IQ_LAW,
+    IQ_MODEL,
     IQ_NTD,
     IQ_RHO,
     IQ_TD,
@@ -99,7 +100,7 @@ N_CS = C_SCR + L.RHO_MAX
 # placeholders bound per instance (see _bind and aiofl.engine.instances)
 _W = 32
 _N = _N_P = 1
-_PNF = _MEMBER_SETUP = _LEADING_ROWS = _IOFL_COMMAND = _COLUMN = None
+_PNF = _PAB = _MEMBER_SETUP = _LEADING_ROWS = _IOFL_COMMAND = _COLUMN = None
 _CTRL_INIT = _CTRL_STEP = None
 _SATURATE = None
 _BLK_OUTPUT = _BLK_PLANT_OUTPUT = _BLK_PLANT = _BLK_DISTURBANCE = _BLK_METRICS = None
@@ -126,7 +127,7 @@ def _tpl_ctrl_init(iq, cs, y0):  # pragma: no cover - compiled
         cs[C_X] = y0
 
 
-def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri):  # pragma: no cover - compiled
+def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri, pn):  # pragma: no cover - compiled
     """One sample of the discrete AIOFL controller: returns u_k, updates ``cs``.
 
     ESO correction :math:`\\hat\\xi = p + L\\phi(y - p_1)`; errors
@@ -135,6 +136,13 @@ def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri):  # pragma: no cover - compil
     prediction :math:`p^+ = \\Phi\\hat\\xi + \\Gamma u_m + K\\phi` with the command applied
     over the coming interval (:math:`u_{k-1}` with a one-sample delay); differentiator
     update to t_{k+1}.
+
+    With the model-assisted observer (``eso.model = "nominal"``) the nominal
+    :math:`\\hat\\alpha, \\hat\\beta` are evaluated at the corrected estimate,
+    :math:`(\\alpha_0, \\beta_0)(\\Phi^{-1}(\\hat\\xi_k))` with the nominal parameters
+    ``pn``, the law is :func:`aiofl.components.law.model_assisted_law` and the prediction's
+    input :math:`b_0 u_m` becomes :math:`\\hat\\alpha + \\hat\\beta u_m` (held over the
+    interval, as u is).
     """
     rho = iq[IQ_RHO]
     n1 = rho + 1
@@ -165,11 +173,21 @@ def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri):  # pragma: no cover - compil
         if td_kind == L.TD_LINEAR:
             rff = _PREFILTER(cs, scr, C_TD, rho, r, q, Q_PF)
 
+    a_hat = 0.0
+    b_hat = q[L.F_B0]
+    model = iq[IQ_MODEL] == L.ESO_MODEL_NOMINAL
+    if model:  # the nominal normal form at x̂ = Φ⁻¹(ξ̂)
+        ab = _PAB(cs[C_X : C_X + rho], pn)
+        a_hat = ab[0]
+        b_hat = ab[1]
+
     # SEF and law (14), the continuous loop's formulas (aiofl.engine.member._aiofl_command)
-    u = _aiofl_command(iq, q, rr, ri, cs, C_PROF, cs, C_X, rff)
+    u = _aiofl_command(iq, q, rr, ri, cs, C_PROF, cs, C_X, rff, a_hat, b_hat)
     u = _SATURATE(u, q[L.F_UMIN], q[L.F_UMAX])  # actuator range [u_min, u_max]
 
     um = cs[C_UPREV] if dsc[D_DELAY] > 0.0 else u
+    if model:  # Γ holds b0: its input is (α̂ + β̂ u_m)/b0
+        um = (a_hat + b_hat * um) / q[L.F_B0]
     _OBS_PREDICT(cs, C_P, C_X, C_Y, n1, dsc, D_PHI, STRIDE, D_GAM, D_K, um, phi, y, dx1)
 
     if td_kind == L.TD_HAN:  # both forms depend on r_1 - r only; keep r_1(k+1) - r_k
@@ -236,7 +254,7 @@ def _tpl_sample(k, z, p, pn, s, rrs, rl, iq, q, ctrl):  # pragma: no cover - com
             uc = _SATURATE(uc, q[l, L.F_UMIN], q[l, L.F_UMAX])
             cs[C_UPREV] = uc
         else:
-            uc = _CTRL_STEP(iq, q[l], dsc, cs, ctrl[2, l], yl, rl, 0)
+            uc = _CTRL_STEP(iq, q[l], dsc, cs, ctrl[2, l], yl, rl, 0, _COLUMN(pn, l))
         ua = u_before if dsc[D_DELAY] > 0.0 else uc
         uq = dsc[D_UQ]
         s[S_U, l] = uq * np.floor(ua / uq + 0.5) if uq > 0.0 else ua
@@ -316,21 +334,28 @@ def _sources() -> tuple[str, ...]:
 _LOCK = threading.Lock()
 
 
-_STANDALONE: list[SimpleNamespace] = []
+_STANDALONE: dict[int, tuple[Any, SimpleNamespace]] = {}
 
 
-def _standalone() -> SimpleNamespace:
-    """The controller update compiled without a plant (for :class:`DiscreteController`)."""
+def _standalone(plant: Any = None) -> SimpleNamespace:
+    """The controller update compiled without the plant's dynamics (for
+    :class:`DiscreteController`); given ``plant``, with its nominal normal form
+    ``alpha_beta_of_xi`` for the model-assisted observer."""
+    from aiofl.plants.base import _no_alpha_beta
+
+    key = id(plant)
     with _LOCK:
-        if not _STANDALONE:
+        if key not in _STANDALONE or _STANDALONE[key][0] is not plant:
             ns = dict(vars(member))
             ns.update(_N=1, _N_P=1, _NZ=1, **bindings.component_functions())
             _bind(ns)
+            ab = plant.compiled[5] if plant is not None else _no_alpha_beta
+            ns["_PAB"] = compile_.rejit(getattr(ab, "py_func", ab), error_model="numpy")
             opts = _opts()
             tpl = compile_.Template
             recipe = compile_.Recipe(
                 kind="standalone",
-                plant=None,
+                plant=plant,
                 bindings=ns,
                 templates=(
                     tpl("_SETUP", member._tpl_setup, opts),
@@ -340,12 +365,11 @@ def _standalone() -> SimpleNamespace:
                 sources=_sources(),
             )
             space = compile_.build(recipe, cache=False).namespace
-            _STANDALONE.append(
-                SimpleNamespace(
-                    setup=space["_SETUP"], init=space["_CTRL_INIT"], step=space["_CTRL_STEP"]
-                )
+            fns = SimpleNamespace(
+                setup=space["_SETUP"], init=space["_CTRL_INIT"], step=space["_CTRL_STEP"]
             )
-        return _STANDALONE[0]
+            _STANDALONE[key] = (plant, fns)
+        return _STANDALONE[key][1]
 
 
 class DiscreteController:
@@ -363,20 +387,31 @@ class DiscreteController:
         and is refused.
     sampling
         Sample time and discretisation.
+    plant
+        The plant whose nominal model a model-assisted observer (``eso.model =
+        "nominal"``) carries, with its nominal parameters; not needed otherwise.
     """
 
-    def __init__(self, controller: Controller, sampling: Sampling) -> None:
+    def __init__(self, controller: Controller, sampling: Sampling, plant: Any = None) -> None:
         if controller.law != "aiofl":
             raise ValueError(
                 f"controller.law_kind = {controller.law!r}: a discrete controller without "
                 "the plant needs the AIOFL law (the IOFL law evaluates the plant model)"
             )
         sampling.check(controller)
+        if controller.eso_model != "none":
+            if plant is None:
+                raise ValueError(
+                    f"controller.eso.model = {controller.eso_model!r}: the discrete controller "
+                    "evaluates the plant's nominal model; pass plant="
+                )
+            controller.check_plant(plant)
         self.controller = controller
         self.sampling = sampling
         batch = controller_batch(controller)
         self.row = sampling_rows(batch, [sampling], sampling.ts)[0]
-        self._fn = _standalone()
+        self._fn = _standalone(plant if controller.eso_model != "none" else None)
+        self._pn = plant.param_vector() if plant is not None else np.zeros(1)
         self._q = np.zeros(N_Q)
         self._iq = np.zeros(N_IQ, dtype=np.int64)
         self._fn.setup(batch.ints[0], batch.floats[0], self._q, self._iq)
@@ -397,7 +432,9 @@ class DiscreteController:
         self._rr[0, :] = 0.0
         self._rr[0, : rv.size] = rv
         return float(
-            self._fn.step(self._iq, self._q, self.row, self._cs, self._scr, y, self._rr, 0)
+            self._fn.step(
+                self._iq, self._q, self.row, self._cs, self._scr, y, self._rr, 0, self._pn
+            )
         )
 
     @property

@@ -77,6 +77,10 @@ def unit_from_label(label: str) -> str:
     return ""
 
 
+def _no_alpha_beta(xi: NDArray[np.float64], p: NDArray[np.float64]) -> Any:  # pragma: no cover
+    return (0.0, 1.0)  # placeholder: a controller that needs the model is refused first
+
+
 def _zero_bd(x: NDArray[np.float64], p: NDArray[np.float64]) -> Any:  # pragma: no cover - jitted
     return x * 0.0
 
@@ -101,6 +105,14 @@ class Plant:
         ρ, if known (used as the default controller order).
     normal_form
         Optional ``(x, p) -> (ξ_1..ξ_ρ, α(x), β(x))`` for the classical IOFL law.
+    alpha_beta_of_xi
+        Optional ``(ξ, p) -> (α, β)``: the normal form :math:`y^{(\rho)} = \alpha +
+        \beta u` in its own coordinates, :math:`\alpha(\Phi^{-1}(\xi))`,
+        :math:`\beta(\Phi^{-1}(\xi))` (ρ = n), for the model-assisted observer
+        (``eso.model = "nominal"``).  Generated for symbolic plants
+        (:attr:`aiofl.plants.normal_form.Analysis.alpha_beta_of_xi`).
+    state_of_xi
+        Optional ``(ξ, p) -> x``, :math:`\Phi^{-1}`: the state with normal-form coordinates ξ.
     state_names, description
         Documentation.
     output_unit, input_unit, disturbance_unit
@@ -119,6 +131,8 @@ class Plant:
     bd: PlantFunction | None = None
     relative_degree: int | None = None
     normal_form: PlantFunction | None = None
+    alpha_beta_of_xi: PlantFunction | None = None
+    state_of_xi: PlantFunction | None = None
     state_names: tuple[str, ...] = ()
     description: str = ""
     output_unit: str = ""
@@ -235,13 +249,22 @@ class Plant:
         if x.shape != (self.n_states,):
             raise PlantError(f"plant {self.name!r}: x0 must have {self.n_states} entries")
         p = self.param_vector()
-        for fname in ("f", "g", "h", "bd", "normal_form"):
+        for fname in ("f", "g", "h", "bd", "normal_form", "alpha_beta_of_xi", "state_of_xi"):
             fn = getattr(self, fname)
             if fn is None:
                 continue
             try:
                 if fname == "h":
                     val = np.asarray(self.output(x, p))
+                elif fname in ("alpha_beta_of_xi", "state_of_xi"):
+                    size = 2 if fname == "alpha_beta_of_xi" else self.n_states
+                    out = self._real(fn(np.full(self.n_states, 0.1), p), fname, x)
+                    if out.shape != (size,):
+                        raise PlantError(
+                            f"plant {self.name!r}: {fname}(xi, p) must return {size} floats; "
+                            f"got shape {out.shape}"
+                        )
+                    continue  # functions of ξ: may be singular at x; only an observer uses it
                 elif fname == "normal_form":
                     nf = self._real(fn(x, p), fname, x)
                     rho = self.relative_degree
@@ -280,7 +303,8 @@ class Plant:
         from numba.core.errors import NumbaError
 
         sig = (nt.float64[::1], nt.float64[::1])
-        for fname, fn in zip(("f", "g", "h", "bd", "normal_form"), self.compiled, strict=True):
+        names = ("f", "g", "h", "bd", "normal_form", "alpha_beta_of_xi")
+        for fname, fn in zip(names, self.compiled, strict=True):
             try:
                 fn.compile(sig)
             except NumbaError as exc:
@@ -292,8 +316,9 @@ class Plant:
 
     # ------------------------------------------------------------------ compilation
     @cached_property
-    def compiled(self) -> tuple[Any, Any, Any, Any, Any]:
-        """The numba-compiled ``(f, g, h, bd, normal_form)`` the engine's kernel calls."""
+    def compiled(self) -> tuple[Any, Any, Any, Any, Any, Any]:
+        """The numba-compiled ``(f, g, h, bd, normal_form, alpha_beta_of_xi)`` the engine's
+        kernel calls (placeholders for the optional ones the plant lacks)."""
         from numba import njit
 
         self.check()
@@ -303,6 +328,8 @@ class Plant:
 
             def nf(x: NDArray[np.float64], p: NDArray[np.float64]) -> Any:  # placeholder
                 return np.zeros(n + 2)
+
+        ab = self.alpha_beta_of_xi or _no_alpha_beta
 
         def jit(fn: PlantFunction) -> Any:
             # the kernel's error model: x/0, overflow and domain errors give inf/NaN
@@ -314,6 +341,7 @@ class Plant:
             jit(self.h),
             jit(self.bd or _zero_bd),
             jit(nf),
+            jit(ab),
         )
 
 

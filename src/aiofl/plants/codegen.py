@@ -60,7 +60,32 @@ def plant_sources(plant: SymbolicModel, analysis: Analysis) -> dict[str, str]:
     }
     if plant.bd is not None:
         out["bd"] = _function_source("bd", list(plant.bd), plant, tuple_=True)
+    in_xi = a.alpha_beta_of_xi
+    if in_xi is not None:
+        # functions of ξ (ρ = n): ξ_i is written as the i-th state's symbol, so the
+        # function reads it as x[i-1] like every generated function
+        x_of_xi, _ = a.inverse
+        back = dict(zip(a.xi_symbols, plant.states, strict=True))
+        out["alpha_beta_of_xi"] = _function_source(
+            "alpha_beta_of_xi",
+            [e.xreplace(back) for e in in_xi],
+            plant,
+            tuple_=True,
+            cse=True,
+            names=["α(Φ⁻¹(ξ))", "β(Φ⁻¹(ξ))"],
+        )
+        out["state_of_xi"] = _function_source(
+            "state_of_xi",
+            [e.xreplace(back) for e in x_of_xi],
+            plant,
+            tuple_=True,
+            cse=True,
+        )
     return out
+
+
+#: the generated functions, in the order a module holds them
+GENERATED_FUNCTIONS = ("f", "g", "h", "bd", "normal_form", "alpha_beta_of_xi", "state_of_xi")
 
 
 def compile_sources(sources: dict[str, str], name: str) -> dict[str, Any]:
@@ -165,7 +190,7 @@ def generate_module_source(plants: Sequence[tuple[str, _HasSources]], header: st
     parts = [f'"""{header}"""\n' if header else "", "import math\n"]
     for prefix, plant in plants:
         srcs = plant.function_sources(prefix=f"{prefix}_")
-        for key in ("f", "g", "h", "bd", "normal_form"):
+        for key in GENERATED_FUNCTIONS:
             if key in srcs:
                 parts.append("\n\n" + srcs[key])
     return "".join(parts)

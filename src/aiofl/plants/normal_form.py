@@ -51,6 +51,7 @@ import numpy as np
 import sympy as sp
 from numpy.typing import NDArray
 
+from aiofl.plants.coordinates import invert_coordinates
 from aiofl.plants.expressions import (
     SymbolicPlantError,
     expanded_terms,
@@ -280,6 +281,39 @@ class Analysis:
     def beta(self) -> Any:
         """:math:`\\beta(x) = L_g L_f^{\\rho-1} h`."""
         return self.lg_lf_h[self.rho - 1]
+
+    @cached_property
+    def xi_symbols(self) -> tuple[Any, ...]:
+        """Symbols :math:`\\xi_1..\\xi_\\rho` for expressions in the normal-form coordinates."""
+        return tuple(sp.Symbol(f"xi_{i}", real=True) for i in range(1, self.rho + 1))
+
+    @cached_property
+    def inverse(self) -> tuple[tuple[Any, ...] | None, str]:
+        r"""The coordinate change back, :math:`x = \Phi^{-1}(\xi)`, where ρ = n.
+
+        Returns ``(x_of_xi, note)``: the n state expressions in :attr:`xi_symbols` (None
+        when there is none, with the reason in ``note``).  Found by elimination
+        (:func:`invert_coordinates`); a model-assisted observer
+        (:mod:`aiofl.components.observers`, ``eso.model = "nominal"``) evaluates the
+        nominal :math:`\alpha, \beta` at :math:`\hat x = \Phi^{-1}(\hat\xi)`.
+        """
+        if self.rho != self.plant.n:
+            return None, (
+                f"ρ = {self.rho} < n = {self.plant.n}: the observer's estimate of "
+                f"(y, ..., y^(ρ-1)) does not determine the state (internal dynamics)"
+            )
+        return invert_coordinates(self.xi, self.plant.states, self.xi_symbols, _tidy)
+
+    @cached_property
+    def alpha_beta_of_xi(self) -> tuple[Any, Any] | None:
+        r""":math:`(\alpha(\Phi^{-1}(\xi)), \beta(\Phi^{-1}(\xi)))`: the normal form
+        :math:`y^{(\rho)} = \alpha + \beta u` in its own coordinates (None without
+        :attr:`inverse`)."""
+        x_of_xi, _ = self.inverse
+        if x_of_xi is None:
+            return None
+        sub = dict(zip(self.plant.states, x_of_xi, strict=True))
+        return _tidy(self.alpha.subs(sub)), _tidy(self.beta.subs(sub))
 
     @cached_property
     def region(self) -> str:

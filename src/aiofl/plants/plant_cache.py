@@ -57,7 +57,15 @@ def _generator_digest() -> str:
     importing them would import sympy, which a cached plant does not need)."""
     here = Path(__file__).parent
     h = hashlib.sha256(f"{_FORMAT}".encode())
-    for name in ("base", "codegen", "expressions", "normal_form", "symbolic", "plant_cache"):
+    for name in (
+        "base",
+        "codegen",
+        "coordinates",
+        "expressions",
+        "normal_form",
+        "symbolic",
+        "plant_cache",
+    ):
         h.update(hashlib.sha256((here / f"{name}.py").read_bytes()).digest())
     return h.hexdigest()
 
@@ -120,6 +128,8 @@ def _digest_line(body: str) -> str:
 
 def _module_source(symbolic: Any, plant: Plant, key: str, origin: str) -> str:
     """The cached module: the generated functions and ``PLANT``, the other fields."""
+    from aiofl.plants.codegen import GENERATED_FUNCTIONS  # sympy: only on a miss
+
     srcs = symbolic.function_sources(prefix="_fn_")
     fields = {name: getattr(plant, name) for name in _FIELDS}
     fields["params"] = dict(plant.params)
@@ -129,7 +139,7 @@ def _module_source(symbolic: Any, plant: Plant, key: str, origin: str) -> str:
             "import math\n\n",
             f"ORIGIN = {origin!r}\n",
             f"PLANT = {fields!r}\n",
-            *(f"\n\n{srcs[k]}" for k in ("f", "g", "h", "bd", "normal_form") if k in srcs),
+            *(f"\n\n{srcs[k]}" for k in GENERATED_FUNCTIONS if k in srcs),
         ]
     )
     return body + _digest_line(body)
@@ -165,6 +175,8 @@ def _load(module_path: Path, key: str) -> Plant | None:
         h=module._fn_h,
         bd=getattr(module, "_fn_bd", None),
         normal_form=module._fn_normal_form,
+        alpha_beta_of_xi=getattr(module, "_fn_alpha_beta_of_xi", None),
+        state_of_xi=getattr(module, "_fn_state_of_xi", None),
         **fields,
     )
 

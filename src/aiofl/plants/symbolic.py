@@ -442,6 +442,8 @@ class SymbolicPlant:
             params={str(s): v for s, v in self.params},
             relative_degree=self.analyze().rho,
             normal_form=fns["normal_form"],
+            alpha_beta_of_xi=fns.get("alpha_beta_of_xi"),
+            state_of_xi=fns.get("state_of_xi"),
             state_names=tuple(str(s) for s in self.states),
             description=self.description,
             output_unit=self.output_unit,
