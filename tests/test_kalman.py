@@ -389,3 +389,50 @@ def test_kalman_config_runs_through_simulate(tmp_path: Path, ts: float | None) -
     assert not rec["diverged"]
     direct = parse_config(data).simulate(store=False)
     assert rec["itae"] == direct.metrics["itae"]
+
+
+# ------------------------------------------------------------------ tuning eso.q
+def _tank_tune(parameters: dict[str, Any]) -> dict[str, Any]:
+    data = _tank()
+    data["tune"] = {
+        "algorithm": "ga",
+        "objective": "itae",
+        "t_final": 0.3,
+        "population": 4,
+        "generations": 2,
+        "parameters": parameters,
+    }
+    return data
+
+
+def test_tuning_samples_q_log_uniformly_and_writes_it_back() -> None:
+    from aiofl.tuning.search import prepare, tune
+
+    bounds = {"eso.q": {"lo": 1e-6, "hi": 1e-2, "log": True}}
+    cfg = parse_config(_tank_tune(bounds))
+    prep = prepare(cfg)
+    assert prep.space.names == ("eso.q",) and prep.space.log.all()
+    # the unit cube's midpoint is the geometric mean: a log-uniform equivalent bandwidth
+    assert prep.space.decode(np.array([[0.5]]))[0, 0] == pytest.approx(1e-4, rel=1e-12)
+    res = tune(cfg, progress=False)
+    q = res.best_values["eso.q"]
+    assert 1e-6 <= q <= 1e-2
+    best = parse_config(res.config)
+    assert best.controller.value("eso.q") == q
+    r = best.controller.value("eso.r")
+    assert best.controller.value("eso.omega0") == pytest.approx((q / r) ** 0.25, rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("bounds", "needle"),
+    [
+        ({"eso.omega0": {"lo": 1.0, "hi": 100.0}}, "no effect"),
+        ({"eso.q": {"lo": -1.0, "hi": 1.0}}, "controller.eso.q"),
+        ({"eso.q": {"lo": 1.0, "hi": 1e305}}, "controller.eso.q"),
+    ],
+)
+def test_tuning_refuses_what_kalman_gains_do_not_use(bounds: dict[str, Any], needle: str) -> None:
+    from aiofl.tuning.search import prepare
+
+    with pytest.raises(ConfigError, match=needle):
+        prepare(parse_config(_tank_tune(bounds)))
