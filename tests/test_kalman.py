@@ -66,9 +66,12 @@ def test_continuous_poles_are_butterworth(rho: int, q: float, r: float) -> None:
     np.testing.assert_allclose(alphas * w0 ** np.arange(1, n + 1), l, rtol=1e-12)
 
 
-def test_kalman_alphas_of_low_orders() -> None:
+def test_kalman_alphas_are_the_butterworth_coefficients_of_every_order() -> None:
     np.testing.assert_allclose(K.kalman_alphas(1), [math.sqrt(2), 1.0], rtol=1e-13)
     np.testing.assert_allclose(K.kalman_alphas(2), [2.0, 2.0, 1.0], rtol=1e-13)
+    for rho in range(1, L.RHO_MAX + 1):
+        poly = np.real(np.poly(K.butterworth_poles(rho, 1.0)))[1:]
+        np.testing.assert_allclose(K.kalman_alphas(rho), poly, rtol=1e-11)
 
 
 # ------------------------------------------------------------------ sampled gains
