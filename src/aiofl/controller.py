@@ -18,6 +18,16 @@ Defaults are chosen so that a controller built with few arguments works:
 * the actuator range is :math:`[u_{min}, u_{max}] = [-\infty, \infty]`; a ``law.u_max``
   alone gives the symmetric range :math:`[-u_{max}, u_{max}]`.
 
+With ``eso_gains = "kalman"`` the linear ESO's gains are the steady-state Kalman gains of
+the process- and measurement-noise intensities ``eso.q`` and ``eso.r``
+(:mod:`aiofl.components.kalman`): the continuous Kalman–Bucy gains are exactly
+:math:`\beta_i = \alpha_i\omega_0^i` with the Butterworth :math:`\alpha_i` and
+:math:`\omega_0 = (q/r)^{1/(2\rho+2)}`, which :meth:`Controller.value`,
+:meth:`Controller.float_row` and :func:`controller_batch` write into the ``eso.omega0``
+and ``eso.alpha*`` columns (so the engine, the analyses and the reports see the
+equivalent bandwidth); a sampled controller gets the discrete Kalman gain instead
+(:func:`aiofl.engine.discrete.sampling_rows`).
+
 :meth:`Controller.check_plant` refuses a controller that cannot drive a plant: ρ different
 from the plant's known relative degree (unless ``allow_rho_mismatch``), an IOFL law on a
 plant without a normal form (or where β(x0) = 0), and a ``law.b0`` whose sign differs
@@ -37,6 +47,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
+from aiofl.components.kalman import kalman_gain_parameters
 from aiofl.components.observers import binomial_alphas
 
 __all__ = [
@@ -46,6 +57,7 @@ __all__ = [
     "PlantLike",
     "controller_batch",
     "default_n_feedback",
+    "resolve_kalman_rows",
 ]
 
 STRUCTURES = MappingProxyType(
@@ -156,6 +168,13 @@ class Controller:
     allow_b0_sign_mismatch
         Let :meth:`check_plant` accept a ``law.b0`` whose sign differs from the plant's
         :math:`\beta(x_0)`; refused otherwise.
+    eso_gains
+        ``"bandwidth"``: :math:`\beta_i = \alpha_i\omega_0^i` from ``eso.omega0`` and
+        ``eso.alpha*``; ``"kalman"``: the steady-state Kalman gains of the process-noise
+        intensity ``eso.q`` (on the extended state's derivative) and the measurement-noise
+        intensity ``eso.r``, both required and positive (linear ESO only; ``eso.omega0``
+        and ``eso.alpha*`` are then derived and may not be given,
+        :mod:`aiofl.components.kalman`).
     """
 
     eso: str = "linear"
@@ -170,6 +189,7 @@ class Controller:
     eso_model: str = "none"
     allow_rho_mismatch: bool = False
     allow_b0_sign_mismatch: bool = False
+    eso_gains: str = "bandwidth"
 
     def __post_init__(self) -> None:
         for kind, table in (
@@ -179,6 +199,7 @@ class Controller:
             ("law", L.LAW_KINDS),
             ("eso_init", L.ESO_INIT_KINDS),
             ("eso_model", L.ESO_MODEL_KINDS),
+            ("eso_gains", L.ESO_GAINS_KINDS),
         ):
             if getattr(self, kind) not in table:
                 raise ValueError(
@@ -217,6 +238,32 @@ class Controller:
                 "plant whose high-frequency gain is negative)"
             )
         self.u_range()  # validates law.u_min / law.u_max
+        if self.eso_gains == "kalman":
+            self._check_kalman()
+
+    def _check_kalman(self) -> None:
+        """Refuse what contradicts ``eso_gains = "kalman"`` (see the class notes)."""
+        if self.eso != "linear":
+            raise ValueError(
+                f"controller.eso.gains = 'kalman' needs the linear ESO (got eso = "
+                f"{self.eso!r}): the improved ESO (INLESO) injects the nonlinear g(e) of "
+                "eq. (19), for which the Kalman gains of the linear chain are not optimal; "
+                "allowed: eso.gains = 'bandwidth', or a linear ESO (eso_kind = 'linear')"
+            )
+        fixed = sorted(n for n in self.values if n == "eso.omega0" or n.startswith("eso.alpha"))
+        if fixed:
+            raise ValueError(
+                f"controller.eso.gains = 'kalman' derives eso.omega0 and eso.alpha from "
+                f"eso.q and eso.r, but {', '.join(fixed)} given too; remove them, or use "
+                "eso.gains = 'bandwidth'"
+            )
+        for name in ("eso.q", "eso.r"):
+            if name not in self.values:
+                raise ValueError(
+                    f"controller.eso.gains = 'kalman' needs controller.{name} (process-noise "
+                    "intensity q, measurement-noise intensity r); allowed: finite and > 0"
+                )
+        kalman_gain_parameters(self.rho, self.values["eso.q"], self.values["eso.r"])
 
     @classmethod
     def from_structure(cls, structure: str, *, rho: int = 4, **kwargs: Any) -> Controller:
@@ -233,12 +280,22 @@ class Controller:
     def value(self, name: str) -> float:
         r"""Parameter ``name``, or its default.
 
-        Defaults: ``eso.alpha{i}`` (i ≤ ρ+1) Gao's :math:`\binom{\rho+1}{i}`;
+        Defaults: ``eso.alpha{i}`` (i ≤ ρ+1) Gao's :math:`\binom{\rho+1}{i}`, or with
+        Kalman gains the Butterworth α and ``eso.omega0`` :math:`(q/r)^{1/(2\rho+2)}`;
         ``law.u_min`` :math:`-u_{max}`; the rest from a fixed table (``law.b0`` 1,
         ``law.u_max`` ∞, SEF ``k``/``alpha``/``delta`` 1, ...).
         """
         if name in self.values:
             return self.values[name]
+        if self.eso_gains == "kalman" and (name == "eso.omega0" or name.startswith("eso.alpha")):
+            alphas, w0 = kalman_gain_parameters(
+                self.rho, self.values["eso.q"], self.values["eso.r"]
+            )
+            if name == "eso.omega0":
+                return w0
+            i = int(name[len("eso.alpha") :])
+            if i <= self.rho + 1:
+                return float(alphas[i - 1])
         if name.startswith("eso.alpha"):
             i = int(name[len("eso.alpha") :])
             if i <= self.rho + 1:
@@ -395,6 +452,7 @@ class Controller:
         row[L.I_NFB] = self.n_feedback
         row[L.I_ESO_INIT] = L.ESO_INIT_KINDS[self.eso_init]
         row[L.I_ESO_MODEL] = L.ESO_MODEL_KINDS[self.eso_model]
+        row[L.I_ESO_GAINS] = L.ESO_GAINS_KINDS[self.eso_gains]
         return row
 
     def float_row(self) -> NDArray[np.float64]:
@@ -402,12 +460,15 @@ class Controller:
 
         Unset α are the binomial defaults; an unset ``law.u_min`` is NaN, which the kernel
         reads as :math:`-u_{max}` (so a batch that varies ``law.u_max`` stays symmetric).
+        With Kalman gains ``eso.omega0`` and ``eso.alpha*`` are the equivalent bandwidth
+        form of ``eso.q``, ``eso.r`` (:func:`resolve_kalman_rows`).
         """
         row = np.array([_DEFAULTS[n] for n in L.FLOAT_COLUMNS], dtype=np.float64)
         alphas = binomial_alphas(self.rho)
         row[L.F_ESO_ALPHA : L.F_ESO_ALPHA + self.rho + 1] = alphas
         for name, val in self.values.items():
             row[L.FLOAT_COLUMNS[name]] = val
+        resolve_kalman_rows(self.int_row()[None, :], row[None, :])
         return row
 
 
@@ -430,6 +491,8 @@ def controller_batch(
 
     With one controller and ``values`` (name -> array of length B), the batch is B copies
     of it with those columns replaced, one member per entry: a GA population in one call.
+    Members with Kalman gains get their ``eso.omega0`` and ``eso.alpha*`` from their own
+    ``eso.q``, ``eso.r`` (:func:`resolve_kalman_rows`), so a tuned q is always the one used.
     """
     if isinstance(controllers, Controller):
         controllers = [controllers]
@@ -449,4 +512,31 @@ def controller_batch(
             if name not in L.FLOAT_COLUMNS:
                 raise ValueError(f"unknown controller parameter {name!r}")
             floats[:, L.FLOAT_COLUMNS[name]] = np.asarray(col, dtype=np.float64)
+        kalman = ints[:, L.I_ESO_GAINS] == L.ESO_GAINS_KALMAN
+        derived = sorted(n for n in values if n == "eso.omega0" or n.startswith("eso.alpha"))
+        if derived and kalman.any():
+            raise ValueError(
+                f"{', '.join(derived)}: derived from eso.q and eso.r for a controller with "
+                "eso.gains = 'kalman'; vary eso.q / eso.r instead"
+            )
+        resolve_kalman_rows(ints, floats)
     return ControllerBatch(np.ascontiguousarray(ints), np.ascontiguousarray(floats))
+
+
+def resolve_kalman_rows(ints: NDArray[np.int64], floats: NDArray[np.float64]) -> None:
+    r"""Write, in place, the Kalman members' ESO gains in the bandwidth form the engine reads.
+
+    For every row with ``eso.gains = "kalman"`` (:data:`aiofl.layout.I_ESO_GAINS`):
+    ``eso.omega0`` :math:`= (q/r)^{1/(2\rho+2)}` and ``eso.alpha1..alpha{ρ+1}`` the
+    Butterworth α of the steady-state Kalman–Bucy gains, from the row's ``eso.q``,
+    ``eso.r`` (:func:`aiofl.components.kalman.kalman_gain_parameters`; the Riccati
+    equation is solved once per order ρ and scaled).  ``ValueError`` if a row's q or r is
+    not finite and positive or its gains overflow.
+    """
+    for i in np.flatnonzero(ints[:, L.I_ESO_GAINS] == L.ESO_GAINS_KALMAN):
+        rho = int(ints[i, L.I_RHO])
+        alphas, w0 = kalman_gain_parameters(
+            rho, float(floats[i, L.F_ESO_Q]), float(floats[i, L.F_ESO_R])
+        )
+        floats[i, L.F_OMEGA0] = w0
+        floats[i, L.F_ESO_ALPHA : L.F_ESO_ALPHA + rho + 1] = alphas

@@ -45,6 +45,9 @@ ESO_INIT_KINDS = MappingProxyType({"zero": ESO_INIT_ZERO, "output": ESO_INIT_OUT
 ESO_MODEL_NONE = 0  #: model-free: the ESO's ρ-th equation carries b0 u only, eq. (5)
 ESO_MODEL_NOMINAL = 1  #: model-assisted: it carries the nominal α(x̂) + β(x̂) u, x̂ = Φ⁻¹(ξ̂)
 ESO_MODEL_KINDS = MappingProxyType({"none": ESO_MODEL_NONE, "nominal": ESO_MODEL_NOMINAL})
+ESO_GAINS_BANDWIDTH = 0  #: β_i = α_i ω0^i from the given ω0 and α (Gao's bandwidth form)
+ESO_GAINS_KALMAN = 1  #: steady-state Kalman gains from eso.q, eso.r (components.kalman)
+ESO_GAINS_KINDS = MappingProxyType({"bandwidth": ESO_GAINS_BANDWIDTH, "kalman": ESO_GAINS_KALMAN})
 
 LAW_AIOFL = 0  #: u = v - ξ̂_{ρ+1}/b0, eq. (14)
 LAW_IOFL = 1  #: classical model-based IOFL, u = (-α(x) + v)/β(x)
@@ -63,8 +66,8 @@ STATUS_OK = 0
 STATUS_DIVERGED = 1
 
 # --------------------------------------------------------------------- integer row
-I_ESO, I_TD, I_SEF, I_LAW, I_RHO, I_NFB, I_ESO_INIT, I_ESO_MODEL = range(8)
-N_INT = 8
+I_ESO, I_TD, I_SEF, I_LAW, I_RHO, I_NFB, I_ESO_INIT, I_ESO_MODEL, I_ESO_GAINS = range(9)
+N_INT = 9
 INT_NAMES = (
     "eso.kind",
     "td.kind",
@@ -74,6 +77,7 @@ INT_NAMES = (
     "sef.n_feedback",
     "eso.init",
     "eso.model",
+    "eso.gains",
 )
 
 
@@ -81,6 +85,9 @@ def _float_columns() -> dict[str, int]:
     names: list[str] = ["law.b0", "law.u_max", "law.u_min", "eso.omega0"]
     names += [f"eso.alpha{i}" for i in range(1, RHO_MAX + 2)]
     names += ["eso.k_alpha", "eso.k_beta", "eso.g_alpha", "eso.g_beta"]
+    # Kalman gains (eso.gains = "kalman"): process- and measurement-noise intensities; the
+    # host writes the equivalent eso.omega0 and eso.alpha* from them (controller_batch)
+    names += ["eso.q", "eso.r"]
     names += ["td.R", "td.a", "td.b", "td.c", "td.rho", "td.omega"]
     for vec in ("k", "alpha", "delta", "kb", "mu"):
         names += [f"sef.{vec}{i}" for i in range(1, RHO_MAX + 1)]
@@ -102,6 +109,8 @@ F_ESO_K_ALPHA = FLOAT_COLUMNS["eso.k_alpha"]
 F_ESO_K_BETA = FLOAT_COLUMNS["eso.k_beta"]
 F_ESO_G_ALPHA = FLOAT_COLUMNS["eso.g_alpha"]
 F_ESO_G_BETA = FLOAT_COLUMNS["eso.g_beta"]
+F_ESO_Q = FLOAT_COLUMNS["eso.q"]
+F_ESO_R = FLOAT_COLUMNS["eso.r"]
 F_TD_R = FLOAT_COLUMNS["td.R"]
 F_TD_A = FLOAT_COLUMNS["td.a"]
 F_TD_B = FLOAT_COLUMNS["td.b"]

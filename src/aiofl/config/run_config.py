@@ -37,6 +37,12 @@ is bounded before anything is allocated (:mod:`aiofl.limits`).  A bad file raise
     init = "zero"                    # or "output": xi_hat_1(0) = the first measurement
     model = "none"                   # or "nominal": model-assisted (alpha + beta u of the
                                      # nominal plant at x_hat = Phi^-1(xi_hat))
+    # gains = "kalman"               # steady-state Kalman gains (then no omega0, alpha):
+    # q = 1e12                       #   process-noise intensity on the extended state's
+    # r = 1e-7                       #   derivative; measurement-noise intensity (default:
+    #                                #   the run's, components.kalman.measurement_noise_
+    #                                #   intensity: noise_variance * noise_hold, sampled:
+    #                                #   * max(noise_hold, ts) + y_quantum^2/12 * ts)
     [controller.td]
     R = 2408.6918
     [controller.sef]
@@ -74,6 +80,7 @@ from typing import Any
 from pydantic import BaseModel, ValidationError
 
 from aiofl import layout as L
+from aiofl.components.kalman import measurement_noise_intensity
 from aiofl.components.metrics import OPIWeights
 from aiofl.config.schema import REQUIRED_KEYS, ConfigError, ConfigModel, DiscreteModel
 from aiofl.controller import Controller
@@ -163,7 +170,10 @@ class RunConfig:
     def with_sample_time(self, ts: float) -> RunConfig:
         """This config with the controller sampled at ``ts`` (the other
         ``[controller.discrete]`` settings kept, or their defaults); raises
-        :class:`ConfigError` if ``ts`` is not a positive integer multiple of ``dt``."""
+        :class:`ConfigError` if ``ts`` is not a positive integer multiple of ``dt``.
+        Kalman observer gains whose r comes from the measurement
+        (:func:`aiofl.components.kalman.measurement_noise_intensity`) are designed for the
+        new sampling."""
         from dataclasses import replace
 
         raw = {**self.raw, "controller": dict(self.raw.get("controller", {}))}
@@ -173,7 +183,17 @@ class RunConfig:
         except ValidationError as exc:
             msg = _format_error(exc, "--ts").replace("  ts:", "  controller.discrete.ts:")
             raise ConfigError(msg) from None
-        cfg = replace(self, sampling=table.build(), raw=raw)
+        try:
+            sampling = table.build()
+        except ValueError as exc:
+            raise ConfigError(f"invalid config {self.name!r}: {exc}") from None
+        controller = self.controller
+        eso_table = raw["controller"].get("eso", {})
+        if controller.eso_gains == "kalman" and "r" not in eso_table:
+            # Kalman gains from the run's measurement noise, as sampled now
+            r = measurement_noise_intensity(self.scenario, sampling)
+            controller = controller.with_values(**{"eso.r": r})
+        cfg = replace(self, sampling=sampling, controller=controller, raw=raw)
         cfg.check_sampling()
         return cfg
 
@@ -383,8 +403,12 @@ def parse_config(
         data = {**data, "plant": str((Path(base_dir) / plant_file).resolve())}
     try:
         plant.param_vector(model.scenario.plant_overrides, model.scenario.plant_scale)
-        controller = model.controller.build(plant.relative_degree or 1)
         scenario = model.scenario.build()
+        discrete = model.controller.discrete
+        sampling = discrete.build() if discrete is not None else None
+        # the default r of Kalman observer gains: this run's measurement noise
+        noise_r = measurement_noise_intensity(scenario, sampling)
+        controller = model.controller.build(plant.relative_degree or 1, measurement_r=noise_r)
         if scenario.x0 and len(scenario.x0) != plant.n_states:
             raise ValueError(
                 f"scenario.x0 has {len(scenario.x0)} entries; plant {plant.name!r} has "
@@ -421,11 +445,7 @@ def parse_config(
         raw=data,
         uncertainty=model.uncertainty,
     )
-    if model.controller.discrete is not None:  # [controller.discrete]: a sampled controller
-        try:
-            sampling = model.controller.discrete.build()
-        except ValueError as exc:
-            raise ConfigError(f"invalid config {source}: {exc}") from None
+    if sampling is not None:  # [controller.discrete]: a sampled controller
         cfg = replace(cfg, sampling=sampling)
         cfg.check_sampling()
     return cfg

@@ -41,6 +41,8 @@ REQUIRED_KEYS = ("plant", "scenario.t_final", "controller.structure", "simulatio
 PosFloat = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 NonNegFloat = Annotated[float, Field(ge=0, allow_inf_nan=False)]
 Finite = Annotated[float, Field(allow_inf_nan=False)]
+#: a noise intensity (eso.q, eso.r): positive, at most 1e300 (q/r and its root stay finite)
+Intensity = Annotated[float, Field(gt=0, le=1e300, allow_inf_nan=False)]
 
 
 class ConfigError(ValueError):
@@ -122,6 +124,36 @@ class ESOModel(_Model):
     # what the observer is given besides rho and b0: "none" (model-free, eq. 5) or
     # "nominal" (model-assisted: the plant's nominal alpha + beta u at x_hat = Phi^-1(xi_hat))
     model: Literal["none", "nominal"] = "none"
+    # "bandwidth": beta_i = alpha_i omega0^i; "kalman": steady-state Kalman gains from q, r
+    # (aiofl.components.kalman); omega0 and alpha are then derived and may not be given
+    gains: Literal["bandwidth", "kalman"] = "bandwidth"
+    q: Intensity | None = None  # process-noise intensity on the extended state's derivative
+    r: Intensity | None = None  # measurement-noise intensity; default: from the scenario
+
+    @model_validator(mode="after")
+    def _gains(self) -> ESOModel:
+        given = self.model_fields_set
+        if self.gains == "bandwidth":
+            extra = [f"controller.eso.{k}" for k in ("q", "r") if getattr(self, k) is not None]
+            if extra:
+                raise ValueError(
+                    f"{', '.join(extra)} set but controller.eso.gains = 'bandwidth' (the "
+                    "gains are alpha_i*omega0^i); allowed: gains = 'kalman' to use them"
+                )
+            return self
+        fixed = [f"controller.eso.{k}" for k in ("alpha", "omega0") if k in given]
+        if fixed:
+            raise ValueError(
+                f"controller.eso.gains = 'kalman' derives the observer gains (and the "
+                f"equivalent omega0, alpha) from q and r; {' and '.join(fixed)} given too: "
+                "remove it, or use gains = 'bandwidth'"
+            )
+        if self.q is None:
+            raise ValueError(
+                "controller.eso.gains = 'kalman' needs controller.eso.q, the process-noise "
+                "intensity on the extended state's derivative; allowed: a number > 0"
+            )
+        return self
 
 
 class TDModel(_Model):
@@ -215,7 +247,10 @@ class ControllerModel(_Model):
     law: LawModel = Field(default_factory=LawModel)
     discrete: DiscreteModel | None = None
 
-    def build(self, default_rho: int) -> Controller:
+    def build(self, default_rho: int, measurement_r: float = 0.0) -> Controller:
+        """The :class:`Controller`; ``measurement_r`` is the run's measurement noise
+        intensity (:func:`aiofl.components.kalman.measurement_noise_intensity`), the
+        default of ``[controller.eso] r`` with Kalman gains."""
         kinds = dict(
             zip(("eso", "td", "sef", "law"), STRUCTURES[self.structure or "LESO"], strict=True)
         )
@@ -229,18 +264,32 @@ class ControllerModel(_Model):
         alphas = eso.pop("alpha")
         eso_init = eso.pop("init")
         eso_model = eso.pop("model")
+        gains = eso.pop("gains")
+        q, r = eso.pop("q"), eso.pop("r")
+        if gains == "kalman":
+            eso.pop("omega0")  # derived from q and r
+            if r is None and not measurement_r > 0:
+                raise ValueError(
+                    "controller.eso.gains = 'kalman' needs a measurement noise: set "
+                    "controller.eso.r (the measurement-noise intensity), or give the "
+                    "scenario a measurement noise (scenario.noise_variance > 0, or a sampled "
+                    "controller's y_quantum); this run's sensor is ideal (r = 0)"
+                )
+            values["eso.q"] = q
+            values["eso.r"] = r if r is not None else measurement_r
         for key, val in eso.items():
             values[f"eso.{key}"] = val
-        if alphas == "binomial":
-            from aiofl.components.observers import binomial_alphas
+        if gains != "kalman":  # Kalman gains: alpha derived from q and r
+            if alphas == "binomial":
+                from aiofl.components.observers import binomial_alphas
 
-            alphas = list(binomial_alphas(rho))
-        if len(alphas) != rho + 1:
-            raise ValueError(
-                f"controller.eso.alpha has {len(alphas)} entries; the ESO of order rho+1 "
-                f"needs rho+1 = {rho + 1}"
-            )
-        values.update({f"eso.alpha{i}": a for i, a in enumerate(alphas, 1)})
+                alphas = list(binomial_alphas(rho))
+            if len(alphas) != rho + 1:
+                raise ValueError(
+                    f"controller.eso.alpha has {len(alphas)} entries; the ESO of order rho+1 "
+                    f"needs rho+1 = {rho + 1}"
+                )
+            values.update({f"eso.alpha{i}": a for i, a in enumerate(alphas, 1)})
         for key, val in self.td.model_dump().items():
             values[f"td.{key}"] = val
         vectors = {k: v for k, v in self.sef.model_dump().items() if isinstance(v, list)}
@@ -267,6 +316,7 @@ class ControllerModel(_Model):
             eso_model=eso_model,
             allow_rho_mismatch=self.allow_rho_mismatch,
             allow_b0_sign_mismatch=self.allow_b0_sign_mismatch,
+            eso_gains=gains,
         )
         m = controller.n_feedback
         for key, val in vectors.items():  # a short vector is refused, never padded

@@ -22,6 +22,13 @@ What the engine simulates at :math:`t_k = kT_s` (:mod:`aiofl.engine.sampled`):
    is applied over the interval (:math:`u_k`, or :math:`u_{k-1}` with the delay), unquantised:
    the controller knows what it commanded, not what the converter made of it.
 
+A linear ESO with Kalman gains (``eso.gains = "kalman"``) discretised by ZOH gets the
+discrete steady-state Kalman gain of the ZOH model instead of the pole-mapped one
+(:func:`aiofl.components.kalman.eso_kalman_observer`), with the process-noise intensity
+``eso.q`` and the measurement variance per sample :math:`R_d = r/T_s`
+(:func:`aiofl.components.kalman.measurement_noise_intensity`); by forward Euler it gets
+the continuous Kalman–Bucy gains, as any gains.
+
 The ESO starts at :math:`\hat\xi = (y_0, 0, \dots, 0)` with :math:`y_0` the first
 measurement, the differentiator at rest at 0.
 """
@@ -37,6 +44,7 @@ from numpy.typing import NDArray
 
 from aiofl import layout as L
 from aiofl.components import discrete as D
+from aiofl.components.kalman import eso_kalman_observer
 from aiofl.components.observers import eso_gain
 from aiofl.controller import Controller, ControllerBatch
 
@@ -158,12 +166,22 @@ class Sampling:
         """The discretisation of each component, one line each (for reports and code)."""
         lines = [f"sample time Ts = {self.ts:g} s, computation delay {self.delay} sample(s)"]
         eso = self.eso_method(controller)
-        lines.append(
-            "ESO: exact ZOH discretisation, current-observer form (Miklosovic, Radke & Gao "
-            "2006), poles z = exp(s_i Ts)"
-            if eso == "zoh"
-            else "ESO: forward Euler"
-        )
+        kalman = controller.eso_gains == "kalman"
+        if eso == "zoh" and kalman:
+            q, r = controller.value("eso.q"), controller.value("eso.r")
+            lines.append(
+                "ESO: exact ZOH discretisation, current-observer form, steady-state Kalman "
+                f"gain (discrete Riccati equation, q = {q:g}, R_d = r/Ts = {r / self.ts:g})"
+            )
+        elif eso == "zoh":
+            lines.append(
+                "ESO: exact ZOH discretisation, current-observer form (Miklosovic, Radke & "
+                "Gao 2006), poles z = exp(s_i Ts)"
+            )
+        else:
+            lines.append(
+                "ESO: forward Euler" + (" on the continuous Kalman-Bucy gains" if kalman else "")
+            )
         td = {
             "exact": "reference derivatives: supplied by the caller (r, r', ..., r^(rho))",
             "han": (
@@ -245,7 +263,12 @@ def _fill_row(
                 "controller.discrete.eso = 'zoh' needs the linear ESO; the improved ESO "
                 "(INLESO) is discretised by forward Euler (allowed: euler)"
             )
-        eso = D.eso_current_observer(rho, alphas, w0, b0, s.ts)
+        if int(ints[L.I_ESO_GAINS]) == L.ESO_GAINS_KALMAN:
+            # the discrete steady-state Kalman gain on the ZOH model, R_d = r/Ts
+            q, r = float(floats[L.F_ESO_Q]), float(floats[L.F_ESO_R])
+            eso = eso_kalman_observer(rho, q, r / s.ts, b0, s.ts)
+        else:
+            eso = D.eso_current_observer(rho, alphas, w0, b0, s.ts)
         row[D_ESO] = ESO_ZOH
     else:
         betas = [eso_gain(float(alphas[i]), float(w0), i + 1) for i in range(n)]

@@ -109,6 +109,8 @@ def _used_parameters(c: Controller) -> list[str]:
     """The parameter columns the discrete controller reads, in a readable order."""
     names = ["law.b0", "law.u_max", "eso.omega0"]
     names += [f"eso.alpha{i}" for i in range(1, c.rho + 2)]
+    if c.eso_gains == "kalman":  # ω0, α above are their equivalent bandwidth form
+        names += ["eso.q", "eso.r"]
     if c.eso == "improved":
         names += ["eso.k_alpha", "eso.k_beta", "eso.g_alpha", "eso.g_beta"]
     names += {

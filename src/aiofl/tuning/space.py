@@ -18,10 +18,15 @@ r"""The ``[tune]`` table: settings, search space, objective, and writing a tuned
     [tune.parameters]
     "eso.omega0" = { lo = 10.0, hi = 2000.0, log = true }
     "law.b0" = { lo = 1.0, hi = 1e5, log = true }
+    # with [controller.eso] gains = "kalman": the noise intensity instead of omega0
+    # "eso.q" = { lo = 1e6, hi = 1e20, log = true }
 
 Parameter names are the engine's column names (:data:`aiofl.layout.FLOAT_COLUMNS`); the
 rest of the controller stays as the config's ``[controller]`` table sets it (e.g.
-``alpha = "binomial"`` there keeps Gao's fixed ratios while ω0 is tuned).  Each bound must
+``alpha = "binomial"`` there keeps Gao's fixed ratios while ω0 is tuned).  With Kalman
+observer gains (``[controller.eso] gains = "kalman"``) ω0 and α are derived: tune
+``eso.q`` (and/or ``eso.r``) instead, log-scaled like ω0 (ω0 = (q/r)^{1/(2ρ+2)}, so a
+log-uniform q is a log-uniform equivalent bandwidth).  Each bound must
 lie in the range the config schema allows for that field, and a parameter must act on
 the configured structure (tuning ``td.R`` of a linear prefilter is rejected).
 
@@ -336,7 +341,10 @@ def used_parameters(controller: Controller) -> set[str]:
     used = {"law.u_max", "law.u_min"}
     if controller.law == "aiofl":
         used.add("law.b0")
-    used |= {"eso.omega0", *(f"eso.alpha{i}" for i in range(1, rho + 2))}
+    if controller.eso_gains == "kalman":  # ω0 and α derived from the noise intensities
+        used |= {"eso.q", "eso.r"}
+    else:
+        used |= {"eso.omega0", *(f"eso.alpha{i}" for i in range(1, rho + 2))}
     if controller.eso == "improved":
         used |= {"eso.k_alpha", "eso.k_beta", "eso.g_alpha", "eso.g_beta"}
     td = {"han": ["td.R"], "improved": ["td.a", "td.b", "td.c", "td.rho"], "linear": ["td.omega"]}
