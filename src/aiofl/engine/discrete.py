@@ -37,7 +37,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -45,6 +45,7 @@ from numpy.typing import NDArray
 from aiofl import layout as L
 from aiofl.components import discrete as D
 from aiofl.components.kalman import eso_kalman_observer
+from aiofl.components.model_gains import discrete_model_gain, model_gain
 from aiofl.components.observers import eso_gain
 from aiofl.controller import Controller, ControllerBatch
 
@@ -214,7 +215,11 @@ def sample_steps(ts: float, dt: float) -> int:
 
 
 def _row(
-    ints: NDArray[np.int64], floats: NDArray[np.float64], s: Sampling, dt: float
+    ints: NDArray[np.int64],
+    floats: NDArray[np.float64],
+    s: Sampling,
+    dt: float,
+    jac: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
     rho = int(ints[L.I_RHO])
     row = np.zeros(N_DISC)
@@ -233,7 +238,7 @@ def _row(
         )
     method = s.eso or ("zoh" if eso_kind == L.ESO_LINEAR else "euler")
     with np.errstate(all="ignore"):  # a Ts too small overflows: refused below, no warning
-        _fill_row(row, ints, floats, s, method, eso_kind, rho)
+        _fill_row(row, ints, floats, s, method, eso_kind, rho, jac)
     if not np.all(np.isfinite(row)):
         raise ValueError(
             f"controller.discrete.ts = {s.ts:g} s: the discretisation has non-finite "
@@ -251,8 +256,11 @@ def _fill_row(
     method: str,
     eso_kind: int,
     rho: int,
+    jac: NDArray[np.float64] | None = None,
 ) -> None:
-    """Write the ESO and prefilter coefficients of ``s`` into ``row`` (see :func:`_row`)."""
+    """Write the ESO and prefilter coefficients of ``s`` into ``row`` (see :func:`_row`);
+    ``jac``: the nominal model's Jacobian a model-assisted observer's gain is placed for
+    (:mod:`aiofl.components.model_gains`)."""
     n = rho + 1
     w0 = floats[L.F_OMEGA0]
     b0 = floats[L.F_B0]
@@ -269,9 +277,13 @@ def _fill_row(
             eso = eso_kalman_observer(rho, q, r / s.ts, b0, s.ts)
         else:
             eso = D.eso_current_observer(rho, alphas, w0, b0, s.ts)
+            if jac is not None:  # placed for the model's linearised error map
+                eso = replace(eso, l=discrete_model_gain(jac, alphas, w0, s.ts))
         row[D_ESO] = ESO_ZOH
     else:
         betas = [eso_gain(float(alphas[i]), float(w0), i + 1) for i in range(n)]
+        if jac is not None:
+            betas = list(model_gain(jac, alphas, w0))
         eso = D.eso_forward_euler(rho, betas, b0, s.ts)
         row[D_ESO] = ESO_EULER
     for i in range(n):
@@ -287,22 +299,32 @@ def _fill_row(
 
 
 def sampling_rows(
-    batch: ControllerBatch, samplings: Sequence[Sampling | None], dt: float
+    batch: ControllerBatch,
+    samplings: Sequence[Sampling | None],
+    dt: float,
+    model_jacobians: NDArray[np.float64] | None = None,
 ) -> NDArray[np.float64]:
     """The engine's per-member discrete rows (B, N_DISC); zeros for continuous members.
 
     Coefficients are computed once per distinct (controller row, settings) pair, from the
     packed rows, so a GA population's tuned ω0, b0, α are always the ones discretised.
+    ``model_jacobians`` (:func:`aiofl.engine.observer_gains.model_jacobians`): for a
+    model-assisted member with bandwidth gains, the nominal model's Jacobian its observer
+    gain is placed for (:mod:`aiofl.components.model_gains`); NaN rows elsewhere.
     """
     if len(samplings) != len(batch):
         raise ValueError(f"{len(samplings)} sampling settings for a batch of {len(batch)}")
     out = np.zeros((len(batch), N_DISC))
-    memo: dict[tuple[bytes, bytes, Sampling], NDArray[np.float64]] = {}
+    memo: dict[tuple[bytes, bytes, Sampling, bytes | None], NDArray[np.float64]] = {}
     for i, s in enumerate(samplings):
         if s is None:
             continue
-        key = (batch.ints[i].tobytes(), batch.floats[i].tobytes(), s)
+        jac = None
+        if model_jacobians is not None and not np.isnan(model_jacobians[i, 0]):
+            jac = model_jacobians[i]
+        jkey = None if jac is None else jac.tobytes()
+        key = (batch.ints[i].tobytes(), batch.floats[i].tobytes(), s, jkey)
         if key not in memo:
-            memo[key] = _row(batch.ints[i], batch.floats[i], s, dt)
+            memo[key] = _row(batch.ints[i], batch.floats[i], s, dt, jac)
         out[i] = memo[key]
     return out

@@ -29,6 +29,7 @@ from aiofl.controller import Controller, ControllerBatch, controller_batch
 from aiofl.engine.batch import Batch, Outputs
 from aiofl.engine.discrete import D_STEPS, N_DISC, Sampling, sampling_rows
 from aiofl.engine.instances import instance_for, plan_groups, run_groups
+from aiofl.engine.observer_gains import model_jacobians, with_model_gains
 from aiofl.plants.base import Plant
 from aiofl.scenario import Scenario, noise_sequence
 
@@ -192,7 +193,10 @@ def simulate_batch(
         for c, s in pairs.values():
             c.check_plant(plant, s.x0 or None)  # ρ, IOFL's normal form, the sign of b0
     samplings = _as_list(sampling, b, "sampling settings")
-    disc = sampling_rows(batch, samplings, dt) if any(samplings) else None
+    # a model-assisted observer's gains are placed for the plant's nominal model
+    jac = model_jacobians(plant, batch, [s.x0 for s in scens])
+    disc = sampling_rows(batch, samplings, dt, jac) if any(samplings) else None
+    batch = with_model_gains(batch, jac)
     t_final = scens[0].t_final
     if any(abs(s.t_final - t_final) > 1e-12 for s in scens):
         raise ValueError("all scenarios in one batch must share t_final")
@@ -418,6 +422,7 @@ def closed_loop_rhs(
     rho = controller.rho
     n_td = {"exact": 0, "han": 2, "improved": 2, "linear": rho}[controller.td]
     batch = controller_batch(controller)
+    batch = with_model_gains(batch, model_jacobians(plant, batch, [scenario.x0]))
     p_nom = plant.param_vector()
     p = plant.param_vector(scenario.plant_overrides, scenario.plant_scale) if changed else p_nom
     nz = n + L.N_METRIC + 2 * L.RHO_MAX + 1
