@@ -143,9 +143,7 @@ class Sensor:
         :class:`Sensor`) replacing its values; raises ``ValueError`` for an unknown preset
         or field, or an out-of-range value."""
         if preset not in SENSOR_PRESETS:
-            raise ValueError(
-                f"sensor.preset = {preset!r}; allowed: {', '.join(SENSOR_PRESETS)}"
-            )
+            raise ValueError(f"sensor.preset = {preset!r}; allowed: {', '.join(SENSOR_PRESETS)}")
         unknown = sorted(set(overrides) - set(FIELDS))
         if unknown:
             raise ValueError(
@@ -170,9 +168,7 @@ class Sensor:
         """One line: ``encoder-12bit (sampled at 1 ms, quantum 2π/4096 = 0.001534 rad, no
         noise)``."""
         parts = []
-        parts.append(
-            "continuous" if self.ts is None else f"sampled at {1e3 * self.ts:g} ms"
-        )
+        parts.append("continuous" if self.ts is None else f"sampled at {1e3 * self.ts:g} ms")
         if self.quantum > 0:
             counts = 2.0 * math.pi / self.quantum
             if abs(counts - round(counts)) < 1e-6 * counts:

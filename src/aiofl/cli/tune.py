@@ -144,6 +144,7 @@ def check_text(prep: Any) -> str:
     st = prep.settings
     candidates = st.population * st.generations
     sims = candidates * (1 + st.robust.draws) if st.robust is not None else candidates
+    sims *= st.noise_realisations
     if st.objectives:
         goal = f"objectives {', '.join(st.objectives)}"
         goal += f" under {', '.join(st.constraints)}" if st.constraints else ""
@@ -155,6 +156,8 @@ def check_text(prep: Any) -> str:
         goal = f"objective {obj}"
     if st.robust is not None:
         goal += f", robust ({st.robust.aggregate} over nominal + {st.robust.draws} draws)"
+    if st.noise_realisations > 1:
+        goal += f", mean over {st.noise_realisations} noise realisations"
     return (
         f"{st.budget()}: up to {candidates} candidates ({sims} simulations of "
         f"{st.t_final:g} s at dt = {prep.spec.dt:g}, {prep.spec.method}); {goal}; "

@@ -74,7 +74,7 @@ from __future__ import annotations
 
 import copy
 import tomllib
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -130,7 +130,7 @@ class RunConfig:
     raw: dict[str, Any]
     sampling: Any = None  # aiofl.engine.discrete.Sampling: [controller.discrete], or None
     uncertainty: UncertaintyModel | None = None  # [uncertainty] (aiofl.uncertainty), or None
-    sensor: Sensor = Sensor()  # the measurement the controller gets ([sensor] or old keys)
+    sensor: Sensor = field(default_factory=Sensor)  # the measurement ([sensor] or old keys)
 
     def simulate(self, *, store: bool = True) -> Any:
         """Run this config once (see :func:`aiofl.engine.simulation.simulate`)."""
