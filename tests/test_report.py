@@ -519,6 +519,9 @@ def test_sensor_table_columns_are_simulate_with_that_sensor() -> None:
             else:
                 assert got[key]["itae"] == one.metrics["itae"]
                 assert got[key]["isu"] == one.metrics["isu"]
+    given = {p: got["ideal"] for p, got in table.results.items()}  # runs already made
+    again = compute_sensor_table(cases, ideal=given)
+    assert again.results == table.results
     rep = SimpleNamespace(runs=[SimpleNamespace(case=c) for c in cases], sensors=table)
     rows = {r[2]: r for r in sensor_rows(rep)}  # type: ignore[arg-type]
     f = rows["frontier-s1-ladrc"]

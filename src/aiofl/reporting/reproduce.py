@@ -82,7 +82,9 @@ def reproduce(
     t0 = time.perf_counter()
     table = compute_robustness([r.case for r in rep.runs], draws=draws, seed=seed, on_stage=stage)
     t1 = time.perf_counter()
-    sensors = compute_sensor_table([r.case for r in rep.runs], on_stage=stage)
+    # the as-shipped column is the report's own run of each preset (unless --ts changed it)
+    ideal = {r.case.preset: r.record for r in rep.runs} if ts is None else None
+    sensors = compute_sensor_table([r.case for r in rep.runs], ideal=ideal, on_stage=stage)
     t2 = time.perf_counter()
     stage("reading the shipped Pareto fronts")
     rep = replace(

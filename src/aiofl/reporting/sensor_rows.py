@@ -20,7 +20,7 @@ even with the ideal sensor".
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -102,20 +102,49 @@ def _key(cfg: Any) -> tuple[Any, ...]:
     return (id(cfg.plant), cfg.scenario.t_final, cfg.dt, cfg.method, cfg.divergence_threshold)
 
 
+def _entry(itae: Any, isu: Any, diverged: bool, at: Any, sensor: str) -> dict[str, Any]:
+    return {
+        "itae": None if diverged else float(itae),
+        "isu": None if diverged else float(isu),
+        "diverged": bool(diverged),
+        "diverged_at": float(at) if diverged else None,
+        "sensor": sensor,
+    }
+
+
 def compute_sensor_table(
-    cases: Sequence[Case], *, on_stage: Callable[[str], None] | None = None
+    cases: Sequence[Case],
+    *,
+    ideal: Mapping[str, Mapping[str, Any]] | None = None,
+    on_stage: Callable[[str], None] | None = None,
 ) -> SensorTable:
     """Run every case with every sensor of :data:`SENSOR_COLUMNS` (module docstring): one
     :func:`~aiofl.engine.simulation.simulate_batch` call per group of members sharing the
-    plant, horizon, step, method and divergence threshold (one call for the SLFJM cases)."""
+    plant, horizon, step, method and divergence threshold (one call for the SLFJM cases).
+
+    ``ideal`` (by preset: ``itae``, ``isu``, ``diverged``, ``diverged_at``) gives the
+    as-shipped column of runs already made (the report's own runs of the presets, the
+    numbers of ``aiofl simulate``), so they are not run twice."""
     from aiofl.engine.simulation import simulate_batch
 
+    ideal = ideal or {}
     members: list[tuple[str, str, Any]] = []
     skipped: dict[str, dict[str, str]] = {}
+    results: dict[str, dict[str, dict[str, Any]]] = {}
     for case in cases:
         cfgs, why = _configs(case)
         if why:
             skipped[case.preset] = why
+        known = ideal.get(case.preset)
+        if known is not None:
+            results.setdefault(case.preset, {})["ideal"] = _entry(
+                known["itae"],
+                known["isu"],
+                known["diverged"],
+                known["diverged_at"],
+                case.config.sensor.describe(),
+            )
+            cfgs.pop("ideal")
         members += [(case.preset, key, cfg) for key, cfg in cfgs.items()]
     stage = on_stage or (lambda _msg: None)
     stage(
@@ -125,7 +154,6 @@ def compute_sensor_table(
     groups: dict[tuple[Any, ...], list[int]] = {}
     for i, (_, _, cfg) in enumerate(members):
         groups.setdefault(_key(cfg), []).append(i)
-    results: dict[str, dict[str, dict[str, Any]]] = {}
     t0 = time.perf_counter()
     for idx in groups.values():
         base = members[idx[0]][2]
@@ -142,17 +170,21 @@ def compute_sensor_table(
         )
         for j, i in enumerate(idx):
             preset, key, cfg = members[i]
-            div = bool(res.diverged[j])
             m = res.metrics[j]
-            results.setdefault(preset, {})[key] = {
-                "itae": None if div else float(m[L.METRIC_NAMES.index("itae")]),
-                "isu": None if div else float(m[L.METRIC_NAMES.index("isu")]),
-                "diverged": div,
-                "diverged_at": float(res.diverged_at[j]) if div else None,
-                "sensor": cfg.sensor.describe(),
-            }
+            results.setdefault(preset, {})[key] = _entry(
+                m[L.METRIC_NAMES.index("itae")],
+                m[L.METRIC_NAMES.index("isu")],
+                bool(res.diverged[j]),
+                res.diverged_at[j],
+                cfg.sensor.describe(),
+            )
+    order = [k for k, _, _ in SENSOR_COLUMNS]
     return SensorTable(
-        results={c.preset: results[c.preset] for c in cases if c.preset in results},
+        results={
+            c.preset: {k: results[c.preset][k] for k in order if k in results[c.preset]}
+            for c in cases
+            if c.preset in results
+        },
         skipped=skipped,
         engine_calls=len(groups),
         seconds=time.perf_counter() - t0,
@@ -239,7 +271,8 @@ def sensor_notes(rep: Reproduction) -> list[str]:
         "by an encoder (aiofl simulate PRESET --sensor encoder-16bit / encoder-12bit): the "
         "controller sampled at 1 ms, the output quantised to 2π/65536 or 2π/4096 rad. "
         "Scenario 3's output noise is part of the scenario and stays in every column. Full "
-        "horizon, same step and scenario as the tables above; every member in "
+        "horizon, same step and scenario as the tables above; the ideal-sensor column is "
+        "the run of those tables when the presets run as shipped, the encoder runs are "
         f"{table.engine_calls} batched engine call(s), {table.seconds:.1f} s.",
         "A design survives a sensor when it stays stable with it, its ITAE is at most "
         f"max({ITAE_FACTOR:g} × the ideal-sensor ITAE, that + {ITAE_SLACK:g}) and its ISU "
