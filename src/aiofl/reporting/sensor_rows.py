@@ -278,9 +278,10 @@ def sensor_notes(rep: Reproduction) -> list[str]:
         f"max({ITAE_FACTOR:g} × the ideal-sensor ITAE, that + {ITAE_SLACK:g}) and its ISU "
         f"at most {ISU_FACTOR:g} × the ideal-sensor ISU (a loop that stops tracking or "
         "turns quantisation steps into control chatter does not survive). Verdicts: "
-        + "; ".join(f"{n} design(s) {v}" for v, n in counts.items())
+        + "; ".join(f"{v}: {n} design(s)" for v, n in counts.items())
         + ". A result counts as a user would get it: a design that is 'ideal-sensor only' "
-        "diverges on a real 16-bit and 12-bit encoder.",
+        "does not survive a real 16-bit or 12-bit encoder (it diverges, or loses its "
+        "tracking or its control energy budget).",
     ]
     if table.skipped:
         notes.append(
