@@ -24,7 +24,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     # plain descriptions of a design, a test and the model error (uncertainty)
     ("aiofl.controller", "aiofl.scenario", "aiofl.uncertainty"),
     ("aiofl.plants",),
-    ("aiofl.engine",),
+    ("aiofl.engine", "aiofl.sensor"),  # the engine; the measurement a user has (sensor)
     ("aiofl.config",),  # TOML -> plant + scenario + controller (+ run settings)
     ("aiofl.analysis",),
     ("aiofl.export",),

@@ -488,3 +488,43 @@ def test_unit_texts_are_bounded() -> None:
         SymbolicPlant.from_dict({**spec, "state_units": ["m" * 33]})
     ok = SymbolicPlant.from_dict({**spec, "states": {"h": "level [" + "m" * 50 + "]"}})
     assert ok.state_units == ("m" * 32,)  # a label's bracket is documentation: cut, not refused
+
+
+# ------------------------------------------------------------------ sensors
+def test_sensor_table_columns_are_simulate_with_that_sensor() -> None:
+    """The ideal column is `aiofl simulate PRESET`, the encoder columns `... --sensor`;
+    a diverged run is written as its divergence time; the verdict follows the columns."""
+    from types import SimpleNamespace
+
+    from aiofl.config import load_config
+    from aiofl.reporting.cases import discover_cases
+    from aiofl.reporting.sensor_rows import SENSOR_COLUMNS, compute_sensor_table, sensor_rows
+
+    cases = [
+        c
+        for c in discover_cases(["frontier-s1-ladrc", "retuned-s1-leso"])
+        if c.preset in ("frontier-s1-ladrc", "retuned-s1-leso", "paper-s1-leso")
+    ]
+    table = compute_sensor_table(cases)
+    assert table.engine_calls == 1 and not table.skipped
+    for case in cases:
+        got = table.results[case.preset]
+        for key, preset, _ in SENSOR_COLUMNS:
+            cfg = load_config(case.preset)
+            cfg = cfg if preset is None else cfg.with_sensor(preset)
+            one = cfg.simulate(store=False)
+            assert got[key]["diverged"] == one.diverged
+            if one.diverged:
+                assert got[key]["diverged_at"] == one.diverged_at
+            else:
+                assert got[key]["itae"] == one.metrics["itae"]
+                assert got[key]["isu"] == one.metrics["isu"]
+    given = {p: got["ideal"] for p, got in table.results.items()}  # runs already made
+    again = compute_sensor_table(cases, ideal=given)
+    assert again.results == table.results
+    rep = SimpleNamespace(runs=[SimpleNamespace(case=c) for c in cases], sensors=table)
+    rows = {r[2]: r for r in sensor_rows(rep)}  # type: ignore[arg-type]
+    f = rows["frontier-s1-ladrc"]
+    assert f[-3].startswith("diverged at t = ") and f[-1] == "ideal-sensor only"
+    assert rows["retuned-s1-leso"][-1] == "survives a 12-bit encoder"
+    assert rows["paper-s1-leso"][-1] == "diverges even with the ideal sensor"

@@ -30,7 +30,7 @@ FILES = (
 )
 KEYS = {"scenario", "structure", "source", "itae", "isu", "iau", "opi", "diverged", "diverged_at"}
 # what the report measured; "robustness": its rows over model-error draws (conftest: 16)
-COMPUTED_KEYS = KEYS | {"preset", "tracking", "linearisation", "robustness"}
+COMPUTED_KEYS = KEYS | {"preset", "tracking", "linearisation", "robustness", "sensors"}
 
 
 def _records(reproduced) -> list[dict]:
@@ -56,6 +56,19 @@ def test_reproduce_succeeds_and_writes_every_file(reproduced) -> None:
     for n in (3, 4, 5):
         assert (reproduced.out / f"fig{n}.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert not [p for p in reproduced.out.parent.iterdir() if ".staging-" in p.name]
+
+
+def test_every_design_is_shown_with_real_sensors(reproduced) -> None:
+    """The sensor table: ideal = the run of the tables, encoders at 1 ms, a verdict each."""
+    recs = [r for r in _records(reproduced) if r["source"] != "paper"]
+    md = (reproduced.out / "tables.md").read_text()
+    assert "## What a user gets: the ideal sensor beside 16-bit and 12-bit encoders" in md
+    for r in recs:
+        got = r["sensors"]
+        assert set(got) == {"ideal", "encoder-16bit", "encoder-12bit", "verdict"}
+        assert (got["ideal"]["itae"], got["ideal"]["diverged"]) == (r["itae"], r["diverged"])
+        assert got["encoder-12bit"]["sensor"].startswith("encoder-12bit (sampled at 1 ms")
+        assert f"| {r['preset']} |" in md and got["verdict"] in md
 
 
 def test_metrics_has_paper_and_printed_records_for_every_case(reproduced) -> None:

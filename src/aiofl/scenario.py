@@ -21,7 +21,7 @@ from numpy.typing import NDArray
 
 from aiofl import layout as L
 
-__all__ = ["Reference", "Scenario", "noise_sequence"]
+__all__ = ["Reference", "Scenario", "noise_sequence", "realisation_seed"]
 
 
 @dataclass(frozen=True)
@@ -142,3 +142,16 @@ def noise_sequence(seed: int, n: int) -> NDArray[np.float64]:
     ``[k·hold, (k+1)·hold)``; the same seed always gives the same noise.
     """
     return np.random.default_rng(seed).standard_normal(n)
+
+
+def realisation_seed(seed: int, k: int) -> int:
+    """The noise seed of realisation ``k`` of base seed ``seed``.
+
+    ``k = 0`` gives ``seed`` itself (one realisation is today's run); ``k >= 1`` gives
+    ``SeedSequence(seed, spawn_key=(k,))``'s first 63-bit word: deterministic, different
+    for every ``k`` and independent of how many realisations are drawn.
+    """
+    if k == 0:
+        return int(seed)
+    word = np.random.SeedSequence(int(seed), spawn_key=(int(k),)).generate_state(1, np.uint64)[0]
+    return int(word) >> 1

@@ -27,9 +27,16 @@ plant's parameters from t = 0 (``Scenario.plant_scale`` with ``parameter_change_
 change at t = 0 by multiplication (the shipped S2 presets' J_l × 1.4 becomes J_l × 1.4 ×
 f).  A scenario whose own plant change is at t > 0 is refused for now: the engine's scenario
 carries a single parameter change, so a draw cannot both apply from t = 0 and be
-compounded at the change time.  A drawn noise variance replaces the scenario's (same noise
-seed, so the noise *shape* is common to all draws); a drawn sample time replaces
-``[controller.discrete] ts`` (:meth:`Draws.samplings`).
+compounded at the change time.  A drawn noise variance replaces the scenario's (the
+sensor's, :mod:`aiofl.sensor`); a drawn sample time replaces ``[controller.discrete] ts``
+(:meth:`Draws.samplings`), the sensor's quantum kept.
+
+**Every draw has its own noise realisation.**  When the measurement is noisy (the
+scenario's or the drawn variance > 0), draw k's noise seed is
+:func:`aiofl.scenario.realisation_seed` (scenario noise seed, 1 + n_k), with n_k the k-th
+integer of the stream named ``"noise_seed"`` of the table's seed: deterministic (same
+seed, same noise), prefix-stable, and different between draws, so a design is never judged
+on one noise sequence shared by all draws.
 
 **Aggregates** over the draws (:func:`aggregate`) treat a diverged draw as :math:`+\infty`:
 ``mean`` and ``worst`` are then infinite (the design is infeasible), and ``cvar`` is the
@@ -50,7 +57,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
-from aiofl.scenario import Scenario
+from aiofl.scenario import Scenario, realisation_seed
 
 __all__ = [
     "AGGREGATES",
@@ -209,12 +216,37 @@ class Draws:
         (K,) sample times [s] (integer multiples of dt), or None.
     noise_variance
         (K,) output-noise variances, or None.
+    noise_seeds
+        (K,) integers that seed each draw's noise realisation (module docstring), or None:
+        every draw keeps the scenario's noise seed.
     """
 
     seed: int
     factors: Mapping[str, NDArray[np.float64]]
     ts: NDArray[np.float64] | None = None
     noise_variance: NDArray[np.float64] | None = None
+    noise_seeds: NDArray[np.int64] | None = None
+
+    def noise_seed(self, base: Scenario, k: int) -> int:
+        """The noise seed of draw ``k`` on scenario ``base`` (its own seed without
+        :attr:`noise_seeds`)."""
+        if self.noise_seeds is None:
+            return base.noise_seed
+        return realisation_seed(base.noise_seed, 1 + int(self.noise_seeds[k]))
+
+    def subset(self, idx: slice) -> Draws:
+        """The draws ``idx`` (every drawn quantity sliced alike)."""
+
+        def cut(a: NDArray[Any] | None) -> NDArray[Any] | None:
+            return None if a is None else a[idx]
+
+        return Draws(
+            seed=self.seed,
+            factors={k: v[idx] for k, v in self.factors.items()},
+            ts=cut(self.ts),
+            noise_variance=cut(self.noise_variance),
+            noise_seeds=cut(self.noise_seeds),
+        )
 
     def __len__(self) -> int:
         for arr in (*self.factors.values(), self.ts, self.noise_variance):
@@ -254,6 +286,8 @@ class Draws:
                 changes.update(plant_scale=scale, parameter_change_time=0.0)
             if self.noise_variance is not None:
                 changes["noise_variance"] = float(self.noise_variance[k])
+            if changes.get("noise_variance", base.noise_variance) > 0:
+                changes["noise_seed"] = self.noise_seed(base, k)  # its own realisation
             out.append(replace(base, **changes) if changes else base)
         return out
 
@@ -290,7 +324,10 @@ def sample_draws(
     if spec.noise_variance is not None:
         a, b = spec.noise_variance
         nv = a + (b - a) * _uniforms(s, "noise_variance", n)
-    return Draws(seed=s, factors=factors, ts=ts, noise_variance=nv)
+    ns = np.random.Generator(
+        np.random.PCG64(np.random.SeedSequence(s, spawn_key=(zlib.crc32(b"noise_seed"),)))
+    ).integers(0, 2**62, n, dtype=np.int64)
+    return Draws(seed=s, factors=factors, ts=ts, noise_variance=nv, noise_seeds=ns)
 
 
 # ------------------------------------------------------------------ aggregates

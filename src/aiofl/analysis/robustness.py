@@ -18,6 +18,11 @@ ITAE, a diverged draw being worse than any finite one (the earliest divergence f
 The influence of a drawn quantity is its Spearman rank correlation with ITAE
 (``scipy.stats.spearmanr``; a rank statistic, so with log ITAE too).
 
+**Noise.**  With a noisy measurement (the config's ``[sensor]`` or ``[scenario]`` noise, or a
+drawn ``noise_variance``) every draw runs its own noise realisation, seeded from the draw
+(:meth:`aiofl.uncertainty.Draws.noise_seed`); the nominal member keeps the config's seed,
+so it is ``aiofl simulate`` of the config.
+
 **Trajectories.**  The tracking error :math:`e = y - r` of every draw is kept at
 :math:`P \le` :data:`MAX_POINTS` decimated points, :math:`P` lowered so the (K, P) float32
 table stays within :data:`ERROR_TABLE_BYTES`; the envelope is its pointwise min/max and
@@ -119,12 +124,7 @@ def _chunk(
 
 
 def _subset(draws: Draws, idx: slice) -> Draws:
-    return Draws(
-        seed=draws.seed,
-        factors={k: v[idx] for k, v in draws.factors.items()},
-        ts=None if draws.ts is None else draws.ts[idx],
-        noise_variance=None if draws.noise_variance is None else draws.noise_variance[idx],
-    )
+    return draws.subset(idx)
 
 
 def simulate_draws(

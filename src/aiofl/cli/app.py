@@ -35,7 +35,7 @@ from typing import Annotated, Any, Literal
 import typer
 from typer.core import TyperCommand, TyperGroup
 
-from aiofl.cli.errors import _check_out, _out_or_check, bad_input_exits
+from aiofl.cli.errors import SENSOR_OPTION, _check_out, _out_or_check, bad_input_exits
 
 __all__ = ["EXAMPLES", "app", "main"]
 
@@ -325,6 +325,7 @@ def simulation_record(cfg: Any, result: Any, source_name: str) -> dict[str, Any]
     rec["config"] = source_name
     rec["name"] = cfg.name
     rec["sample_time"] = cfg.sampling.ts if cfg.sampling is not None else None
+    rec["sensor"] = cfg.sensor.describe()
     return rec
 
 
@@ -372,6 +373,7 @@ def simulate_command(
             "other [controller.discrete] settings are kept).",
         ),
     ] = None,
+    sensor: Annotated[str | None, SENSOR_OPTION] = None,
 ) -> None:
     """Simulate one config: metrics.json, trajectory.csv and figure.png in OUT.
 
@@ -400,6 +402,7 @@ def simulate_command(
             cfg = cfg.with_overrides(
                 t_final=t_final, dt=dt, method=method, source=f"{config} with {flags}"
             )
+        cfg = cfg.with_sensor(sensor, source=f"{config} with --sensor {sensor}") if sensor else cfg
         cfg = cfg.with_sample_time(ts) if ts is not None else cfg
         cfg.check_sampling()  # Ts must stay a multiple of an overridden dt
     if check or out is None:
@@ -407,7 +410,8 @@ def simulate_command(
         typer.echo(
             f"{config}: valid; {steps} {cfg.method} steps of {cfg.dt:g} s over "
             f"{cfg.scenario.t_final:g} s, plant {cfg.plant.name}, "
-            f"{cfg.controller.structure} controller; nothing run or written"
+            f"{cfg.controller.structure} controller, sensor {cfg.sensor.describe()}; "
+            "nothing run or written"
         )
         return
     with bad_input_exits(run=True), atomic_output_dir(out) as stage:
@@ -437,6 +441,7 @@ def simulate_command(
         )
         atomic_write_bytes(stage / "figure.png", figure_png(fig))
     _print_records([record], title=f"aiofl simulate {config}")
+    typer.echo(f"sensor: {cfg.sensor.describe()}")
     typer.echo(f"wrote {out}/metrics.json, trajectory.csv, figure.png")
     note = units_note(cfg.plant)
     if note:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import typer
 
-__all__ = ["EXIT_BAD_INPUT", "bad_input_exits"]
+__all__ = ["EXIT_BAD_INPUT", "SENSOR_OPTION", "bad_input_exits"]
 
 EXIT_BAD_INPUT = 2
 
@@ -68,3 +68,11 @@ def bad_input_exits(*, run: bool = False) -> Iterator[None]:
         msg = str(exc).strip() or type(exc).__name__
         typer.echo(f"aiofl: error: {msg}", err=True)
         raise typer.Exit(EXIT_BAD_INPUT) from None
+
+
+SENSOR_OPTION = typer.Option(
+    "--sensor",
+    help="Measure with this sensor preset (ideal, encoder-12bit, encoder-14bit, "
+    "encoder-16bit): sets the config's [sensor] preset (its noise keys kept).",
+)
+"""The ``--sensor PRESET`` option of simulate, robustness and tune."""

@@ -16,7 +16,7 @@ from typing import Annotated, Any
 
 import typer
 
-from aiofl.cli.errors import _check_out, bad_input_exits
+from aiofl.cli.errors import SENSOR_OPTION, _check_out, bad_input_exits
 
 __all__ = ["robustness_command"]
 
@@ -63,8 +63,12 @@ def robustness_command(
         int | None,
         typer.Option("--dask-workers", help="Start a local Dask cluster with N workers."),
     ] = None,
+    sensor: Annotated[str | None, SENSOR_OPTION] = None,
 ) -> None:
-    """Measure a design's robustness over the draws of its [uncertainty] table."""
+    """Measure a design's robustness over the draws of its [uncertainty] table.
+
+    Every draw has its own measurement-noise realisation (seeded from the draw); --sensor
+    measures with a sensor preset."""
     from aiofl.analysis.robustness import robustness_figure, run_robustness
     from aiofl.config import load_config
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
@@ -81,6 +85,8 @@ def robustness_command(
             raise ValueError(f"--seed = {seed}; allowed: 0 <= S < 2**63")
         _check_out(out)
         cfg = load_config(config)
+        if sensor:
+            cfg = cfg.with_sensor(sensor, source=f"{config} with --sensor {sensor}")
         if cfg.uncertainty is None:
             raise ValueError(
                 f"{config}: no [uncertainty] table; add one, e.g.\n  [uncertainty]\n"
@@ -111,5 +117,6 @@ def robustness_command(
         f"{_fmt(itae['q05'])} / {_fmt(itae['q50'])} / {_fmt(itae['q95'])} / "
         f"{_fmt(itae['max'])} (nominal {_fmt(info['nominal']['itae'])}); "
         f"{res.engine_calls} engine call(s), {res.seconds:.1f} s\n"
+        f"sensor: {cfg.sensor.describe()}\n"
         f"wrote {out}/robustness.json, robustness.png"
     )

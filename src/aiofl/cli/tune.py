@@ -16,7 +16,7 @@ from typing import Annotated, Any
 
 import typer
 
-from aiofl.cli.errors import _check_out, _out_or_check, bad_input_exits
+from aiofl.cli.errors import SENSOR_OPTION, _check_out, _out_or_check, bad_input_exits
 
 __all__ = ["tune_command"]
 
@@ -65,6 +65,7 @@ def tune_command(
             "--ts", help="Tune the controller sampled at Ts [s] (an integer multiple of dt)."
         ),
     ] = None,
+    sensor: Annotated[str | None, SENSOR_OPTION] = None,
 ) -> None:
     """Tune a controller's parameters per the config's [tune] table (pymoo: GA, DE, CMA-ES
     or NSGA-II).
@@ -94,11 +95,15 @@ def tune_command(
             raise ValueError("--resume needs --out (the folder holding checkpoint.npz)")
         if out is not None:
             _check_out(out)
-        target = config
-        if ts is not None:  # the sampled controller is tuned (and written to best.toml)
+        target: Any = config
+        if sensor or ts is not None:  # the sampled controller is tuned (and written)
             from aiofl.config import load_config
 
-            target = load_config(config).with_sample_time(ts)
+            target = load_config(config)
+            if sensor:
+                target = target.with_sensor(sensor, source=f"{config} with --sensor {sensor}")
+            if ts is not None:
+                target = target.with_sample_time(ts)
         prep = prepare(target, None, seed=seed, generations=generations, population=population)
         if resume and out is not None and (out / CHECKPOINT).exists():
             load_checkpoint(out / CHECKPOINT, prep.fingerprint)  # a damaged one: exit 2 now
@@ -139,6 +144,7 @@ def check_text(prep: Any) -> str:
     st = prep.settings
     candidates = st.population * st.generations
     sims = candidates * (1 + st.robust.draws) if st.robust is not None else candidates
+    sims *= st.noise_realisations
     if st.objectives:
         goal = f"objectives {', '.join(st.objectives)}"
         goal += f" under {', '.join(st.constraints)}" if st.constraints else ""
@@ -150,6 +156,8 @@ def check_text(prep: Any) -> str:
         goal = f"objective {obj}"
     if st.robust is not None:
         goal += f", robust ({st.robust.aggregate} over nominal + {st.robust.draws} draws)"
+    if st.noise_realisations > 1:
+        goal += f", mean over {st.noise_realisations} noise realisations"
     return (
         f"{st.budget()}: up to {candidates} candidates ({sims} simulations of "
         f"{st.t_final:g} s at dt = {prep.spec.dt:g}, {prep.spec.method}); {goal}; "

@@ -52,8 +52,12 @@ is bounded before anything is allocated (:mod:`aiofl.limits`).  A bad file raise
     b0 = 22.771                      # finite, non-zero, with the sign of the plant's beta
     u_max = inf                      # actuator range [u_min, u_max]; u_min omitted: -u_max
     [controller.discrete]            # optional: run the controller sampled (engine.discrete)
-    ts = 1e-3                        # an integer multiple of dt; delay, y_quantum, u_quantum,
+    ts = 1e-3                        # an integer multiple of dt; delay, u_quantum,
                                      # eso = "zoh" | "euler", td = "fhan" | "euler", h0
+
+    [sensor]                         # the measurement: the one place for ts, quantum, noise
+    preset = "encoder-12bit"         # ideal | encoder-12bit | encoder-14bit | encoder-16bit
+    # ts, quantum, noise_variance, noise_hold, noise_seed override the preset (aiofl.sensor)
 
     [simulation]
     dt = 1e-4
@@ -62,6 +66,12 @@ is bounded before anything is allocated (:mod:`aiofl.limits`).  A bad file raise
     [metrics]
     weights = [0.6, 0.2, 0.6]
     normalisers = [10.0, 2.0, 2.7]
+
+**The sensor.**  ``[sensor]`` (:mod:`aiofl.sensor`) is the one place for what the
+controller measures: it fills ``[scenario] noise_variance / noise_hold / noise_seed`` and
+``[controller.discrete] ts / y_quantum`` (a sensor ``ts`` makes the controller sampled).
+The older keys still work, but a quantity set both in ``[sensor]`` and in its old place is
+refused, except ``[controller.discrete] ts`` equal to the sensor's.
 
 Vector parameters (``alpha``, ``k``, ``delta`` ...) are lists, numbered from 1 as in the
 paper; each maps onto the engine columns of :data:`aiofl.layout.FLOAT_COLUMNS`
@@ -72,7 +82,7 @@ from __future__ import annotations
 
 import copy
 import tomllib
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -92,6 +102,7 @@ from aiofl.limits import (
 )
 from aiofl.plants.base import Plant, PlantError
 from aiofl.scenario import Scenario
+from aiofl.sensor import Sensor
 from aiofl.uncertainty import UncertaintyModel
 
 __all__ = [
@@ -128,6 +139,7 @@ class RunConfig:
     raw: dict[str, Any]
     sampling: Any = None  # aiofl.engine.discrete.Sampling: [controller.discrete], or None
     uncertainty: UncertaintyModel | None = None  # [uncertainty] (aiofl.uncertainty), or None
+    sensor: Sensor = field(default_factory=Sensor)  # the measurement ([sensor] or old keys)
 
     def simulate(self, *, store: bool = True) -> Any:
         """Run this config once (see :func:`aiofl.engine.simulation.simulate`)."""
@@ -176,6 +188,13 @@ class RunConfig:
         new sampling."""
         from dataclasses import replace
 
+        if isinstance(self.raw.get("sensor"), dict):  # --ts sets the sensor's sample time
+            data = copy.deepcopy(self.raw)
+            data["sensor"]["ts"] = ts
+            disc = data.get("controller", {}).get("discrete")
+            if isinstance(disc, dict) and "ts" in disc:
+                disc["ts"] = ts
+            return parse_config(data, f"{self.name} with --ts {ts:g}")
         raw = {**self.raw, "controller": dict(self.raw.get("controller", {}))}
         raw["controller"]["discrete"] = {**raw["controller"].get("discrete", {}), "ts": ts}
         try:
@@ -193,9 +212,28 @@ class RunConfig:
             # Kalman gains from the run's measurement noise, as sampled now
             r = measurement_noise_intensity(self.scenario, sampling)
             controller = controller.with_values(**{"eso.r": r})
-        cfg = replace(self, sampling=sampling, controller=controller, raw=raw)
+        sensor = replace(self.sensor, ts=ts, quantum=sampling.y_quantum)
+        if self.sensor.preset == "ideal" and sensor.quantum == 0:
+            sensor = replace(sensor, preset="custom")
+        cfg = replace(self, sampling=sampling, controller=controller, raw=raw, sensor=sensor)
         cfg.check_sampling()
         return cfg
+
+    def with_sensor(self, preset: str, *, source: str = "") -> RunConfig:
+        """This config measured by the sensor preset ``preset`` (``--sensor``).
+
+        The ``[sensor]`` table becomes ``preset = ...`` (its ``ts`` and ``quantum`` keys
+        dropped, its noise keys kept) and the config is validated again by
+        :func:`parse_config`, so a contradiction with ``[controller.discrete]`` is refused
+        as in a file.  Raises :class:`ConfigError`.
+        """
+        data = copy.deepcopy(self.raw)
+        old = data.get("sensor") if isinstance(data.get("sensor"), dict) else {}
+        data["sensor"] = {
+            "preset": preset,
+            **{k: v for k, v in old.items() if k.startswith("noise_")},
+        }
+        return parse_config(data, source or f"{self.name} with --sensor {preset}")
 
     def check_sampling(self) -> None:
         """Raise :class:`ConfigError` unless the sampled controller (if any) can run with this
@@ -387,8 +425,15 @@ def parse_config(
         )
     missing = _missing_keys(data)
     note = "\n" + _missing_text(missing) if missing else ""
+    sensor_table: Any = None
+    if "sensor" in data:  # the table alone first: its errors name sensor.KEY
+        try:
+            sensor_table = ConfigModel.model_validate({"sensor": data["sensor"]}).sensor
+        except ValidationError as exc:
+            raise ConfigError(_format_error(exc, source) + note) from None
+    merged = _merge_sensor(data, sensor_table, source) if sensor_table is not None else data
     try:
-        model = ConfigModel.model_validate(data)
+        model = ConfigModel.model_validate(merged)
     except ValidationError as exc:
         raise ConfigError(_format_error(exc, source) + note) from None
     sim, sc = model.simulation, model.scenario
@@ -448,7 +493,74 @@ def parse_config(
     if sampling is not None:  # [controller.discrete]: a sampled controller
         cfg = replace(cfg, sampling=sampling)
         cfg.check_sampling()
-    return cfg
+    label = sensor_table.preset if sensor_table is not None else "custom"
+    return replace(cfg, sensor=Sensor.of_run(cfg.scenario, cfg.sampling, preset=label))
+
+
+_SENSOR_NOISE = ("noise_variance", "noise_hold", "noise_seed")
+
+
+def _merge_sensor(data: dict[str, Any], table: Any, source: str) -> dict[str, Any]:
+    """``data`` with the ``[sensor]`` table's quantities filled into ``[scenario]`` (noise)
+    and ``[controller.discrete]`` (ts, y_quantum); raises :class:`ConfigError` for a
+    quantity set in two places (a discrete ts equal to the sensor's is accepted) or a
+    quantum without a sample time."""
+
+    def refuse(msg: str) -> ConfigError:
+        return ConfigError(f"invalid config {source}:\n  {msg}")
+
+    try:
+        sensor = table.build()
+    except ValueError as exc:
+        raise refuse(str(exc)) from None
+    explicit = table.explicit()
+    out = dict(data)
+    scen = dict(out.get("scenario") or {}) if isinstance(out.get("scenario"), dict) else None
+    if scen is not None or any(k in explicit for k in _SENSOR_NOISE):
+        scen = scen if scen is not None else {}
+        for key in _SENSOR_NOISE:
+            if key in explicit:
+                if key in scen:
+                    raise refuse(
+                        f"{key} is set twice: sensor.{key} = {explicit[key]!r} and scenario.{key}"
+                        f" = {scen[key]!r}; set it in [sensor] only"
+                    )
+                scen[key] = explicit[key]
+        if sensor.ts is not None and "noise_hold" not in scen:
+            scen["noise_hold"] = sensor.ts  # a noise sample per measurement
+        out["scenario"] = scen
+    ctrl = out.get("controller")
+    if not isinstance(ctrl, dict):
+        ctrl = {}
+    disc = ctrl.get("discrete")
+    if sensor.ts is None and sensor.quantum == 0:
+        return out
+    if disc is not None and not isinstance(disc, dict):
+        return out  # the schema reports the malformed table
+    disc = dict(disc or {})
+    if sensor.ts is not None:
+        if "ts" in disc and disc["ts"] != sensor.ts:
+            raise refuse(
+                f"sensor.ts = {sensor.ts!r} (preset {sensor.preset!r} or the table) contradicts "
+                f"controller.discrete.ts = {disc['ts']!r}; set the sample time in one place "
+                "(or the same value in both)"
+            )
+        disc["ts"] = sensor.ts
+    elif "ts" not in disc:
+        raise refuse(
+            f"sensor.quantum = {sensor.quantum:g} needs a sample time: set sensor.ts (or "
+            "[controller.discrete] ts); a continuous loop has no ADC"
+        )
+    if sensor.quantum > 0 or "quantum" in explicit:
+        if "y_quantum" in disc:
+            raise refuse(
+                f"the measurement quantum is set twice: sensor.quantum = {sensor.quantum!r} "
+                f"(preset {sensor.preset!r} or the table) and controller.discrete.y_quantum = "
+                f"{disc['y_quantum']!r}; set it in [sensor] only"
+            )
+        disc["y_quantum"] = sensor.quantum
+    out["controller"] = {**ctrl, "discrete": disc}
+    return out
 
 
 def _presets_dir() -> Any:

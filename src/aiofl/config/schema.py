@@ -24,6 +24,7 @@ from aiofl.limits import (
     T_FINAL_MAX,
 )
 from aiofl.scenario import Reference, Scenario
+from aiofl.sensor import SENSOR_PRESETS, Sensor
 from aiofl.uncertainty import UncertaintyModel
 
 __all__ = [
@@ -33,6 +34,7 @@ __all__ = [
     "ControllerModel",
     "DiscreteModel",
     "ScenarioModel",
+    "SensorModel",
 ]
 
 #: keys every config must set (an empty or cut-off file is refused, not run with defaults)
@@ -329,6 +331,49 @@ class ControllerModel(_Model):
         return controller
 
 
+# ------------------------------------------------------------------------ sensor
+class SensorModel(_Model):
+    """``[sensor]``: the measurement as a user has it (:mod:`aiofl.sensor`).
+
+    ``preset`` names a :data:`aiofl.sensor.SENSOR_PRESETS` entry; a key given here
+    overrides the preset's value (None: not set here).
+    """
+
+    preset: str = "ideal"
+    ts: Annotated[float, Field(gt=0, le=1.0, allow_inf_nan=False)] | None = None
+    quantum: NonNegFloat | None = None
+    noise_variance: NonNegFloat | None = None
+    noise_hold: PosFloat | None = None
+    noise_seed: Annotated[int, Field(ge=0, lt=2**63)] | None = None
+
+    @field_validator("preset")
+    @classmethod
+    def _preset(cls, v: str) -> str:
+        if v not in SENSOR_PRESETS:
+            raise ValueError(f"unknown sensor preset {v!r}; allowed: {', '.join(SENSOR_PRESETS)}")
+        return v
+
+    @field_validator("quantum")
+    @classmethod
+    def _quantum(cls, v: float | None) -> float | None:
+        from aiofl.engine.discrete import QUANTUM_MIN
+
+        if v is not None and 0 < v < QUANTUM_MIN:
+            raise ValueError(
+                f"allowed: 0 (none) or a quantum >= {QUANTUM_MIN:g} (an encoder of N counts "
+                "per revolution: 2π/N rad)"
+            )
+        return v
+
+    def explicit(self) -> dict[str, Any]:
+        """The keys set in the table (besides ``preset``)."""
+        return {k: v for k, v in self.model_dump(exclude={"preset"}).items() if v is not None}
+
+    def build(self) -> Sensor:
+        """The :class:`~aiofl.sensor.Sensor`: the preset with the explicit keys."""
+        return Sensor.from_preset(self.preset, **self.explicit())
+
+
 # -------------------------------------------------------------------- the rest
 class SimulationModel(_Model):
     dt: Annotated[float, Field(gt=0, le=DT_MAX, allow_inf_nan=False)] = 1e-4
@@ -359,6 +404,8 @@ class ConfigModel(_Model):
     tune: dict[str, Any] | None = None
     # [uncertainty]: model error as data (aiofl.uncertainty); plant names checked in run_config
     uncertainty: UncertaintyModel | None = None
+    # [sensor]: the measurement (aiofl.sensor); merged into [scenario] / [controller.discrete]
+    sensor: SensorModel | None = None
 
     @field_validator("plant")
     @classmethod

@@ -442,6 +442,8 @@ class Reproduction:
     robustness: Any = None
     # the shipped Pareto fronts (aiofl.reporting.fronts.ShippedFronts), or None
     fronts: Any = None
+    # every design with the ideal sensor and real encoders (reporting.sensor_rows), or None
+    sensors: Any = None
 
     def scenario_runs(self, scenario: int) -> list[CaseRun]:
         """The runs of one scenario, in table order."""

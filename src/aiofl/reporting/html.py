@@ -28,6 +28,7 @@ from aiofl.reporting.fronts import (
 )
 from aiofl.reporting.paper import SCENARIOS
 from aiofl.reporting.robust_rows import ROBUST_HEADER, robust_notes, robust_rows
+from aiofl.reporting.sensor_rows import SENSOR_HEADER, SENSOR_TITLE, sensor_notes, sensor_rows
 from aiofl.reporting.summary import (
     structure_header,
     structure_rows,
@@ -186,6 +187,11 @@ def _robust_sections(rep: Reproduction, figures: Mapping[str, bytes]) -> list[st
     body.append(
         _details("How these rows were computed, per scenario", [_list(robust_notes(rep), "notes")])
     )
+    rows = sensor_rows(rep)
+    if rows:
+        body.append(f"<h2>{_e(SENSOR_TITLE)}</h2>")
+        body.append(_html_table(SENSOR_HEADER, rows))
+        body.append(_details("What these columns are", [_list(sensor_notes(rep), "notes")]))
     body.append("<h2>Pareto fronts: which structure tracks best at equal control energy?</h2>")
     body.append(_details("Where the fronts come from", [_list(front_notes(rep), "notes")]))
     for s, sentences in front_scenarios(rep).items():

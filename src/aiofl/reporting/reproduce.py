@@ -1,7 +1,8 @@
 """Reproduce the paper's Tables I–III and Figures 3–5 (``aiofl reproduce``).
 
 :func:`reproduce` computes every case (:func:`aiofl.reporting.cases.compute`), runs every
-case over the same model-error draws (:mod:`aiofl.reporting.robust_rows`), reads the
+case over the same model-error draws (:mod:`aiofl.reporting.robust_rows`) and with the ideal
+sensor beside 16-bit and 12-bit encoders (:mod:`aiofl.reporting.sensor_rows`), reads the
 shipped Pareto fronts (:mod:`aiofl.reporting.fronts`) and writes ``metrics.json``,
 ``tables.md``, ``fig3.png``–``fig5.png``, ``fronts-s1.png``/``fronts-s3.png`` (when
 fronts are shipped) and a self-contained ``report.html`` into an output directory,
@@ -29,6 +30,7 @@ from aiofl.reporting.robust_rows import (
     robust_markdown,
     with_robustness,
 )
+from aiofl.reporting.sensor_rows import compute_sensor_table, sensor_markdown, with_sensors
 from aiofl.reporting.summary import summary_markdown
 from aiofl.reporting.tables import tables_markdown
 from aiofl.uncertainty import MAX_DRAWS
@@ -80,14 +82,23 @@ def reproduce(
     t0 = time.perf_counter()
     table = compute_robustness([r.case for r in rep.runs], draws=draws, seed=seed, on_stage=stage)
     t1 = time.perf_counter()
+    # the as-shipped column is the report's own run of each preset (unless --ts changed it)
+    ideal = {r.case.preset: r.record for r in rep.runs} if ts is None else None
+    sensors = compute_sensor_table([r.case for r in rep.runs], ideal=ideal, on_stage=stage)
+    t2 = time.perf_counter()
     stage("reading the shipped Pareto fronts")
     rep = replace(
         rep,
         robustness=table,
-        records=with_robustness(rep.records, table),
+        sensors=sensors,
+        records=with_sensors(with_robustness(rep.records, table), sensors),
         fronts=load_fronts(fronts_dir),
-        timings={**rep.timings, "robustness": t1 - t0},
+        timings={**rep.timings, "robustness": t1 - t0, "sensors": t2 - t1},
         engine={
+            "sensors": (
+                f"ideal, 16-bit and 12-bit encoder at 1 ms for every design: "
+                f"{sensors.engine_calls} engine call(s)"
+            ),
             **rep.engine,
             "model-error draws": (
                 f"{table.draws} per design, seed {table.seed}, {table.engine_calls} engine "
@@ -125,6 +136,7 @@ def reproduce(
                 summary_markdown(rep),
                 tables_markdown(rep),
                 robust_markdown(rep),
+                sensor_markdown(rep),
                 fronts_markdown(rep),
             ]
         )

@@ -3,7 +3,8 @@
 The unit of work is :func:`evaluate_chunk`: given an :class:`EvalSpec` (small, picklable:
 the config as a plain dict, the tuned parameter names, horizon and integrator) and a
 (B, d) array of parameter values, it runs **one** :func:`aiofl.engine.simulation.simulate_batch`
-call and returns the metrics of the B members.  The spec carries the plant by *name*:
+call and returns the metrics of the B members (B x (K+1) x R engine members with K
+robust draws and R noise realisations, all in the one call).  The spec carries the plant by *name*:
 a worker rebuilds the plant, controller and scenario from the dict on first use and
 keeps them (so the plant's kernel is compiled once per worker process), never receiving
 jitted functions over the wire.
@@ -57,6 +58,10 @@ class EvalSpec:
         and ``"ts"``, a drawn sample time) that make the K perturbed scenarios; each
         candidate is simulated on the nominal scenario and on every draw (K + 1
         members).  Empty: the nominal scenario only.
+    noise_realisations
+        R >= 1 noise sequences per scenario (realisation r seeded
+        :func:`aiofl.scenario.realisation_seed` (its noise seed, r), the same for every
+        candidate); a member's metrics are their mean over the R (diverged if any is).
     """
 
     config: Mapping[str, Any]
@@ -66,6 +71,7 @@ class EvalSpec:
     method: str
     divergence_threshold: float
     draws: tuple[Mapping[str, Any], ...] = ()
+    noise_realisations: int = 1
 
     def key(self) -> str:
         """A digest identifying the spec (used to cache the built objects on a worker)."""
@@ -78,6 +84,7 @@ class EvalSpec:
                 self.method,
                 self.divergence_threshold,
                 list(self.draws),
+                *([self.noise_realisations] if self.noise_realisations > 1 else []),
             ],
             sort_keys=True,
             default=repr,
@@ -127,8 +134,29 @@ def _build(spec: EvalSpec) -> Any:
             sampling = [sampling] + [
                 replace(sampling, ts=d["ts"]) if "ts" in d else sampling for d in spec.draws
             ]
+        r = spec.noise_realisations
+        if r > 1:  # every scenario's R noise realisations, next to each other
+            from aiofl.scenario import realisation_seed
+
+            scenarios = [
+                replace(s, noise_seed=realisation_seed(s.noise_seed, i))
+                for s in scenarios
+                for i in range(r)
+            ]
+            if isinstance(sampling, list):
+                sampling = [x for x in sampling for _ in range(r)]
         _BUILT[key] = (cfg.plant, cfg.controller, scenarios, sampling)
     return _BUILT[key]
+
+
+def _mean_over_realisations(
+    metrics: NDArray[np.float64], diverged: NDArray[np.bool_], at: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
+    """Collapse the realisation axis (the last of ``diverged``): metrics their mean,
+    diverged if any realisation diverged, at the earliest divergence."""
+    div = diverged.any(axis=-1)
+    first = np.where(diverged, at, np.inf).min(axis=-1)
+    return metrics.mean(axis=-2), div, np.where(div, first, at[..., 0])
 
 
 def evaluate_chunk(spec: EvalSpec, values: NDArray[np.float64]) -> PopulationResult:
@@ -142,19 +170,20 @@ def evaluate_chunk(spec: EvalSpec, values: NDArray[np.float64]) -> PopulationRes
 
     values = np.asarray(values, dtype=np.float64)
     k1 = 1 + len(spec.draws)
+    r = spec.noise_realisations
     shape = (values.shape[0], k1) if spec.draws else (values.shape[0],)
     if values.shape[0] == 0:
         return PopulationResult(np.zeros((*shape, 5)), np.zeros(shape, dtype=bool), np.zeros(shape))
     with _LOCK:
         plant, controller, scenarios, sampling = _build(spec)
-        members = np.repeat(values, k1, axis=0)
+        members = np.repeat(values, k1 * r, axis=0)
         batch = controller_batch(
             controller, {name: members[:, j] for j, name in enumerate(spec.names)}
         )
         res = simulate_batch(
             plant,
             batch,
-            scenarios * values.shape[0] if spec.draws else scenarios[0],
+            scenarios * values.shape[0] if len(scenarios) > 1 else scenarios[0],
             dt=spec.dt,
             method=spec.method,
             store=False,
@@ -162,6 +191,13 @@ def evaluate_chunk(spec: EvalSpec, values: NDArray[np.float64]) -> PopulationRes
             # a [controller.discrete] table tunes the sampled controller
             sampling=sampling * values.shape[0] if isinstance(sampling, list) else sampling,
         )
+    if r > 1:  # (B, [K+1,] R): the mean over the realisations
+        m, d, t = _mean_over_realisations(
+            res.metrics.reshape(*shape, r, 5),
+            res.diverged.reshape(*shape, r),
+            res.diverged_at.reshape(*shape, r),
+        )
+        return PopulationResult(m, d, t)
     return PopulationResult(
         res.metrics.reshape(*shape, 5).copy(),
         res.diverged.reshape(shape).copy(),

@@ -149,6 +149,8 @@ class TuneResult:
             r = s.robust
             agg = f"cvar alpha = {r.alpha:g}" if r.aggregate == "cvar" else r.aggregate
             rob = f", robust over the nominal plant + {r.draws} [uncertainty] draws ({agg})"
+        if s.noise_realisations > 1:
+            rob += f", mean over {s.noise_realisations} noise realisations"
         if self.front is not None:
             f = self.front
             cons = f" under {', '.join(f.constraints)}" if f.constraints else ""
@@ -311,7 +313,14 @@ def prepare(
         method=st.method or cfg.method,
         divergence_threshold=cfg.divergence_threshold,
         draws=robust_draws,
+        noise_realisations=st.noise_realisations,
     )
+    if st.noise_realisations > 1 and not _noisy(cfg):
+        raise ConfigError(
+            f"tune.noise_realisations = {st.noise_realisations} but the measurement of "
+            f"{source} has no noise; set [sensor] noise_variance (or [uncertainty] "
+            "noise_variance), or noise_realisations = 1"
+        )
     coeffs = objective_coefficients(st, cfg)
     initial = _initial_population(space, cfg, st)
     fp_data = {
@@ -325,6 +334,13 @@ def prepare(
     return _Prepared(
         cfg, st, space, spec, coeffs, initial, fingerprint, source, objectives, constraints
     )
+
+
+def _noisy(cfg: RunConfig) -> bool:
+    """Whether the config's measurement has noise (its own or a drawn variance)."""
+    unc = cfg.uncertainty
+    drawn = unc is not None and unc.noise_variance is not None and unc.noise_variance[1] > 0
+    return cfg.scenario.noise_variance > 0 or drawn
 
 
 # -------------------------------------------------------------------------- runner

@@ -11,6 +11,7 @@ r"""The ``[tune]`` table: settings, search space, objective, and writing a tuned
     seed = 1
     divergence_penalty = 1e6  # objective of a member that diverged (see below)
     robust = { draws = 16, aggregate = "cvar", alpha = 0.9 }  # optional; needs [uncertainty]
+    noise_realisations = 1    # K > 1: a noisy measurement scored over K noise realisations
     # nsga2 only: objectives (2 or 3) and constraints, see aiofl.tuning.robust
     # objectives = ["itae", "isu"]          # METRIC or METRIC:AGGREGATE
     # constraints = ["isu <= 15.5", "stable_fraction >= 1"]
@@ -41,6 +42,14 @@ member that diverges at :math:`t_d` scores
 :math:`P\,(2 - t_d/t_f)` (P = ``divergence_penalty``): finite, worse than any stable
 member with J < P, and better the later it diverges, which steers the search towards
 stability.
+
+With a noisy measurement (``[sensor]`` or ``[scenario]`` noise) ``noise_realisations = K``
+scores every candidate over K noise sequences, the same K for every candidate (common
+random numbers; realisation 0 is the config's noise seed, the others
+:func:`aiofl.scenario.realisation_seed`): a candidate's metrics are their mean over the K
+realisations (a candidate that diverges on any is diverged), so the linear objective is the
+mean cost; with ``robust`` every draw gets its K realisations and the robust aggregate
+runs over the draws of these means (:mod:`aiofl.tuning.robust`).
 """
 
 from __future__ import annotations
@@ -78,6 +87,8 @@ __all__ = [
 ALGORITHMS = ("ga", "de", "cmaes", "nsga2")
 #: largest ``robust.draws`` (each candidate costs K + 1 simulations)
 MAX_ROBUST_DRAWS = 1000
+#: largest ``noise_realisations`` (each candidate costs K simulations per plant)
+MAX_NOISE_REALISATIONS = 256
 
 
 class _Model(BaseModel):
@@ -125,6 +136,7 @@ class TuneSettings(_Model):
     chunks: Annotated[int, Field(ge=1, le=100_000)] | None = None
     parameters: dict[str, ParameterBounds]
     robust: RobustSettings | None = None
+    noise_realisations: Annotated[int, Field(ge=1, le=MAX_NOISE_REALISATIONS)] = 1
     objectives: list[str] | None = None
     constraints: list[str] = Field(default_factory=list, max_length=16)
     choose: Literal["best-first-under-constraints", "knee"] = "best-first-under-constraints"
@@ -175,11 +187,11 @@ class TuneSettings(_Model):
                     f"{', '.join(over)}: an aggregate over draws needs robust = "
                     "{ draws = K, ... } (and an [uncertainty] table)"
                 )
-        k1 = 1 + (self.robust.draws if self.robust else 0)
+        k1 = (1 + (self.robust.draws if self.robust else 0)) * self.noise_realisations
         if self.population * k1 > MAX_POPULATION:
             raise ValueError(
-                f"population x (robust.draws + 1) = {self.population} x {k1} = "
-                f"{self.population * k1} members per generation; allowed: at most "
+                f"population x (robust.draws + 1) x noise_realisations = {self.population} x "
+                f"{k1} = {self.population * k1} members per generation; allowed: at most "
                 f"{MAX_POPULATION} (one batched engine call)"
             )
         total = self.population * self.generations
