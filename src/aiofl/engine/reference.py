@@ -7,7 +7,9 @@ the engine's compiled kernel: the plant is evaluated through :meth:`aiofl.plants
 and :meth:`aiofl.plants.base.Plant.output` (the user's Python functions), and every controller
 component is written out again below.  Only the data containers (:class:`Controller`,
 :class:`Scenario`) and the noise generator :func:`aiofl.scenario.noise_sequence` (which
-*defines* the noise) are shared.
+*defines* the noise) are shared, and for a model-assisted observer the host-side placement
+of its gains (:mod:`aiofl.components.model_gains`, at a Jacobian this path computes from its
+own numerical :math:`\Phi^{-1}`).
 
 The loop, with :math:`e_i = r_i - \hat\xi_i` and :math:`y_m = h(x) + n(t)`:
 
@@ -59,6 +61,7 @@ from numpy.typing import NDArray
 from scipy.integrate import solve_ivp
 from scipy.optimize import root
 
+from aiofl.components.model_gains import design_point_jacobian, model_gain
 from aiofl.controller import Controller
 from aiofl.plants.base import Plant
 from aiofl.scenario import Scenario, noise_sequence
@@ -108,7 +111,8 @@ def setup_loop(plant: Plant, controller: Controller, scenario: Scenario) -> Loop
     rho = c.rho
     n_td = {"exact": 0, "han": 2, "improved": 2, "linear": rho}[c.td]
     omega0 = c.value("eso.omega0")
-    betas = np.array([c.value(f"eso.alpha{i}") * omega0**i for i in range(1, rho + 2)])
+    alphas = np.array([c.value(f"eso.alpha{i}") for i in range(1, rho + 2)])
+    betas = alphas * omega0 ** np.arange(1, rho + 2)
     if c.sef == "linear" or c.law == "iofl":
         wc = c.value("sef.omega_c")
         k_lin = np.array([comb(rho, i - 1) * wc ** (rho - i + 1) for i in range(1, rho + 1)])
@@ -116,7 +120,7 @@ def setup_loop(plant: Plant, controller: Controller, scenario: Scenario) -> Loop
         k_lin = np.array([c.value(f"sef.k{i}") for i in range(1, rho + 1)])
     # (s + ω)^ρ = s^ρ + a_1 s^(ρ-1) + ... + a_ρ, from its roots
     prefilter_poly = np.real(np.poly(np.full(rho, -c.value("td.omega"))))
-    return LoopSetup(
+    setup = LoopSetup(
         plant=plant,
         controller=c,
         scenario=scenario,
@@ -131,6 +135,19 @@ def setup_loop(plant: Plant, controller: Controller, scenario: Scenario) -> Loop
         p_changed=plant.param_vector(scenario.plant_overrides, scenario.plant_scale),
         x_hat=np.zeros(plant.n_states),
     )
+    if c.eso_model == "nominal" and c.eso_gains == "bandwidth":
+        # the gains placed for the model's linearised error dynamics at Φ(x0), from this
+        # path's own numerical Φ⁻¹ (aiofl.components.model_gains)
+        x0 = np.asarray(scenario.x0 or np.zeros(plant.n_states), dtype=np.float64)
+        xi0 = np.asarray(plant.normal_form(x0, setup.p_nominal), dtype=float)[:rho]  # type: ignore[misc]
+
+        def model(xi: NDArray[np.float64], p: NDArray[np.float64]) -> tuple[float, float]:
+            return _nominal_model_at(setup, np.r_[xi, 0.0])
+
+        jac = design_point_jacobian(model, xi0, setup.p_nominal)
+        setup.betas[:] = model_gain(jac, alphas, omega0)
+        setup.x_hat[:] = 0.0
+    return setup
 
 
 def _nominal_model_at(s: LoopSetup, xi: NDArray[np.float64]) -> tuple[float, float]:

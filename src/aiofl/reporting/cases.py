@@ -19,6 +19,10 @@ when they exist, and appear as extra rows and panels everywhere without special 
   (records with ``"source": "retuned"``);
 * ``frontier-s{N}-{leso,inleso,ladrc}``: designs at the Pareto frontier, tuned for
   tracking, energy and robustness (records with ``"source": "robust"``);
+* ``assisted-s{N}-ladrc``: the model-assisted ESO (``eso.model = "nominal"``: the
+  observer and the law carry the plant's nominal α, β; records with
+  ``"source": "assisted"``), tuned with the measurement a rig has (a 12-bit encoder
+  sampled at 1 ms, or scenario 3's noise);
 * ``iofl-s{N}``: the classical model-based IOFL baseline (``"structure": "IOFL"``,
   ``"source": "model"``).
 """
@@ -57,6 +61,7 @@ __all__ = [
     "computed_record",
     "controller_access",
     "discover_cases",
+    "model_assistance",
     "paper_records",
     "run_cases",
     "trivial_itae",
@@ -65,11 +70,12 @@ __all__ = [
 EXTRA_PRESETS: tuple[tuple[str, str], ...] = (
     (r"retuned-s(?P<s>\d+)-(?:leso|inleso|ladrc)", "retuned"),
     (r"frontier-s(?P<s>\d+)-(?:leso|inleso|ladrc)", "robust"),
+    (r"assisted-s(?P<s>\d+)-(?:leso|inleso|ladrc)", "assisted"),
     (r"iofl-s(?P<s>\d+)", "model"),
 )
 """Optional presets (regex on the name, source label) included when they are shipped."""
 
-SOURCE_ORDER = ("paper", "printed", "retuned", "robust", "model")
+SOURCE_ORDER = ("paper", "printed", "retuned", "robust", "assisted", "model")
 STRUCTURE_ORDER = ("LESO", "INLESO", "LADRC", "IOFL")
 _SCENARIO_IN_NAME = re.compile(r"(?:^|-)s(\d+)(?:-|$)")
 
@@ -412,6 +418,19 @@ def controller_access(cfg: RunConfig, *, short: bool = False) -> str | None:
     )
     items = [model, state] + (["the exact reference derivatives"] if c.td == "exact" else [])
     return "given " + (", ".join(items[:-1]) + " and " + items[-1])
+
+
+def model_assistance(cfg: RunConfig) -> str | None:
+    """What a model-assisted ESO design is given besides the measured output, ρ and b0
+    (None for a model-free or IOFL design), and the sensor it was designed for."""
+    c = cfg.controller
+    if c.law != "aiofl" or c.eso_model == "none":
+        return None
+    text = "given the nominal model (α, β at x̂ = Φ⁻¹(ξ̂)) and the measured output"
+    sensor = getattr(cfg, "sensor", None)
+    if sensor is not None and sensor.preset not in ("ideal", "custom"):
+        text += f", {sensor.preset}"
+    return text
 
 
 def closed_loop_verdict(cfg: RunConfig) -> dict[str, Any]:

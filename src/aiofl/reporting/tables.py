@@ -22,6 +22,7 @@ from aiofl.reporting.cases import (
     Reproduction,
     controller_access,
     itd_gain,
+    model_assistance,
     observer_roots,
     output_ratio,
 )
@@ -130,8 +131,8 @@ def _with_unit(text: str, unit: str) -> str:
 
 
 def case_label(run: CaseRun) -> str:
-    """Row label; an IOFL row says what the model-based law is given."""
-    given = controller_access(run.case.config)
+    """Row label; an IOFL or model-assisted row says what its law is given."""
+    given = controller_access(run.case.config) or model_assistance(run.case.config)
     return run.case.label + (f"; {given}" if given else "")
 
 
