@@ -62,6 +62,7 @@ from aiofl.components.differentiators import (
     linear_prefilter_update,
 )
 from aiofl.components.feedback import fal, inlsef_limit, inlsef_term, linear_sef_gains
+from aiofl.components.model_gains import design_point_jacobian, model_gain
 from aiofl.components.observers import eso_gains, inleso_injection
 from aiofl.controller import Controller
 from aiofl.plants.base import Plant
@@ -152,6 +153,12 @@ class ClosedLoop:
         self.derivatives = PlantDerivatives(plant)
         alphas = [c.value(f"eso.alpha{i}") for i in range(1, c.rho + 2)]
         self.betas = eso_gains(c.value("eso.omega0"), alphas)
+        if c.eso_model == "nominal" and c.eso_gains == "bandwidth":
+            # the engine's gains: placed for the nominal model at Φ(x0) (model_gains)
+            x0 = np.asarray(scenario.x0 or np.zeros(plant.n_states), dtype=np.float64)
+            xi0 = np.asarray(plant.normal_form(x0, self.p_nom), dtype=np.float64)[: c.rho]  # type: ignore[misc]
+            jac = design_point_jacobian(plant.alpha_beta_of_xi, xi0, self.p_nom)
+            self.betas = model_gain(jac, alphas, c.value("eso.omega0"))
         wc = c.value("sef.omega_c")
         if c.sef == "linear" or c.law == "iofl":
             self.lin_k = linear_sef_gains(c.rho, wc)
