@@ -118,10 +118,12 @@ def closed_loop(
     sampling: Sampling,
     t_final: float,
     n_sub: int = 5,
+    x0: tuple[float, ...] = (),
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Drive the plant (RK4 at Ts/n_sub, the command held) with the C controller; step the
     engine's discrete controller on the same inputs (the measurement and reference as the C
-    code received them: rounded to float in a float build).  Returns (u_C, u_engine, y)."""
+    code received them: rounded to float in a float build; a model-assisted controller's
+    with the plant's nominal model, its gain placed at ``x0``).  Returns (u_C, u_engine, y)."""
     lib = ctypes.CDLL(str(lib_path))
     real = ctypes.c_double if precision == "double" else ctypes.c_float
     lib.aiofl_init.argtypes = [ctypes.c_void_p, real]
@@ -130,7 +132,8 @@ def closed_loop(
     lib.aiofl_step.restype = real
     state = (ctypes.c_double * 128)()  # larger than any aiofl_state, double-aligned
     rbuf = (real * (L.RHO_MAX + 1))()
-    engine = DiscreteController(controller, sampling)
+    model = plant if controller.eso_model != "none" else None  # the nominal model's plant
+    engine = DiscreteController(controller, sampling, plant=model, x0=x0)
     f, g, h = plant.compiled[:3]
     p = plant.param_vector()
     x = np.zeros(plant.n_states)

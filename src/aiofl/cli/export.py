@@ -2,8 +2,10 @@
 
 Writes ``DIR/aiofl_controller.h`` and ``DIR/aiofl_controller.c`` (:mod:`aiofl.export`), the
 discrete controller the engine simulates with ``--ts`` / ``[controller.discrete]``.  A
-controller the C code cannot express (the IOFL law, which needs the plant model), a missing
-sample time or a bad option exits with status 2 and the reason; nothing is written then.
+controller the C code cannot express (the IOFL law, which needs the plant model; a
+model-assisted controller of a plant without symbolic expressions, whose nominal model is
+generated as C from them), a missing sample time or a bad option exits with status 2 and the
+reason; nothing is written then.
 The config's name, description and path go into the files' comment block only, made inert
 by :func:`aiofl.export.c_text.comment_text` inside :func:`aiofl.export.export_c`.
 """
@@ -58,6 +60,9 @@ def export_command(
                 precision=precision,
                 title=cfg.name,
                 notes=[f"Config: {config}", *([cfg.description] if cfg.description else [])],
+                plant=cfg.plant,  # a model-assisted controller's nominal model
+                plant_source=str(cfg.raw.get("plant", cfg.plant.name)),
+                x0=cfg.scenario.x0,
             )
         except ExportError as exc:
             raise ValueError(f"cannot export {cfg.name!r}: {exc}") from None

@@ -84,6 +84,7 @@ from aiofl.engine.member import (
     Q_PF,
     _aiofl_command,
 )
+from aiofl.engine.observer_gains import model_jacobians
 
 __all__ = ["DiscreteController"]
 
@@ -390,9 +391,21 @@ class DiscreteController:
     plant
         The plant whose nominal model a model-assisted observer (``eso.model =
         "nominal"``) carries, with its nominal parameters; not needed otherwise.
+    x0
+        The plant state the model-assisted observer's bandwidth gains are placed at, as the
+        engine places them at the scenario's initial state:
+        :math:`J = \\partial(\\hat\\alpha + \\hat\\beta u^*)/\\partial\\xi` at
+        :math:`\\xi^* = \\Phi(x_0)` (:func:`aiofl.engine.observer_gains.model_jacobians`);
+        empty (the default): the origin.  Not used otherwise.
     """
 
-    def __init__(self, controller: Controller, sampling: Sampling, plant: Any = None) -> None:
+    def __init__(
+        self,
+        controller: Controller,
+        sampling: Sampling,
+        plant: Any = None,
+        x0: Sequence[float] = (),
+    ) -> None:
         if controller.law != "aiofl":
             raise ValueError(
                 f"controller.law_kind = {controller.law!r}: a discrete controller without "
@@ -409,7 +422,9 @@ class DiscreteController:
         self.controller = controller
         self.sampling = sampling
         batch = controller_batch(controller)
-        self.row = sampling_rows(batch, [sampling], sampling.ts)[0]
+        # a model-assisted observer's gain is placed for the model's error map at Φ(x0)
+        jac = model_jacobians(plant, batch, [x0]) if controller.eso_model != "none" else None
+        self.row = sampling_rows(batch, [sampling], sampling.ts, jac)[0]
         self._fn = _standalone(plant if controller.eso_model != "none" else None)
         self._pn = plant.param_vector() if plant is not None else np.zeros(1)
         self._q = np.zeros(N_Q)
