@@ -27,8 +27,8 @@ The *mean* of the cluster is well-conditioned, :math:`O(\epsilon)` (Kato, *Pertu
 Theory for Linear Operators*, ch. II §1: the weighted mean of the λ-group is analytic in
 the perturbation where its members have branch points).  :func:`group_eigenvalues` finds
 such clusters — eigenvalues whose distances are within how far they move when A is
-perturbed at 10 × rounding level, their own accuracy — and reports each as its mean with a multiplicity, so
-−50 ×3 prints as −50 ×3.  Eigenvalues that rounding cannot have made differ are not
+perturbed at 10 × rounding level, their own accuracy — and reports each as its mean
+with a multiplicity, so −50 ×3 prints as −50 ×3.  Eigenvalues that rounding cannot have made differ are not
 merged (two simple eigenvalues 1e-6 apart stay two; −10 ×3 and −10.1 ×2 stay two groups;
 see the tests).
 
