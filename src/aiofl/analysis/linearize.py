@@ -28,8 +28,8 @@ Theory for Linear Operators*, ch. II §1: the weighted mean of the λ-group is a
 the perturbation where its members have branch points).  :func:`group_eigenvalues` finds
 such clusters — eigenvalues whose distances are within how far they move when A is
 perturbed at 10 × rounding level, their own accuracy — and reports each as its mean
-with a multiplicity, so −50 ×3 prints as −50 ×3.  Eigenvalues that rounding cannot have made differ are not
-merged (two simple eigenvalues 1e-6 apart stay two; −10 ×3 and −10.1 ×2 stay two groups;
+with a multiplicity, so −50 ×3 prints as −50 ×3.  Eigenvalues that rounding cannot
+have made differ are not merged (two simple eigenvalues 1e-6 apart stay two; −10 ×3 and −10.1 ×2 stay two groups;
 see the tests).
 
 Frequency-domain margins (the loop broken at the plant input) are
