@@ -29,8 +29,8 @@ the perturbation where its members have branch points).  :func:`group_eigenvalue
 such clusters — eigenvalues whose distances are within how far they move when A is
 perturbed at 10 × rounding level, their own accuracy — and reports each as its mean
 with a multiplicity, so −50 ×3 prints as −50 ×3.  Eigenvalues that rounding cannot
-have made differ are not merged (two simple eigenvalues 1e-6 apart stay two; −10 ×3 and −10.1 ×2 stay two groups;
-see the tests).
+have made differ are not merged (two simple eigenvalues 1e-6 apart stay two; −10 ×3
+and −10.1 ×2 stay two groups; see the tests).
 
 Frequency-domain margins (the loop broken at the plant input) are
 :mod:`aiofl.analysis.frequency`; the closed loop itself, and how its non-smooth elements
