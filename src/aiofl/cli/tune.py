@@ -135,6 +135,8 @@ def tune_command(
         summary = write_outputs(result, out)
     for note in summary["notes"]:
         typer.echo(f"aiofl: note: {note}", err=True)
+    for warning in summary.get("warnings", []):
+        typer.echo(f"aiofl: warning: {warning}", err=True)
     typer.echo(summary_text(result, summary, out))
 
 
