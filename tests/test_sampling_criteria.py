@@ -135,3 +135,28 @@ def test_a_loop_unstable_in_continuous_time_prints_no_ts_stable(tmp_path: Path) 
     info = json.loads(runner.invoke(app, ["analyze", str(run), "--sampling", "--json"]).stdout)
     assert info["continuous_diverged"] and info["ts_stable"] is None and info["ts_max"] is None
     assert "criteria" in info
+
+
+def test_the_one_sample_delay_is_in_the_linearisation(tmp_path: Path) -> None:
+    """With ``delay = 1`` the plant gets the previous command (a state u_{k-1}) and so does
+    the ESO's prediction: state (y, ẑ1, ẑ2, u_{k-1}), the matrix written out."""
+    from dataclasses import replace
+
+    from aiofl.engine.discrete import Sampling
+
+    cfg = load_config(str(first_order(tmp_path)))
+    loop = SampledLoop(replace(cfg, sampling=Sampling(1e-4, delay=1, eso="euler")))
+
+    def radius(a: float) -> float:
+        m = np.array(
+            [
+                [1.0, 0.0, 0.0, a * BETA],
+                [2 * a * W0, 1 - 2 * a * W0, a, a * BETA],
+                [a * W0**2, -(a * W0**2), 1.0, 0.0],
+                [0.0, -WC / BETA, -1 / BETA, 0.0],
+            ]
+        )
+        return float(np.max(np.abs(np.linalg.eigvals(m))))
+
+    for ts in (0.005, 0.01, 0.0224, 0.03):
+        assert loop.spectral_radius(ts) == pytest.approx(radius(ts), rel=1e-6)

@@ -103,7 +103,7 @@ class SampledLoop:
             z = loop.operating_point()
             a, b, _, _ = loop.linear_model(z, broken=True)
             a_cl, _, c_cl, _ = loop.linear_model(z)
-        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+        except Exception as exc:  # no operating point, a plant without derivatives, ...
             self.available, self.reason = False, f"no linearisation: {exc}"
             return
         n = loop.n
@@ -214,11 +214,16 @@ class SampledLoop:
         return m
 
     def spectral_radius(self, ts: float) -> float | None:
-        """:math:`\\max_i|\\lambda_i|` of :meth:`matrix` (None when not available or the
-        matrix is not finite)."""
+        """:math:`\\max_i|\\lambda_i|` of :meth:`matrix` (None when not available, when the
+        controller cannot be built at ``ts`` (``reason`` says why) or the matrix is not
+        finite)."""
         if not self.available:
             return None
-        m = self.matrix(ts)
+        try:
+            m = self.matrix(ts)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+            self.reason = f"no linearisation at Ts = {ts:g}: {exc}"
+            return None
         if not np.all(np.isfinite(m)):
             return None
         return float(np.max(np.abs(np.linalg.eigvals(m))))
