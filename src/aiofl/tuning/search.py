@@ -517,7 +517,8 @@ def tune(
             state["live_s"] += secs
             if ckpt is not None:
                 save_checkpoint(ckpt, prep.fingerprint, gens)
-        shown = state["lowest"] if prep.objectives else state["best"]
+        # the first objective as itself (a maximised margin is minimised as its negative)
+        shown = state["lowest"] * prep.objectives[0].sign if prep.objectives else state["best"]
         bar.update(len(gens), shown, int(state["live_n"]), float(state["live_s"]))
         return (scores["F"], scores["G"]) if prep.objectives else obj
 
