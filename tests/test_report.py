@@ -492,36 +492,46 @@ def test_unit_texts_are_bounded() -> None:
 
 # ------------------------------------------------------------------ sensors
 def test_sensor_table_columns_are_simulate_with_that_sensor() -> None:
-    """The ideal column is `aiofl simulate PRESET`, the encoder columns `... --sensor`;
-    a diverged run is written as its divergence time; the verdict follows the columns."""
+    """Every column is `aiofl simulate PRESET --sensor S` (S = ideal, encoder-16bit,
+    encoder-12bit): the ideal column is the ideal-sensor limit also of a preset shipped
+    sampled and quantised (assisted-*), and `aiofl simulate PRESET` for the continuous
+    ones; a diverged run is written as its divergence time; the verdict follows."""
     from types import SimpleNamespace
 
     from aiofl.config import load_config
     from aiofl.reporting.cases import discover_cases
     from aiofl.reporting.sensor_rows import SENSOR_COLUMNS, compute_sensor_table, sensor_rows
 
-    cases = [
-        c
-        for c in discover_cases(["frontier-s1-ladrc", "retuned-s1-leso"])
-        if c.preset in ("frontier-s1-ladrc", "retuned-s1-leso", "paper-s1-leso")
-    ]
+    names = ("frontier-s1-ladrc", "retuned-s1-leso", "paper-s1-leso", "assisted-s1-ladrc")
+    cases = [c for c in discover_cases(list(names)) if c.preset in names]
+    assert len(cases) == len(names)
     table = compute_sensor_table(cases)
     assert table.engine_calls == 1 and not table.skipped
     for case in cases:
         got = table.results[case.preset]
+        assert [k for k, _, _ in SENSOR_COLUMNS] == ["ideal", "encoder-16bit", "encoder-12bit"]
         for key, preset, _ in SENSOR_COLUMNS:
-            cfg = load_config(case.preset)
-            cfg = cfg if preset is None else cfg.with_sensor(preset)
-            one = cfg.simulate(store=False)
+            one = load_config(case.preset).with_sensor(preset).simulate(store=False)
             assert got[key]["diverged"] == one.diverged
             if one.diverged:
                 assert got[key]["diverged_at"] == one.diverged_at
             else:
                 assert got[key]["itae"] == one.metrics["itae"]
                 assert got[key]["isu"] == one.metrics["isu"]
+        assert got["ideal"]["sensor"].startswith("ideal (continuous, not quantised")
+        shipped = load_config(case.preset).simulate(store=False)
+        if case.preset == "assisted-s1-ladrc":  # shipped with a 12-bit encoder at 1 ms
+            assert load_config(case.preset).sampling is not None
+            assert got["encoder-12bit"]["itae"] == shipped.metrics["itae"]
+            assert got["ideal"]["itae"] != shipped.metrics["itae"]
+        elif not shipped.diverged:
+            assert got["ideal"]["itae"] == shipped.metrics["itae"]
     given = {p: got["ideal"] for p, got in table.results.items()}  # runs already made
     again = compute_sensor_table(cases, ideal=given)
     assert again.results == table.results
+    # a sampled preset's own run is not taken as its ideal column
+    wrong = {"assisted-s1-ladrc": {"itae": 1.0, "isu": 1.0, "diverged": False, "diverged_at": 0}}
+    assert compute_sensor_table(cases, ideal=wrong).results == table.results
     rep = SimpleNamespace(runs=[SimpleNamespace(case=c) for c in cases], sensors=table)
     rows = {r[2]: r for r in sensor_rows(rep)}  # type: ignore[arg-type]
     f = rows["frontier-s1-ladrc"]

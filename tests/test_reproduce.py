@@ -26,6 +26,7 @@ FILES = (
     "fig3.png",
     "fig4.png",
     "fig5.png",
+    "noise-front-s3.png",
     "report.html",
 )
 KEYS = {"scenario", "structure", "source", "itae", "isu", "iau", "opi", "diverged", "diverged_at"}
@@ -59,14 +60,19 @@ def test_reproduce_succeeds_and_writes_every_file(reproduced) -> None:
 
 
 def test_every_design_is_shown_with_real_sensors(reproduced) -> None:
-    """The sensor table: ideal = the run of the tables, encoders at 1 ms, a verdict each."""
+    """The sensor table: ideal = the ideal-sensor limit (the run of the tables for the
+    presets shipped continuous), encoders at 1 ms, a verdict each."""
     recs = [r for r in _records(reproduced) if r["source"] != "paper"]
     md = (reproduced.out / "tables.md").read_text()
     assert "## What a user gets: the ideal sensor beside 16-bit and 12-bit encoders" in md
     for r in recs:
         got = r["sensors"]
         assert set(got) == {"ideal", "encoder-16bit", "encoder-12bit", "verdict"}
-        assert (got["ideal"]["itae"], got["ideal"]["diverged"]) == (r["itae"], r["diverged"])
+        assert got["ideal"]["sensor"].startswith("ideal (continuous, not quantised")
+        if load_config(r["preset"]).sampling is None:
+            assert (got["ideal"]["itae"], got["ideal"]["diverged"]) == (r["itae"], r["diverged"])
+        else:  # shipped sampled (assisted-*): its own run is its 12-bit / noisy 1-ms run
+            assert got["ideal"]["itae"] != r["itae"]
         assert got["encoder-12bit"]["sensor"].startswith("encoder-12bit (sampled at 1 ms")
         assert f"| {r['preset']} |" in md and got["verdict"] in md
 
@@ -151,6 +157,7 @@ def test_report_is_self_contained(reproduced) -> None:
     assert "http://" not in page and "https://" not in page
     srcs = re.findall(r'src="([^"]*)"', page)
     n_fronts = len(list(reproduced.out.glob("fronts-s*.png")))  # one per shipped scenario
+    n_fronts += (reproduced.out / "noise-front-s3.png").is_file()  # scenario 3's noise fronts
     assert len(srcs) == 3 + n_fronts
     assert all(s.startswith("data:image/png;base64,") for s in srcs)
     assert "<link" not in page and "<script" not in page
@@ -376,7 +383,7 @@ def test_per_case_prose_figures_and_linearisation_sentences_are_folded(reproduce
     assert not re.search(r"the simulation(?:'s error| tracks| diverges| stays)", shown)
     for n in (3, 4, 5):  # the tall figures are folded, the fronts' stay open
         assert f'alt="Figure {n}' in page and f'alt="Figure {n}' not in shown
-    assert shown.count("<img") == len(list(reproduced.out.glob("fronts-s*.png")))
+    assert shown.count("<img") == len(list(reproduced.out.glob("*front*-s*.png")))
 
 
 def test_report_embeds_smaller_figures(reproduced) -> None:
@@ -387,9 +394,11 @@ def test_report_embeds_smaller_figures(reproduced) -> None:
 
     page = _page(reproduced)
     embedded = re.findall(r'<img alt="([^"]*)" src="data:image/png;base64,([^"]*)"', page)
-    files = {f"Figure {n}": f"fig{n}.png" for n in (3, 4, 5)} | {
-        f"Pareto fronts, scenario {s}": f"fronts-s{s}.png" for s in (1, 3)
-    }
+    files = (
+        {f"Figure {n}": f"fig{n}.png" for n in (3, 4, 5)}
+        | {f"Pareto fronts, scenario {s}": f"fronts-s{s}.png" for s in (1, 3)}
+        | {"Noise fronts, scenario 3": "noise-front-s3.png"}
+    )
     total_file = total_page = 0
     for alt, data in embedded:
         png = base64.b64decode(data)
@@ -399,7 +408,7 @@ def test_report_embeds_smaller_figures(reproduced) -> None:
             assert im.mode == "P" and im.size == full.size  # a palette, same pixels size
         total_file += len(written)
         total_page += len(png)
-    assert len(embedded) == 3 + len(list(reproduced.out.glob("fronts-s*.png")))
+    assert len(embedded) == 3 + len(list(reproduced.out.glob("*front*-s*.png")))
     assert total_page < 0.5 * total_file  # 2.6x smaller at the time of writing
     assert len(page.encode()) < 1.5e6  # 2.66 MB before
 
@@ -435,3 +444,29 @@ def test_stage_progress_on_a_terminal_ticks_each_stage_with_its_seconds() -> Non
     out = re.sub(r"\x1b\[[0-9;?]*[a-zA-Z]", "", buf.getvalue())
     assert re.search(r"✓ first \(\d+\.\d s\)", out) and re.search(r"✓ second \(\d+\.\d s\)", out)
     assert not re.search(r"^\[\s*\d", out, flags=re.M)  # no log lines on a terminal
+
+
+def test_noise_fronts_and_fresh_seeds_are_in_the_report(reproduced) -> None:
+    """Scenario 3 under noise: the answer from the shipped noise fronts, the figure, and
+    every scenario-3 design with noise on the 32 fresh seeds."""
+    from aiofl.reporting.fresh_seeds import FRESH_TITLE
+    from aiofl.reporting.noise_front import (
+        NOISE_FRONTS,
+        NOISE_TITLE,
+        load_noise_fronts,
+        winner,
+    )
+
+    md = (reproduced.out / "tables.md").read_text()
+    page = html.unescape((reproduced.out / "report.html").read_text())
+    best = winner(load_noise_fronts())
+    assert best is not None
+    said = f"the {dict(NOISE_FRONTS)[best]} is best"
+    for text in (md, page):
+        assert NOISE_TITLE in text and said in text and FRESH_TITLE in text
+    assert (reproduced.out / "noise-front-s3.png").read_bytes()[:4] == b"\x89PNG"
+    section = md.split(f"## {FRESH_TITLE}")[1].split("\n## ")[0]
+    for name in list_presets():
+        if re.fullmatch(r"(paper|retuned|frontier|assisted)-s3-\w+|iofl-s3", name):
+            assert f"| {name} |" in section, name
+    assert "32 noise seeds" in section and "(1000–1031)" in section

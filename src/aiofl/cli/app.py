@@ -515,8 +515,8 @@ def reproduce_command(
     shipped retuned-s*-* / frontier-s*-* / iofl-s* presets, batched; runs every design over
     the same --draws model-error draws (one batched call per scenario) and reads the
     shipped Pareto fronts.  Writes metrics.json, sampling.json, tables.md, fig3.png,
-    fig4.png, fig5.png, fronts-s1.png / fronts-s3.png (when fronts are shipped) and
-    report.html.
+    fig4.png, fig5.png, fronts-s1.png / fronts-s3.png (when fronts are shipped),
+    noise-front-s3.png (when scenario 3's noise fronts are shipped) and report.html.
     """
     import time
 
@@ -532,6 +532,7 @@ def reproduce_command(
         progress.done()
     _print_records(rep.records, title="aiofl reproduce: paper vs computed")
     fronts = "".join(f"fronts-s{s}.png, " for s in sorted({k[0] for k in rep.fronts.fronts}))
+    fronts += "noise-front-s3.png, " if rep.noise_fronts.fronts else ""
     typer.echo(
         f"wrote {out}/metrics.json, sampling.json, tables.md, fig3.png, fig4.png, fig5.png, "
         f"{fronts}report.html in {time.perf_counter() - t0:.1f} s"

@@ -463,6 +463,10 @@ class Reproduction:
     fronts: Any = None
     # every design with the ideal sensor and real encoders (reporting.sensor_rows), or None
     sensors: Any = None
+    # scenario 3's noise fronts (reporting.noise_front.NoiseFronts), or None
+    noise_fronts: Any = None
+    # scenario 3's designs on fresh noise seeds (reporting.fresh_seeds.FreshSeeds), or None
+    fresh: Any = None
 
     def scenario_runs(self, scenario: int) -> list[CaseRun]:
         """The runs of one scenario, in table order."""

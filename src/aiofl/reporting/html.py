@@ -18,6 +18,7 @@ from collections.abc import Mapping, Sequence
 
 from aiofl.reporting.cases import CaseRun, Reproduction
 from aiofl.reporting.findings import findings
+from aiofl.reporting.fresh_seeds import FRESH_HEADER, FRESH_TITLE, fresh_notes, fresh_rows
 from aiofl.reporting.fronts import (
     ISU_BUDGET,
     front_header,
@@ -25,6 +26,13 @@ from aiofl.reporting.fronts import (
     front_rows,
     front_scenarios,
     has_front_content,
+)
+from aiofl.reporting.noise_front import (
+    NOISE_HEADER,
+    NOISE_TITLE,
+    noise_answer,
+    noise_notes,
+    noise_rows,
 )
 from aiofl.reporting.paper import SCENARIOS
 from aiofl.reporting.robust_rows import ROBUST_HEADER, robust_notes, robust_rows
@@ -192,6 +200,11 @@ def _robust_sections(rep: Reproduction, figures: Mapping[str, bytes]) -> list[st
         body.append(f"<h2>{_e(SENSOR_TITLE)}</h2>")
         body.append(_html_table(SENSOR_HEADER, rows))
         body.append(_details("What these columns are", [_list(sensor_notes(rep), "notes")]))
+    rows = fresh_rows(rep)
+    if rows:
+        body.append(f"<h2>{_e(FRESH_TITLE)}</h2>")
+        body.append(_html_table(FRESH_HEADER, rows))
+        body.append(_details("How these rows were computed", [_list(fresh_notes(rep), "notes")]))
     body.append("<h2>Pareto fronts: which structure tracks best at equal control energy?</h2>")
     body.append(_details("Where the fronts come from", [_list(front_notes(rep), "notes")]))
     for s, sentences in front_scenarios(rep).items():
@@ -200,6 +213,11 @@ def _robust_sections(rep: Reproduction, figures: Mapping[str, bytes]) -> list[st
             body.append(_html_table(front_header(s), front_rows(rep, s), cls="settings"))
         body.append(_list(sentences, "answers"))
         body += _img(figures, f"fronts-s{s}.png", f"Pareto fronts, scenario {s}")
+    body.append(f"<h2>{_e(NOISE_TITLE)}</h2>")
+    body.append(_list(noise_answer(getattr(rep, "noise_fronts", None)), "answers"))
+    body.append(_html_table(NOISE_HEADER, noise_rows(rep), cls="settings"))
+    body.append(_details("Where the noise fronts come from", [_list(noise_notes(rep), "notes")]))
+    body += _img(figures, "noise-front-s3.png", "Noise fronts, scenario 3")
     return body
 
 

@@ -5,7 +5,9 @@ case over the same model-error draws (:mod:`aiofl.reporting.robust_rows`) and wi
 sensor beside 16-bit and 12-bit encoders (:mod:`aiofl.reporting.sensor_rows`), reads the
 shipped Pareto fronts (:mod:`aiofl.reporting.fronts`) and writes ``metrics.json``,
 ``tables.md``, ``fig3.png``–``fig5.png``, ``fronts-s1.png``/``fronts-s3.png`` (when
-fronts are shipped) and a self-contained ``report.html`` into an output directory,
+fronts are shipped), ``noise-front-s3.png`` (scenario 3's noise fronts,
+:mod:`aiofl.reporting.noise_front`; with scenario 3's designs on fresh noise seeds,
+:mod:`aiofl.reporting.fresh_seeds`) and a self-contained ``report.html`` into an output directory,
 all-or-nothing.
 """
 
@@ -20,8 +22,10 @@ from pathlib import Path
 from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 from aiofl.reporting.cases import Reproduction, compute
 from aiofl.reporting.figures import figure_png, scenario_figure
+from aiofl.reporting.fresh_seeds import compute_fresh_seeds, fresh_markdown
 from aiofl.reporting.fronts import FRONT_SCENARIOS, front_figure, fronts_markdown, load_fronts
 from aiofl.reporting.html import html_report
+from aiofl.reporting.noise_front import load_noise_fronts, noise_figure, noise_markdown
 from aiofl.reporting.paper import SCENARIOS
 from aiofl.reporting.robust_rows import (
     DEFAULT_DRAWS,
@@ -52,7 +56,8 @@ def reproduce(
 
     Writes ``metrics.json``, ``sampling.json`` (the sample-time limits of every case),
     ``tables.md``, ``fig3.png``, ``fig4.png``, ``fig5.png``, ``fronts-s{N}.png`` (one per
-    scenario with a shipped front) and ``report.html``.
+    scenario with a shipped front), ``noise-front-s3.png`` (when a noise front is shipped)
+    and ``report.html``.
 
     Parameters
     ----------
@@ -82,10 +87,12 @@ def reproduce(
     t0 = time.perf_counter()
     table = compute_robustness([r.case for r in rep.runs], draws=draws, seed=seed, on_stage=stage)
     t1 = time.perf_counter()
-    # the as-shipped column is the report's own run of each preset (unless --ts changed it)
-    ideal = {r.case.preset: r.record for r in rep.runs} if ts is None else None
+    # the report's own runs fill the ideal column of the presets run continuous
+    ideal = {r.case.preset: r.record for r in rep.runs}
     sensors = compute_sensor_table([r.case for r in rep.runs], ideal=ideal, on_stage=stage)
     t2 = time.perf_counter()
+    fresh = compute_fresh_seeds([r.case for r in rep.runs], on_stage=stage)
+    t3 = time.perf_counter()
     stage("reading the shipped Pareto fronts")
     rep = replace(
         rep,
@@ -93,11 +100,22 @@ def reproduce(
         sensors=sensors,
         records=with_sensors(with_robustness(rep.records, table), sensors),
         fronts=load_fronts(fronts_dir),
-        timings={**rep.timings, "robustness": t1 - t0, "sensors": t2 - t1},
+        noise_fronts=load_noise_fronts(fronts_dir),
+        fresh=fresh,
+        timings={
+            **rep.timings,
+            "robustness": t1 - t0,
+            "sensors": t2 - t1,
+            "fresh noise seeds": t3 - t2,
+        },
         engine={
             "sensors": (
                 f"ideal, 16-bit and 12-bit encoder at 1 ms for every design: "
                 f"{sensors.engine_calls} engine call(s)"
+            ),
+            "fresh noise seeds": (
+                f"{len(fresh.results)} scenario-3 designs × {len(fresh.seeds)} seeds: "
+                f"{fresh.engine_calls} engine call(s)"
             ),
             **rep.engine,
             "model-error draws": (
@@ -128,6 +146,9 @@ def reproduce(
             name = f"fronts-s{s}.png"
             figures[name] = figure_png(front_figure(rep, s, floor))
             atomic_write_bytes(stage_dir / name, figures[name])
+        if rep.noise_fronts.fronts:
+            figures["noise-front-s3.png"] = figure_png(noise_figure(rep))
+            atomic_write_bytes(stage_dir / "noise-front-s3.png", figures["noise-front-s3.png"])
         t1 = time.perf_counter()
         rep = replace(rep, timings={**rep.timings, "figures": t1 - t0})
         stage("writing tables and report")
@@ -137,7 +158,9 @@ def reproduce(
                 tables_markdown(rep),
                 robust_markdown(rep),
                 sensor_markdown(rep),
+                fresh_markdown(rep),
                 fronts_markdown(rep),
+                noise_markdown(rep),
             ]
         )
         atomic_write_text(stage_dir / "tables.md", md)

@@ -4,9 +4,10 @@ Every case of the report is run three times, all in one batched engine call per 
 designs that share the plant, the horizon, the step and the method
 (:func:`~aiofl.engine.simulation.simulate_batch`):
 
-* **as shipped** — the preset as ``aiofl simulate PRESET`` runs it: for the continuous
-  presets the ideal, continuous measurement (the *ideal-sensor limit*); scenario 3's output
-  noise is part of the scenario and stays in every column;
+* **ideal sensor** — the preset with ``[sensor] preset = "ideal"`` (``aiofl simulate PRESET
+  --sensor ideal``): the continuous controller, no quantum, the *ideal-sensor limit* of
+  every design, also of those shipped sampled and quantised (the ``assisted-*`` presets);
+  scenario 3's output noise is part of the scenario and stays in every column;
 * **16-bit encoder** and **12-bit encoder** — the preset with ``[sensor] preset =
   "encoder-16bit"`` / ``"encoder-12bit"`` (:mod:`aiofl.sensor`): the controller sampled at
   1 ms, the output quantised to 2π/65536 or 2π/4096 rad.
@@ -43,9 +44,9 @@ __all__ = [
     "with_sensors",
 ]
 
-#: the columns: (key, sensor preset or None for the preset as shipped, label)
-SENSOR_COLUMNS: tuple[tuple[str, str | None, str], ...] = (
-    ("ideal", None, "ideal sensor"),
+#: the columns: (key, sensor preset, label)
+SENSOR_COLUMNS: tuple[tuple[str, str, str], ...] = (
+    ("ideal", "ideal", "ideal sensor"),
     ("encoder-16bit", "encoder-16bit", "16-bit, 1 ms"),
     ("encoder-12bit", "encoder-12bit", "12-bit, 1 ms"),
 )
@@ -88,14 +89,17 @@ def _configs(case: Case) -> tuple[dict[str, Any], dict[str, str]]:
     out: dict[str, Any] = {}
     why: dict[str, str] = {}
     for key, preset, _ in SENSOR_COLUMNS:
-        if preset is None:
-            out[key] = case.config
-            continue
         try:
             out[key] = case.config.with_sensor(preset)
         except ConfigError as exc:
             why[key] = str(exc).split("\n")[-1].strip()
     return out, why
+
+
+def _is_ideal(cfg: Any) -> bool:
+    """Whether a config's measurement is the ideal sensor's (continuous, no quantum; its
+    noise is the scenario's), so its own run is its ideal-sensor run."""
+    return cfg.sampling is None and cfg.sensor.ts is None and cfg.sensor.quantum == 0
 
 
 def _key(cfg: Any) -> tuple[Any, ...]:
@@ -122,9 +126,11 @@ def compute_sensor_table(
     :func:`~aiofl.engine.simulation.simulate_batch` call per group of members sharing the
     plant, horizon, step, method and divergence threshold (one call for the SLFJM cases).
 
-    ``ideal`` (by preset: ``itae``, ``isu``, ``diverged``, ``diverged_at``) gives the
-    as-shipped column of runs already made (the report's own runs of the presets, the
-    numbers of ``aiofl simulate``), so they are not run twice."""
+    ``ideal`` (by preset: ``itae``, ``isu``, ``diverged``, ``diverged_at``) gives runs
+    already made (the report's own runs of the presets, the numbers of ``aiofl
+    simulate``): they fill the ideal column of the presets whose shipped measurement *is*
+    the ideal one (continuous, no quantum), so those are not run twice; a sampled preset's
+    ideal column is always run."""
     from aiofl.engine.simulation import simulate_batch
 
     ideal = ideal or {}
@@ -136,13 +142,13 @@ def compute_sensor_table(
         if why:
             skipped[case.preset] = why
         known = ideal.get(case.preset)
-        if known is not None:
+        if known is not None and "ideal" in cfgs and _is_ideal(case.config):
             results.setdefault(case.preset, {})["ideal"] = _entry(
                 known["itae"],
                 known["isu"],
                 known["diverged"],
                 known["diverged_at"],
-                case.config.sensor.describe(),
+                cfgs["ideal"].sensor.describe(),
             )
             cfgs.pop("ideal")
         members += [(case.preset, key, cfg) for key, cfg in cfgs.items()]
@@ -265,14 +271,16 @@ def sensor_notes(rep: Reproduction) -> list[str]:
     verdicts = [verdict(table.results.get(r.case.preset, {})) for r in rep.runs]
     counts = {v: verdicts.count(v) for v in dict.fromkeys(verdicts)}
     notes = [
-        "'ideal sensor' is the preset as shipped (aiofl simulate PRESET): for the continuous "
-        "presets the ideal, continuous measurement, the ideal-sensor limit no real "
-        "controller reaches. '16-bit, 1 ms' and '12-bit, 1 ms' run the same design measured "
+        "'ideal sensor' is the design with the ideal, continuous measurement (aiofl "
+        "simulate PRESET --sensor ideal): the ideal-sensor limit no real controller "
+        "reaches, for every design, also those shipped sampled and quantised (the "
+        "assisted-* presets, whose own runs in the tables above are their 12-bit or noisy "
+        "1-ms runs). '16-bit, 1 ms' and '12-bit, 1 ms' run the same design measured "
         "by an encoder (aiofl simulate PRESET --sensor encoder-16bit / encoder-12bit): the "
         "controller sampled at 1 ms, the output quantised to 2π/65536 or 2π/4096 rad. "
         "Scenario 3's output noise is part of the scenario and stays in every column. Full "
-        "horizon, same step and scenario as the tables above; the ideal-sensor column is "
-        "the run of those tables when the presets run as shipped, the encoder runs are "
+        "horizon, same step and scenario as the tables above; the ideal-sensor column reuses "
+        "the run of those tables for the presets shipped continuous; the other runs are "
         f"{table.engine_calls} batched engine call(s), {table.seconds:.1f} s.",
         "A design survives a sensor when it stays stable with it, its ITAE is at most "
         f"max({ITAE_FACTOR:g} × the ideal-sensor ITAE, that + {ITAE_SLACK:g}) and its ISU "
