@@ -12,7 +12,11 @@ the rows are paired comparisons; all designs of a scenario run in one batched en
 A row gives the stable fraction and the ITAE quantiles q05/q50/q95 over all N draws, a
 diverged draw counting as :math:`+\infty` (empirical quantiles, ``inverted_cdf``; a quantile
 that falls on a diverged draw is ``null`` in ``metrics.json`` and "diverged" in the tables),
-exactly the statistics of ``aiofl robustness``.
+exactly the statistics of ``aiofl robustness``.  Beside them: the 16 corners of the box
+(every factor at 0.8 or 1.2, :func:`aiofl.uncertainty.corner_draws`), run in the same
+engine call as the draws, and the design's β/b0 stability range
+(:func:`aiofl.analysis.corners.beta_ranges`: the true plant's high-frequency gain alone
+scaled, bisected on both sides; a few engine calls for all designs together).
 """
 
 from __future__ import annotations
@@ -22,9 +26,11 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from aiofl.reporting.cases import Case, Reproduction, controller_access
 from aiofl.reporting.tables import DASH, fmt
-from aiofl.uncertainty import UncertaintyModel, sample_draws
+from aiofl.uncertainty import UncertaintyModel, corner_draws, sample_draws
 
 __all__ = [
     "DEFAULT_DRAWS",
@@ -59,6 +65,8 @@ ROBUST_HEADER = (
     "ITAE 5 %",
     "ITAE 50 %",
     "ITAE 95 %",
+    "corners stable",
+    "β/b0 range",
 )
 """Columns of the robustness table."""
 
@@ -89,7 +97,14 @@ class RobustTable:
     skipped
         By preset, why a case was not run over the draws.
     engine_calls, seconds
-        Engine calls made and their wall time.
+        Engine calls made for the draws and corners, and their wall time.
+    corners
+        By preset, the box corners: ``{"count", "stable", "corners_stable", "diverged":
+        [{"corner", "t", "point"}]}``.
+    beta
+        By preset, :meth:`aiofl.analysis.corners.BetaRange.to_dict`.
+    beta_engine_calls
+        Engine calls of the β/b0 ranges (all designs together).
     """
 
     draws: int
@@ -99,6 +114,9 @@ class RobustTable:
     skipped: dict[str, str] = field(default_factory=dict)
     engine_calls: int = 0
     seconds: float = 0.0
+    corners: dict[str, dict[str, Any]] = field(default_factory=dict)
+    beta: dict[str, dict[str, Any]] = field(default_factory=dict)
+    beta_engine_calls: int = 0
 
 
 def compute_robustness(
@@ -107,6 +125,8 @@ def compute_robustness(
     draws: int = DEFAULT_DRAWS,
     seed: int = DEFAULT_SEED,
     on_stage: Callable[[str], None] | None = None,
+    corners: bool = True,
+    beta: bool = True,
 ) -> RobustTable | None:
     """Run every case over the same ``draws`` draws of :func:`robust_spec` (None if 0).
 
@@ -115,12 +135,16 @@ def compute_robustness(
     report.  The cases run scenario by scenario (designs of different scenarios never
     share an engine call), and ``on_stage`` is called with a description before each.
     """
+    from dataclasses import replace
+
+    from aiofl.analysis.corners import beta_ranges
     from aiofl.analysis.robustness import simulate_designs
 
     if draws == 0:
         return None
     spec = robust_spec(draws, seed)
     d = sample_draws(spec, draws=draws, seed=seed)
+    cd = corner_draws(spec)[0] if corners else None
     run: list[Case] = []
     skipped: dict[str, str] = {}
     for case in cases:
@@ -135,6 +159,7 @@ def compute_robustness(
     stage = on_stage or (lambda _msg: None)
     scenarios = sorted({c.scenario for c in run})
     results: dict[str, dict[str, Any]] = {}
+    corner_rec: dict[str, dict[str, Any]] = {}
     n_calls = 0
     t0 = time.perf_counter()
     for i, s in enumerate(scenarios, 1):
@@ -143,9 +168,41 @@ def compute_robustness(
             f"robustness, scenario {s} ({i} of {len(scenarios)}): {len(group)} designs × "
             f"{draws} draws of ±{100 * ROBUST_SPREAD:g} % model error"
         )
-        res = simulate_designs([c.config for c in group], d)
+        res = simulate_designs([c.config for c in group], d if cd is None else d.concat(cd))
         n_calls += sum({r.group: r.engine_calls for r in res}.values())
-        results.update({c.preset: r.to_dict() for c, r in zip(group, res, strict=True)})
+        for c, r in zip(group, res, strict=True):
+            own = replace(
+                r,
+                draws=d,
+                itae=r.itae[:draws],
+                isu=r.isu[:draws],
+                diverged=r.diverged[:draws],
+                diverged_at=r.diverged_at[:draws],
+            )
+            results[c.preset] = own.to_dict()
+            if cd is not None:
+                cols = cd.columns()
+                div = r.diverged[draws:]
+                t_div = r.diverged_at[draws:]
+                corner_rec[c.preset] = {
+                    "count": len(cd),
+                    "stable": int(len(cd) - div.sum()),
+                    "corners_stable": float(np.mean(~div)),
+                    "diverged": [
+                        {
+                            "corner": int(i),
+                            "t": float(t_div[i]),
+                            "point": {n: float(v[i]) for n, v in cols.items()},
+                        }
+                        for i in np.flatnonzero(div)
+                    ],
+                }
+    beta_rec: dict[str, dict[str, Any]] = {}
+    n_beta = 0
+    if beta and run:
+        stage(f"robustness: β/b0 stability range of {len(run)} designs")
+        ranges, n_beta = beta_ranges([c.config for c in run])
+        beta_rec = {c.preset: b.to_dict() for c, b in zip(run, ranges, strict=True)}
     seconds = time.perf_counter() - t0
     return RobustTable(
         draws=draws,
@@ -155,6 +212,9 @@ def compute_robustness(
         skipped=skipped,
         engine_calls=n_calls,
         seconds=seconds,
+        corners=corner_rec,
+        beta=beta_rec,
+        beta_engine_calls=n_beta,
     )
 
 
@@ -167,7 +227,13 @@ def with_robustness(
     out = []
     for rec in records:
         if "preset" in rec:
-            rec = {**rec, "robustness": table.results.get(rec["preset"]) if table else None}
+            got = table.results.get(rec["preset"]) if table else None
+            if got is not None and table is not None:
+                got = {**got}
+                for key, src in (("corners", table.corners), ("beta_range", table.beta)):
+                    if rec["preset"] in src:
+                        got[key] = src[rec["preset"]]
+            rec = {**rec, "robustness": got}
         out.append(rec)
     return out
 
@@ -199,9 +265,7 @@ def robust_rows(rep: Reproduction) -> list[list[str]]:
         got = table.results.get(preset)
         if got is None:
             why = table.skipped.get(preset, "not run")
-            rows.append(
-                [str(run.case.scenario), run.case.label, preset, nominal, why, DASH, DASH, DASH]
-            )
+            rows.append([str(run.case.scenario), run.case.label, preset, nominal, why, *[DASH] * 5])
             continue
         k, n_div = got["draws"], got["diverged"]
         q = got["itae"]
@@ -215,9 +279,37 @@ def robust_rows(rep: Reproduction) -> list[list[str]]:
                 _q(q["q05"]),
                 _q(q["q50"]),
                 _q(q["q95"]),
+                _corner_cell(table.corners.get(preset)),
+                _beta_cell(table.beta.get(preset)),
             ]
         )
     return rows
+
+
+def _corner_cell(rec: dict[str, Any] | None) -> str:
+    """ "16/16", or "15/16 (first diverged at t = 0.43 s)"."""
+    if rec is None:
+        return DASH
+    text = f"{rec['stable']}/{rec['count']}"
+    if rec["diverged"]:
+        text += f" (first diverged at t = {min(d['t'] for d in rec['diverged']):.2g} s)"
+    return text
+
+
+def _beta_cell(rec: dict[str, Any] | None) -> str:
+    """ "0.06 – 2.7 (nominal 1.16)", "≤ 0.06" / "≥ 23" at the cap, or why not computed."""
+    if rec is None:
+        return DASH
+    rng = rec["beta_over_b0"]
+    if rng is None:
+        if rec["s"] is not None:  # no b0 (IOFL): the factor on β
+            lo, hi = rec["s"]
+            return f"β×{lo:.2g} – β×{hi:.2g}"
+        return rec["reason"] or DASH
+    lo, hi = rng
+    a = ("≤ " if rec["capped"][0] else "") + f"{lo:.2g}"
+    b = ("≥ " if rec["capped"][1] else "") + f"{hi:.2g}"
+    return f"{a} – {b} (nominal {rec['beta_over_b0_nominal']:.3g})"
 
 
 def robust_notes(rep: Reproduction) -> list[str]:
@@ -240,6 +332,22 @@ def robust_notes(rep: Reproduction) -> list[str]:
         "draw. 'ITAE nominal' is the run of the table above. The same statistics as aiofl "
         "robustness; in metrics.json each computed record carries them as 'robustness'.",
     ]
+    if table.corners:
+        notes.append(
+            "'corners stable': the design on the 16 corners of the same box (each of "
+            f"{names} at {1 - ROBUST_SPREAD:g} or {1 + ROBUST_SPREAD:g}), run in the same "
+            "engine call as the draws; random draws rarely come near them, yet the extremes "
+            "of the true input gain β = K_s K_m K_g/(J_l J_h R_m) (× 0.46 .. 2.34) are there."
+        )
+    if table.beta:
+        notes.append(
+            "'β/b0 range': the true plant's high-frequency gain β alone scaled by s (K_m × "
+            "1/s, R_m × 1/s², which keeps the back-EMF damping) on the scenario's plant, "
+            "with the interval of s β/b0 over which the design did not diverge within the "
+            "horizon; a grid on each side of s = 1 up to a factor 20, then bisection "
+            f"({table.beta_engine_calls} engine calls for all designs); ≤/≥ mark the cap. "
+            "aiofl robustness prints the same range for one design."
+        )
     for s in sorted({r.case.scenario for r in rep.runs}):
         cands = [
             (r, table.results[r.case.preset])
