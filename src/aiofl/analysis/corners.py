@@ -45,7 +45,7 @@ import itertools
 import math
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -157,6 +157,10 @@ class WorstCase:
         }
 
 
+class _Budget(Exception):
+    """The search's evaluations are spent."""
+
+
 class _Diverged(Exception):
     def __init__(self, u: NDArray[np.float64], t: float) -> None:
         self.u, self.t = u, t
@@ -169,12 +173,16 @@ def worst_case_search(
     *,
     start_label: str = "given point",
     evaluations: int = SEARCH_EVALUATIONS,
+    noise_seed: int | None = None,
 ) -> WorstCase:
     r"""Maximise ITAE over the box of ``spec`` from ``start`` (unit coordinates, (k,)).
 
     See the module docstring.  Each evaluation runs the point and its k finite-difference
     neighbours in one :func:`~aiofl.analysis.robustness.simulate_designs` call; the first
-    diverged plant ends the search and is returned.
+    diverged plant ends the search and is returned.  With a noisy measurement every point
+    runs the noise realisation ``noise_seed`` (:attr:`aiofl.uncertainty.Draws.noise_seeds`;
+    give the start's, so the search compares plants on the start's noise, common random
+    numbers); None: the box points' own seeds.
     """
     from scipy.optimize import minimize
 
@@ -188,10 +196,15 @@ def worst_case_search(
 
     def run(u: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         nonlocal calls
+        if calls >= evaluations:
+            raise _Budget
         pts = np.repeat(u[None, :], k + 1, axis=0)
         steps = np.where(u + FD_STEP <= 1.0, FD_STEP, -FD_STEP)
         pts[1 + np.arange(k), np.arange(k)] += steps
-        r = simulate_designs([cfg], box_draws(spec, pts, dt=cfg.dt))[0]
+        d = box_draws(spec, pts, dt=cfg.dt)
+        if noise_seed is not None:
+            d = replace(d, noise_seeds=np.full(len(pts), noise_seed, dtype=np.int64))
+        r = simulate_designs([cfg], d)[0]
         calls += 1
         if r.diverged.any():
             i = int(np.flatnonzero(r.diverged)[np.argmin(r.diverged_at[r.diverged])])
@@ -222,9 +235,11 @@ def worst_case_search(
             jac=True,
             method="L-BFGS-B",
             bounds=[(0.0, 1.0)] * k,
-            options={"maxfun": max(1, evaluations - 1), "maxiter": evaluations},
+            options={"maxfun": evaluations, "maxiter": evaluations},
         )
         message = str(opt.message)
+    except _Budget:
+        message = f"stopped after {evaluations} evaluations"
     except _Diverged as exc:
         return WorstCase(
             point=point(exc.u),
@@ -488,6 +503,10 @@ def beta_ranges(
 
 
 # ----------------------------------------------------------------------- the whole run
+def _seed(d: Draws, i: int) -> int | None:
+    return None if d.noise_seeds is None else int(d.noise_seeds[i])
+
+
 def run_box_robustness(
     cfg: Any,
     *,
@@ -502,8 +521,6 @@ def run_box_robustness(
     (:func:`~aiofl.analysis.robustness.run_robustness`), then the worst-case search from
     the worst corner or draw and the β/b0 range; their records go into the result's
     ``extra`` (``corners``, ``worst_case``, ``beta_range``)."""
-    from dataclasses import replace
-
     from aiofl.analysis.robustness import run_robustness
     from aiofl.uncertainty import corner_draws
 
@@ -524,6 +541,7 @@ def run_box_robustness(
                 {k: float(v[i]) for k, v in res.corners.columns().items()},
                 f"corner {i}",
                 float(res.corner_diverged_at[i]),
+                _seed(res.corners, i),
             )
             for i in [int(extra["corners"]["worst"]["corner"])]
         ]
@@ -535,9 +553,10 @@ def run_box_robustness(
                 {k: float(v[dw]) for k, v in cols.items()},
                 f"draw {dw}",
                 float(res.diverged_at[dw]),
+                _seed(res.draws, dw),
             )
         )
-        div0, _, src, label, t_div = max(cands, key=lambda c: (c[0], c[1]))
+        div0, _, src, label, t_div, n_seed = max(cands, key=lambda c: (c[0], c[1]))
         u = np.array([(src[n] - lo) / (hi - lo) if hi > lo else 0.5 for n, (lo, hi) in box.items()])
         if div0:
             wc = WorstCase(
@@ -552,7 +571,7 @@ def run_box_robustness(
                 message="the start diverged: nothing to search",
             )
         else:
-            wc = worst_case_search(cfg, cfg.uncertainty, u, start_label=label)
+            wc = worst_case_search(cfg, cfg.uncertainty, u, start_label=label, noise_seed=n_seed)
         calls += wc.engine_calls
         extra["worst_case"] = wc.to_dict()
     if beta:
