@@ -276,8 +276,11 @@ def beta_scaling(plant: Any, *, rtol: float = 1e-9) -> dict[str, float] | None:
 
     Tried in order: one parameter (exponent ±1), then pairs of parameters (exponents in
     ±1, ±2, ±1/2), names in the plant's order; each candidate is checked numerically at
-    five random states (seed 0) for s = 2 and s = 1/3.  None if no such combination exists
-    (then no β/b0 range is computed).
+    five random states (seed 0) for s = 2 and s = 1/3.  A combination that also keeps the
+    disturbance input :math:`b_d` is preferred; failing that, one that scales :math:`b_d`
+    along (e.g. the pendulum's :math:`m \times s^{-1}, c \times s^{-1}`: a torque
+    disturbance enters like the input, so it scales with β).  None if no such combination
+    exists (then no β/b0 range is computed).
     """
     names = list(plant.param_names)
     p0 = plant.param_vector()
@@ -287,7 +290,7 @@ def beta_scaling(plant: Any, *, rtol: float = 1e-9) -> dict[str, float] | None:
     def ev(fn: Any, x: NDArray[np.float64], p: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.atleast_1d(np.asarray(fn(x, p), dtype=np.float64))
 
-    def works(expo: Mapping[str, float]) -> bool:
+    def works(expo: Mapping[str, float], with_bd: bool) -> bool:
         for s in (2.0, 1.0 / 3.0):
             p = plant.param_vector(scale={n: s**e for n, e in expo.items()})
             for x in xs:
@@ -295,7 +298,7 @@ def beta_scaling(plant: Any, *, rtol: float = 1e-9) -> dict[str, float] | None:
                     try:
                         same = [
                             (ev(fn, x, p), ev(fn, x, p0))
-                            for fn in (plant.f, plant.h, plant.bd)
+                            for fn in (plant.f, plant.h, plant.bd if with_bd else None)
                             if fn is not None
                         ]
                         g1, g0 = ev(plant.g, x, p), ev(plant.g, x, p0)
@@ -309,15 +312,17 @@ def beta_scaling(plant: Any, *, rtol: float = 1e-9) -> dict[str, float] | None:
 
     if not np.all(np.isfinite(p0)):
         return None
-    for n in names:
-        for e in (1.0, -1.0):
-            if works({n: e}):
-                return {n: e}
-    for a, b in itertools.combinations(names, 2):
-        for ea in _EXPONENTS:
-            for eb in _EXPONENTS:
-                if works({a: ea, b: eb}):
-                    return {a: ea, b: eb}
+    cands: list[dict[str, float]] = [{n: e} for n in names for e in (1.0, -1.0)]
+    cands += [
+        {a: ea, b: eb}
+        for a, b in itertools.combinations(names, 2)
+        for ea in _EXPONENTS
+        for eb in _EXPONENTS
+    ]
+    for with_bd in (True, False) if plant.bd is not None else (True,):
+        for expo in cands:
+            if works(expo, with_bd):
+                return expo
     return None
 
 
