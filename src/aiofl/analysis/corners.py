@@ -43,7 +43,6 @@ from __future__ import annotations
 
 import itertools
 import math
-import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -533,7 +532,6 @@ def run_box_robustness(
         return run_robustness(cfg, draws=draws, seed=seed, client=client, chunks=chunks)
     corners, design = corner_draws(cfg.uncertainty, dt=cfg.dt)
     res = run_robustness(cfg, draws=draws, seed=seed, client=client, chunks=chunks, corners=corners)
-    t0 = time.perf_counter()
     extra: dict[str, Any] = {"corners": corner_summary(res, design)}
     calls = 0
     if search:
@@ -583,6 +581,5 @@ def run_box_robustness(
         (br,), n = beta_ranges([cfg])
         calls += n
         extra["beta_range"] = {**br.to_dict(), "engine_calls": n}
-    extra["box_seconds"] = time.perf_counter() - t0
     extra["box_engine_calls"] = calls
     return replace(res, extra=extra)

@@ -93,16 +93,14 @@ class RobustTable:
     results
         By preset, :meth:`aiofl.analysis.robustness.DesignDraws.to_dict`: ``draws``,
         ``seed``, ``stable_fraction``, ``diverged`` (count), ``itae`` and ``isu`` quantiles
-        (q05, q50, q95, max; null where the value falls on a diverged draw).
+        (q05, q50, q95, max; null where the value falls on a diverged draw); with
+        ``corners`` (the box corners: ``count``, ``stable``, ``corners_stable``,
+        ``diverged`` = [{``corner``, ``t``, ``point``}]) and ``beta_range``
+        (:meth:`aiofl.analysis.corners.BetaRange.to_dict`) when computed.
     skipped
         By preset, why a case was not run over the draws.
     engine_calls, seconds
         Engine calls made for the draws and corners, and their wall time.
-    corners
-        By preset, the box corners: ``{"count", "stable", "corners_stable", "diverged":
-        [{"corner", "t", "point"}]}``.
-    beta
-        By preset, :meth:`aiofl.analysis.corners.BetaRange.to_dict`.
     beta_engine_calls
         Engine calls of the β/b0 ranges (all designs together).
     """
@@ -114,8 +112,6 @@ class RobustTable:
     skipped: dict[str, str] = field(default_factory=dict)
     engine_calls: int = 0
     seconds: float = 0.0
-    corners: dict[str, dict[str, Any]] = field(default_factory=dict)
-    beta: dict[str, dict[str, Any]] = field(default_factory=dict)
     beta_engine_calls: int = 0
 
 
@@ -159,7 +155,6 @@ def compute_robustness(
     stage = on_stage or (lambda _msg: None)
     scenarios = sorted({c.scenario for c in run})
     results: dict[str, dict[str, Any]] = {}
-    corner_rec: dict[str, dict[str, Any]] = {}
     n_calls = 0
     t0 = time.perf_counter()
     for i, s in enumerate(scenarios, 1):
@@ -184,7 +179,7 @@ def compute_robustness(
                 cols = cd.columns()
                 div = r.diverged[draws:]
                 t_div = r.diverged_at[draws:]
-                corner_rec[c.preset] = {
+                results[c.preset]["corners"] = {
                     "count": len(cd),
                     "stable": int(len(cd) - div.sum()),
                     "corners_stable": float(np.mean(~div)),
@@ -197,12 +192,12 @@ def compute_robustness(
                         for i in np.flatnonzero(div)
                     ],
                 }
-    beta_rec: dict[str, dict[str, Any]] = {}
     n_beta = 0
     if beta and run:
         stage(f"robustness: β/b0 stability range of {len(run)} designs")
         ranges, n_beta = beta_ranges([c.config for c in run])
-        beta_rec = {c.preset: b.to_dict() for c, b in zip(run, ranges, strict=True)}
+        for c, b in zip(run, ranges, strict=True):
+            results[c.preset]["beta_range"] = b.to_dict()
     seconds = time.perf_counter() - t0
     return RobustTable(
         draws=draws,
@@ -212,8 +207,6 @@ def compute_robustness(
         skipped=skipped,
         engine_calls=n_calls,
         seconds=seconds,
-        corners=corner_rec,
-        beta=beta_rec,
         beta_engine_calls=n_beta,
     )
 
@@ -227,13 +220,7 @@ def with_robustness(
     out = []
     for rec in records:
         if "preset" in rec:
-            got = table.results.get(rec["preset"]) if table else None
-            if got is not None and table is not None:
-                got = {**got}
-                for key, src in (("corners", table.corners), ("beta_range", table.beta)):
-                    if rec["preset"] in src:
-                        got[key] = src[rec["preset"]]
-            rec = {**rec, "robustness": got}
+            rec = {**rec, "robustness": table.results.get(rec["preset"]) if table else None}
         out.append(rec)
     return out
 
@@ -279,8 +266,8 @@ def robust_rows(rep: Reproduction) -> list[list[str]]:
                 _q(q["q05"]),
                 _q(q["q50"]),
                 _q(q["q95"]),
-                _corner_cell(table.corners.get(preset)),
-                _beta_cell(table.beta.get(preset)),
+                _corner_cell(got.get("corners")),
+                _beta_cell(got.get("beta_range")),
             ]
         )
     return rows
@@ -332,14 +319,14 @@ def robust_notes(rep: Reproduction) -> list[str]:
         "draw. 'ITAE nominal' is the run of the table above. The same statistics as aiofl "
         "robustness; in metrics.json each computed record carries them as 'robustness'.",
     ]
-    if table.corners:
+    if any("corners" in g for g in table.results.values()):
         notes.append(
             "'corners stable': the design on the 16 corners of the same box (each of "
             f"{names} at {1 - ROBUST_SPREAD:g} or {1 + ROBUST_SPREAD:g}), run in the same "
             "engine call as the draws; random draws rarely come near them, yet the extremes "
             "of the true input gain β = K_s K_m K_g/(J_l J_h R_m) (× 0.46 .. 2.34) are there."
         )
-    if table.beta:
+    if any("beta_range" in g for g in table.results.values()):
         notes.append(
             "'β/b0 range': the true plant's high-frequency gain β alone scaled by s (K_m × "
             "1/s, R_m × 1/s², which keeps the back-EMF damping) on the scenario's plant, "
