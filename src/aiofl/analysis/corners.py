@@ -78,10 +78,6 @@ BETA_GRID = 6
 BETA_STEPS = 5
 
 
-def _itae_of(runs: Any) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64]]:
-    return runs.itae, runs.diverged, runs.diverged_at
-
-
 # --------------------------------------------------------------------------- corners
 def corner_summary(res: Any, design: str) -> dict[str, Any]:
     """The ``corners`` record of a :class:`~aiofl.analysis.robustness.RobustnessResult` run
