@@ -527,3 +527,25 @@ def test_no_zero_dynamics_verdict_where_beta_vanishes() -> None:
     zd = plant("1 + x1").analyze().zero_dynamics
     assert zd is not None and zd.verdict == "minimum phase"
     assert np.allclose(zd.eigenvalues, [-1.0])
+
+
+def test_close_distinct_poles_stay_distinct() -> None:
+    """LADRC with ρ = 2 on ÿ = GAIN·u, ω0 = 10, ω_c = 10.1: the observer's −10 ×3 and the
+    tracking −10.1 ×2 are 0.1 apart, far more than the computed eigenvalues' own accuracy
+    (~5e-3 here), so they are two groups (a perturbation level of 1000 ε‖A‖ merged them
+    into −10.04 ×5); ω_c = ω0 = 10 is one genuinely repeated pole of multiplicity 5."""
+    scenario = Scenario(reference=Reference(kind="step", amplitude=0.3))
+    lin = linearize_closed_loop(
+        plant=chain(2), controller=gao_ladrc(2, 10.0, 10.1), scenario=scenario
+    )
+    groups = lin.eigenvalue_groups
+    assert [k for _, k in groups] == [3, 2]
+    assert groups[0][0] == pytest.approx(-10.0, rel=1e-6)
+    assert groups[1][0] == pytest.approx(-10.1, rel=1e-6)
+    text = format_linearization_text(lin)
+    assert "-10 ×3" in text and "-10.1 ×2" in text
+    same = linearize_closed_loop(
+        plant=chain(2), controller=gao_ladrc(2, 10.0, 10.0), scenario=scenario
+    )
+    assert [k for _, k in same.eigenvalue_groups] == [5]
+    assert same.eigenvalue_groups[0][0] == pytest.approx(-10.0, rel=1e-9)

@@ -68,7 +68,8 @@ def test_cells_and_paragraph_follow_the_numbers() -> None:
     )
     assert "LESO of scenario 1 keeps its ITAE within 10 % up to Ts = 2 ms" in text
     assert "500 Hz" in text
-    assert "INLESO of scenario 1 diverges in continuous time" in text
+    assert "INLESO of scenario 1 is not stable in continuous time already (it diverges)" in text
+    assert "Stable at a Ts means three things at once" in text
     assert "X of scenario 2 lose more than the allowance already at Ts = dt = 0.1 ms" in text
 
 

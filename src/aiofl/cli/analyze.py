@@ -5,7 +5,8 @@
   defined, α, β, the normal-form coordinates ξ and, where ρ < n, the zero dynamics with a
   stability verdict (Section III).  ``--latex`` prints LaTeX, ``--json`` JSON.
 * ``aiofl analyze CONFIG.toml|PRESET --sampling``: the largest sample time at which the
-  design is stable and within 10 % of its continuous ITAE (:mod:`aiofl.cli.sampling`).
+  design is stable (linearised sampled loop inside the unit circle, bounded run, off the
+  saturation) and within 10 % of its continuous ITAE (:mod:`aiofl.cli.sampling`).
 * ``aiofl analyze CONFIG.toml|PRESET --closed-loop``: eigenvalues of the closed loop
   linearised at its operating point (exact Jacobian; repeated ones with their
   multiplicity), slowest / fastest modes and a verdict (:mod:`aiofl.analysis.linearize`);
@@ -64,8 +65,10 @@ def analyze_command(
         bool,
         typer.Option(
             "--sampling",
-            help="Largest sample time Ts at which a config's design is stable and within "
-            "--tolerance of its continuous ITAE (batched runs; see aiofl.analysis.sampling).",
+            help="Largest sample time Ts at which a config's design is stable (the "
+            "linearised sampled loop has spectral radius < 1, the run stays bounded and off "
+            "the saturation) and within --tolerance of its continuous ITAE (batched runs; "
+            "see aiofl.analysis.sampling).",
         ),
     ] = False,
     tolerance: Annotated[

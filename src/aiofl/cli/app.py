@@ -486,7 +486,9 @@ def _print_records(records: list[dict[str, Any]], title: str) -> None:
             *(_short(r[k]) for k in ("itae", "isu", "iau", "opi")),
             status,
         )
-    Console().print(table)
+    console = Console()
+    # not a terminal (a pipe, a log): wide enough that no column is cut
+    Console(width=max(console.width, 110)).print(table)
 
 
 @app.command("reproduce")

@@ -1,8 +1,11 @@
-"""``aiofl analyze CONFIG --sampling [--json] [--out DIR]``: the largest usable sample time.
+r"""``aiofl analyze CONFIG --sampling [--json] [--out DIR]``: the largest usable sample time.
 
 Runs :func:`aiofl.analysis.sampling.sampling_limits` (batched engine runs over a ladder of
-sample times) and prints ``ts_max`` (stable and within the ITAE tolerance of the continuous
-design) and ``ts_stable``; ``--json`` prints ``{"ts_max": ..., "ts_stable": ..., ...}``;
+sample times, each with the spectral radius of the linearised sampled loop) and prints the
+definitions, ``ts_max`` (stable and within the ITAE tolerance of the continuous design) and
+``ts_stable`` with :math:`\omega_0T_s`, and every run (Ts, ω0·Ts, spectral radius, time at
+the saturation, ITAE, the criteria it fails); a design whose continuous loop is not stable
+gets neither limit; ``--json`` prints ``{"ts_max": ..., "ts_stable": ..., ...}``;
 ``--out DIR`` also writes ``DIR/sampling.json`` and ``DIR/sampling.png`` (ITAE against Ts).
 """
 
@@ -10,6 +13,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import typer
 
@@ -20,6 +24,32 @@ __all__ = ["run_sampling"]
 
 def _fmt(x: float | None, unit: str = " s") -> str:
     return "—" if x is None else f"{x:.4g}{unit}"
+
+
+def _w0(lim: Any, ts: float | None) -> str:
+    return "" if ts is None or lim.omega0 is None else f" (ω0·Ts = {lim.omega0 * ts:.3g})"
+
+
+def _criteria_lines(lim: Any) -> list[str]:
+    words = lim.criteria.split(" ")
+    out, line = [], "  definitions:"
+    for w in words:
+        if len(line) + len(w) > 92:
+            out.append(line)
+            line = "   "
+        line += " " + w
+    return [*out, line]
+
+
+def _point_line(lim: Any, p: Any) -> str:
+    fails = p.failures(lim.saturated_continuous or 0.0, lim.saturation_allowance)
+    w0 = "—" if p.omega0_ts is None else f"{p.omega0_ts:.3g}"
+    rad = "—" if p.radius is None else f"{p.radius:.6f}"
+    sat = "—" if p.saturated is None else f"{100 * p.saturated:.3g} %"
+    return (
+        f"  {p.ts:<10.4g}  {w0:<8}  {rad:<9}  {sat:<9}  {_fmt(p.itae, ''):<10}  "
+        f"{', '.join(fails) or 'stable'}"
+    )
 
 
 def run_sampling(target: str, *, as_json: bool, out: Path | None, tolerance: float) -> None:
@@ -52,12 +82,39 @@ def run_sampling(target: str, *, as_json: bool, out: Path | None, tolerance: flo
         f"{cfg.name}: sampled controller, engine step dt = {cfg.dt:g} s, horizon "
         f"{cfg.scenario.t_final:g} s",
         *(f"  {ln}" for ln in lim.discretisation),
+        *_criteria_lines(lim),
         f"  continuous ITAE: {_fmt(lim.itae_continuous, '')}"
-        + ("  (the continuous loop diverges)" if lim.continuous_diverged else ""),
-        f"  ts_max    = {_fmt(lim.ts_max)}  (stable and ITAE within "
-        f"{100 * tolerance:g} % of continuous; first failure at {_fmt(lim.ts_max_bracket[1])})",
-        f"  ts_stable = {_fmt(lim.ts_stable)}  (no divergence; first divergence at "
-        f"{_fmt(lim.ts_stable_bracket[1])})",
+        + (
+            f", at the saturation {100 * lim.saturated_continuous:.3g} % of the horizon"
+            if lim.saturated_continuous is not None
+            else ""
+        ),
+    ]
+    if lim.linearisation_note:
+        lines.append(f"  note: {lim.linearisation_note}")
+    if lim.continuous_diverged:
+        lines.append(
+            "  the continuous loop is not stable (it diverges, or its linearisation is "
+            "unstable): there is no sample time to look for; no ts_max, no ts_stable"
+        )
+    else:
+        fail = ", ".join(lim.first_failure) or "—"
+        lines += [
+            f"  ts_max    = {_fmt(lim.ts_max)}{_w0(lim, lim.ts_max)}  (stable and ITAE within "
+            f"{100 * tolerance:g} % of continuous; first failure at "
+            f"{_fmt(lim.ts_max_bracket[1])})",
+            f"  ts_stable = {_fmt(lim.ts_stable)}{_w0(lim, lim.ts_stable)}  (first unstable Ts "
+            f"{_fmt(lim.ts_stable_bracket[1])}{_w0(lim, lim.ts_stable_bracket[1])}, fails: "
+            f"{fail})",
+        ]
+        if lim.ts_stable is not None and lim.ts_stable_bracket[1] is None:
+            lines.append(
+                f"  (nothing up to the largest Ts tried, {lim.ts_upper:g} s, failed: "
+                "ts_stable is a lower bound)"
+            )
+    lines += [
+        "  Ts [s]      ω0·Ts     radius    saturated  ITAE        fails",
+        *(_point_line(lim, p) for p in lim.points),
         f"  {len(lim.points)} sampled runs in {lim.engine_calls} engine calls, "
         f"{lim.seconds:.1f} s; Ts tried up to {lim.ts_upper:g} s",
     ]

@@ -135,6 +135,8 @@ def tune_command(
         summary = write_outputs(result, out)
     for note in summary["notes"]:
         typer.echo(f"aiofl: note: {note}", err=True)
+    for warning in summary.get("warnings", []):
+        typer.echo(f"aiofl: warning: {warning}", err=True)
     typer.echo(summary_text(result, summary, out))
 
 
@@ -185,10 +187,15 @@ def summary_text(result: Any, summary: dict[str, Any], out: Path) -> str:
         chosen = ", ".join(
             f"{q} {v:.6g}" for q, v in zip(front.objectives, front.F[front.chosen], strict=True)
         )
+        first = front.objectives[0]
+        best_first = (  # a margin (pm, gm, dm) objective is maximised
+            ("highest", float(front.F[:, 0].max()))
+            if first.split(":")[0] in ("pm", "gm", "dm")
+            else ("lowest", float(front.F[:, 0].min()))
+        )
         head = (
             f"chosen design ({front.rule}, from a {front.F.shape[0]}-design Pareto front): "
-            f"{chosen}; lowest {front.objectives[0]} on the front "
-            f"{float(front.F[:, 0].min()):.6g} {counts}"
+            f"{chosen}; {best_first[0]} {first} on the front {best_first[1]:.6g} {counts}"
         )
     full = summary["full_horizon"]
     if full is None:

@@ -453,6 +453,21 @@ class DiscreteController:
         )
 
     @property
+    def state(self) -> NDArray[np.float64]:
+        """A copy of the whole controller state (the engine's ``cs`` vector: differentiator,
+        ESO prediction and estimate, previous command, measurement and reference, ...);
+        assign to it to set the state (for the one-sample Jacobian of
+        :mod:`aiofl.analysis.sampled_loop`)."""
+        return self._cs.copy()
+
+    @state.setter
+    def state(self, value: NDArray[np.float64]) -> None:
+        v = np.asarray(value, dtype=np.float64)
+        if v.shape != self._cs.shape:
+            raise ValueError(f"state has shape {v.shape}; allowed: {self._cs.shape}")
+        self._cs[:] = v
+
+    @property
     def estimate(self) -> NDArray[np.float64]:
         """The ESO estimate ξ̂ after the last sample's correction (ρ+1 values)."""
         return self._cs[C_X : C_X + self.controller.rho + 1].copy()

@@ -3,7 +3,9 @@
 :func:`case_limits` runs :func:`aiofl.analysis.sampling.sampling_limits_many` on every case
 of a reproduction (batched per plant); :func:`ts_max_cell` formats one case's limit for the
 tables and :func:`sampling_paragraph` writes the paragraph on what the limits mean for the
-paper's printed designs, from the computed numbers only.  Kept in its own module so that the
+paper's printed designs, from the computed numbers only, with the definition of "stable"
+of :mod:`aiofl.analysis.sampling` (linearised sampled loop inside the unit circle, bounded
+simulation, no more than 5 % extra time at the saturation).  Kept in its own module so that the
 tables and the HTML page only add one column and one section.
 """
 
@@ -32,8 +34,8 @@ def _ms(x: float) -> str:
 
 def ts_max_cell(lim: Mapping[str, Any] | None) -> str:
     """One table cell: ts_max in ms; '≥ X' when nothing up to the largest Ts tried failed,
-    '< dt' when the design fails already at Ts = dt, '—' when the continuous loop
-    diverges (or no limits were computed)."""
+    '< dt' when the design fails already at Ts = dt, '—' when the continuous loop is not
+    stable (it diverges or its linearisation is unstable; or no limits were computed)."""
     if lim is None or lim["continuous_diverged"]:
         return "—"
     if lim["ts_max"] is None:
@@ -45,17 +47,29 @@ def ts_max_cell(lim: Mapping[str, Any] | None) -> str:
 
 def _describe(label: str, lim: Mapping[str, Any]) -> str:
     stable = lim["ts_stable"]
+    w0 = lim.get("omega0")
+
+    def with_w0(ts: float) -> str:
+        return f" (ω0·Ts = {w0 * ts:.3g})" if w0 else ""
+
     st = (
-        "diverges already at Ts = dt"
+        "is not stable already at Ts = dt"
         if stable is None
         else (
-            f"stays stable up to {_ms(stable)} ms"
+            f"stays stable up to {_ms(stable)} ms{with_w0(stable)}"
             if lim["ts_stable_bracket"][1] is not None
-            else f"stays stable at every Ts tried (up to {_ms(stable)} ms)"
+            else f"stays stable at every Ts tried (up to {_ms(stable)} ms{with_w0(stable)})"
         )
     )
     if lim["continuous_diverged"]:
-        return f"{label} diverges in continuous time already, so no processor can run it"
+        how = (
+            "its linearisation at the operating point is unstable"
+            if lim.get("continuous_linear_stable") is False
+            else "it diverges"
+        )
+        return (
+            f"{label} is not stable in continuous time already ({how}), so no processor can run it"
+        )
     if lim["ts_max"] is None:
         return (
             f"{label} loses more than {100 * lim['tolerance']:g} % of its continuous ITAE "
@@ -66,7 +80,8 @@ def _describe(label: str, lim: Mapping[str, Any]) -> str:
     bound = "at least " if lim["ts_max_bracket"][1] is None else ""
     return (
         f"{label} keeps its ITAE within {100 * lim['tolerance']:g} % up to Ts = "
-        f"{bound}{_ms(lim['ts_max'])} ms (a controller rate of {hz} or more) and {st}"
+        f"{bound}{_ms(lim['ts_max'])} ms{with_w0(lim['ts_max'])} (a controller rate of {hz} "
+        f"or more) and {st}"
     )
 
 
@@ -90,7 +105,17 @@ def sampling_paragraph(
         f"{100 * any_lim['tolerance']:g} % of the continuous value, at that and every smaller "
         f"Ts tried (multiples of dt = {_ms(any_lim['dt'])} ms, up to "
         f"{_ms(any_lim['ts_upper'])} ms; aiofl analyze CONFIG --sampling; every run is in "
-        "sampling.json)."
+        "sampling.json).",
+        "Stable at a Ts means three things at once: the sampled loop linearised at its "
+        "operating point (the zero-order-hold model of the plant's continuous linearisation "
+        "closed with the controller's discrete update) has all eigenvalues inside the unit "
+        "circle; the simulation over the horizon stays bounded; and the command sits at its "
+        f"limit for at most {100 * any_lim.get('saturation_allowance', 0.05):g} % of the "
+        "horizon more than the continuous design does (a loop held by a saturated command "
+        "stays bounded whatever its dynamics). ts_stable is the largest Ts stable at it and "
+        "every smaller Ts tried; ω0·Ts (the observer bandwidth times the sample time) is "
+        "given beside each limit. A design whose continuous loop is not stable has neither "
+        "limit.",
     ]
     printed = [(lbl, p, s) for lbl, p, src, s in cases if src == "printed" and p in limits]
     if printed:

@@ -131,9 +131,9 @@ def front_of_run(prep: Any, gens: list[dict[str, Any]], values: NDArray[np.float
         objectives=tuple(q.text() for q in prep.objectives),
         constraints=tuple(c.text() for c in prep.constraints),
         values=values[idx],
-        F=F[idx],
+        F=F[idx] * np.array([q.sign for q in prep.objectives]),  # margins as themselves
         raw=raw[idx],
-        chosen=choose(F[idx], st.choose),
+        chosen=choose(F[idx], st.choose),  # minimisation form
         rule=st.choose,
     )
     return front

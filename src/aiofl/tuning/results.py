@@ -7,7 +7,10 @@ nothing is simulated or drawn before they are on disk.  Then it adds what is com
 them (the full-horizon record, ``convergence.png``, the front figure's reference markers
 and ``front.png``), each on its own: one that fails is left out with a note (in
 ``summary.json``'s ``notes``, printed by ``aiofl tune``; a marker's note also under the
-front figure's title), so nothing after the search can lose the search.
+front figure's title), so nothing after the search can lose the search.  The chosen
+design's ``warnings`` (a parameter within 1 % of a search bound, PM < 30°, Ms > 2.5;
+:mod:`aiofl.tuning.margins`) and its ``chosen_margins`` are computed the same way and
+printed by ``aiofl tune`` as warnings.
 
 ``best.toml``
     The input config with the best parameters, loadable by ``aiofl simulate`` from any
@@ -42,6 +45,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import math
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, TypeVar
@@ -425,6 +429,10 @@ def write_outputs(result: TuneResult, out: str | Path, *, header: str = "") -> d
     summary["full_horizon"] = _optional(
         notes, "full-horizon record not computed", lambda: full_horizon_record(result)
     )
+    summary["warnings"], summary["chosen_margins"] = [], None
+    found_w = _optional(notes, "design warnings not computed", lambda: chosen_warnings(result))
+    if found_w is not None:
+        summary["warnings"], summary["chosen_margins"] = found_w
     figure("convergence.png", lambda: convergence_png(result))
     if front is not None:
         from aiofl.tuning.front import front_png
@@ -445,6 +453,23 @@ def write_outputs(result: TuneResult, out: str | Path, *, header: str = "") -> d
         figure("front.png", lambda: front_png(front, title, markers, floor, figure_notes))
     atomic_write_text(out / "summary.json", summary_json())
     return summary
+
+
+def chosen_warnings(result: TuneResult) -> tuple[list[str], dict[str, float | None] | None]:
+    """Warnings on the chosen design (:func:`aiofl.tuning.margins.design_warnings`: a
+    parameter within 1 % of a search bound, PM < 30°, Ms > 2.5) and its margins
+    (``pm`` [deg], ``gm`` [dB], ``dm`` [s], ``ms``; None where infinite)."""
+    from aiofl.config import parse_config
+    from aiofl.tuning.margins import design_warnings
+
+    cfg = parse_config(result.config)
+    warn, margins = design_warnings(cfg, result.settings.parameters, result.best_values)
+    shown = (
+        None
+        if margins is None
+        else {k: (float(v) if math.isfinite(v) else None) for k, v in margins.items()}
+    )
+    return warn, shown
 
 
 def _json_default(o: Any) -> Any:

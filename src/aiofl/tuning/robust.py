@@ -31,7 +31,7 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -52,8 +52,11 @@ __all__ = [
 ]
 
 AGGREGATES = ("mean", "worst", "cvar", "nominal")
-#: quantities a constraint or objective may name besides the engine metrics
-EXTRA_QUANTITIES = ("stable_fraction",)
+#: quantities a constraint or objective may name besides the engine metrics: the fraction
+#: of stable members, and the stability margins of the loop broken at the plant input
+#: (:mod:`aiofl.tuning.margins`: ``pm`` [deg], ``gm`` [dB], ``dm`` [s], ``ms``)
+MARGINS = ("pm", "gm", "dm", "ms")
+EXTRA_QUANTITIES = ("stable_fraction", *MARGINS)
 
 
 def aggregate(values: NDArray[np.float64], kind: str, alpha: float = 0.9) -> NDArray[np.float64]:
@@ -97,6 +100,17 @@ class Quantity:
         """The quantity as written in the config."""
         return self.metric + (f":{self.aggregate}" if self.aggregate else "")
 
+    @property
+    def sign(self) -> float:
+        """+1 for a quantity minimised as an objective, −1 for a margin that is maximised
+        (``pm``, ``gm``, ``dm``: pymoo minimises their negatives)."""
+        return -1.0 if self.metric in ("pm", "gm", "dm") else 1.0
+
+    @property
+    def is_margin(self) -> bool:
+        """Whether the quantity is a stability margin (:mod:`aiofl.tuning.margins`)."""
+        return self.metric in MARGINS
+
 
 @dataclass(frozen=True)
 class Constraint:
@@ -114,9 +128,11 @@ class Constraint:
 def parse_quantity(text: str) -> Quantity:
     """Parse ``METRIC`` or ``METRIC:AGGREGATE`` (no eval: a regular expression).
 
-    METRIC is one of :data:`aiofl.layout.METRIC_NAMES` or ``stable_fraction`` (the
-    fraction of the K+1 members that did not diverge; it takes no aggregate); AGGREGATE
-    one of ``mean``, ``worst``, ``cvar``, ``nominal``.  Raises ``ValueError`` naming the
+    METRIC is one of :data:`aiofl.layout.METRIC_NAMES`, ``stable_fraction`` (the
+    fraction of the K+1 members that did not diverge) or a margin ``pm``, ``gm``, ``dm``,
+    ``ms`` (of the nominal plant's linearised loop, :mod:`aiofl.tuning.margins`); those
+    take no aggregate (a margin ``:nominal`` is allowed).  AGGREGATE one of ``mean``,
+    ``worst``, ``cvar``, ``nominal``.  Raises ``ValueError`` naming the
     allowed values.
     """
     m = _QUANTITY.match(text) if isinstance(text, str) else None
@@ -131,7 +147,12 @@ def parse_quantity(text: str) -> Quantity:
         raise ValueError(f"unknown metric {metric!r} in {text!r}; allowed: {', '.join(allowed)}")
     if agg is not None and agg not in AGGREGATES:
         raise ValueError(f"unknown aggregate {agg!r} in {text!r}; allowed: {', '.join(AGGREGATES)}")
-    if metric in EXTRA_QUANTITIES and agg is not None:
+    if metric in MARGINS and agg not in (None, "nominal"):
+        raise ValueError(
+            f"{metric} is a margin of the nominal plant's linearised loop; it takes no "
+            f"aggregate over draws (got {text!r}; allowed: {metric} or {metric}:nominal)"
+        )
+    if metric == "stable_fraction" and agg is not None:
         raise ValueError(f"{metric} takes no aggregate (got {text!r})")
     return Quantity(metric, agg)
 
@@ -172,9 +193,15 @@ def quantity_values(
     diverged: NDArray[np.bool_],
     default: str,
     alpha: float,
+    margins: Mapping[str, NDArray[np.float64]] | None = None,
 ) -> NDArray[np.float64]:
-    """Per candidate value (B,) of quantity ``q`` (``default``: the run's aggregate)."""
+    """Per candidate value (B,) of quantity ``q`` (``default``: the run's aggregate;
+    ``margins``: :func:`aiofl.tuning.margins.candidate_margins`, needed for a margin)."""
     m, d = _as_draws(metrics, diverged)
+    if q.is_margin:
+        if margins is None:
+            raise ValueError(f"{q.text()}: the candidates' margins were not computed")
+        return np.asarray(margins[q.metric], dtype=np.float64)
     if q.metric == "stable_fraction":
         return 1.0 - d.mean(axis=1)
     col = m[:, :, L.METRIC_NAMES.index(q.metric)]
@@ -220,25 +247,37 @@ def objective_matrix(
     default: str,
     alpha: float,
     cap: float,
+    margins: Mapping[str, NDArray[np.float64]] | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
     """pymoo's ``F`` (B, n_obj), ``G`` (B, 1 + n_con) and the raw constraint values.
 
+    ``F`` is in minimisation form: a maximised margin (``pm``, ``gm``, ``dm``) enters as
+    its negative (:attr:`Quantity.sign`).
+
     ``G[:, 0]`` is the number of diverged members (> 0: infeasible); ``G[:, 1+i]`` is
     ``value - bound`` for ``<=`` and ``bound - value`` for ``>=`` (pymoo: feasible iff
-    ``G <= 0``).  Non-finite objectives (diverged) are replaced by ``cap`` so that pymoo's
-    sorting stays well defined; such candidates are infeasible through ``G[:, 0]``.
+    ``G <= 0``).  Infinite objectives and constraint values are clipped to ``±cap`` (NaN
+    to ``cap``) so that pymoo's sorting stays well defined: a diverged candidate (+inf) is
+    infeasible through ``G[:, 0]``, an infinite margin (no crossover, −inf in minimisation
+    form) stays the best.
     """
     _, d = _as_draws(metrics, diverged)
-    f = np.column_stack([quantity_values(q, metrics, diverged, default, alpha) for q in objectives])
+    f = np.column_stack(
+        [
+            q.sign * quantity_values(q, metrics, diverged, default, alpha, margins)
+            for q in objectives
+        ]
+    )
     raw = np.zeros((f.shape[0], len(constraints)))
     g = np.zeros((f.shape[0], 1 + len(constraints)))
     g[:, 0] = d.sum(axis=1).astype(np.float64)
     for i, c in enumerate(constraints):
-        v = quantity_values(c.quantity, metrics, diverged, default, alpha)
+        v = quantity_values(c.quantity, metrics, diverged, default, alpha, margins)
         raw[:, i] = v
         viol = v - c.bound if c.upper else c.bound - v
-        g[:, 1 + i] = np.where(np.isfinite(viol), viol, cap)
-    f = np.where(np.isfinite(f), f, cap)
+        # an infinite margin (no crossover) satisfies any bound: -inf stays feasible
+        g[:, 1 + i] = np.where(np.isnan(viol), cap, np.clip(viol, -cap, cap))
+    f = np.where(np.isnan(f), cap, np.clip(f, -cap, cap))
     return f, g, raw
 
 

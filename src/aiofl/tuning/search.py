@@ -510,7 +510,7 @@ def tune(
             res_m, res_d, res_t = res.metrics, res.diverged, res.diverged_at
             secs = time.perf_counter() - t0
             live = True
-        scores = _scores(prep, res_m, res_d, res_t)
+        scores = _scores(prep, res_m, res_d, res_t, space.decode(s))
         obj, cand_div = scores["objective"], scores["candidate_diverged"]
         gens.append(
             {
@@ -536,7 +536,8 @@ def tune(
             state["live_s"] += secs
             if ckpt is not None:
                 save_checkpoint(ckpt, prep.fingerprint, gens)
-        shown = state["lowest"] if prep.objectives else state["best"]
+        # the first objective as itself (a maximised margin is minimised as its negative)
+        shown = state["lowest"] * prep.objectives[0].sign if prep.objectives else state["best"]
         bar.update(len(gens), shown, int(state["live_n"]), float(state["live_s"]))
         return (scores["F"], scores["G"]) if prep.objectives else obj
 
@@ -603,8 +604,13 @@ def _scores(
     metrics: NDArray[np.float64],
     diverged: NDArray[np.bool_],
     diverged_at: NDArray[np.float64],
+    values: NDArray[np.float64] | None = None,
 ) -> dict[str, NDArray[Any]]:
-    """Per-candidate objective (and for NSGA-II ``F``, ``G``, constraint values)."""
+    """Per-candidate objective (and for NSGA-II ``F``, ``G``, constraint values).
+
+    ``values`` (B, d) are the candidates' parameter values, needed when an objective or
+    constraint names a margin (:func:`aiofl.tuning.margins.candidate_margins`, computed
+    then only; a candidate diverged on the nominal plant is not linearised)."""
     from aiofl.tuning.robust import objective_matrix, robust_objective
 
     st = prep.settings
@@ -612,8 +618,15 @@ def _scores(
     kind, alpha = (st.robust.aggregate, st.robust.alpha) if st.robust else ("nominal", 0.9)
     if prep.objectives:
         cap = 2.0 * st.divergence_penalty
+        margins = None
+        named = [*prep.objectives, *(c.quantity for c in prep.constraints)]
+        if values is not None and any(q.is_margin for q in named):
+            from aiofl.tuning.margins import candidate_margins
+
+            nominal_div = diverged[:, 0] if diverged.ndim == 2 else diverged
+            margins = candidate_margins(prep.config, prep.space.names, values, nominal_div)
         F, G, raw = objective_matrix(
-            prep.objectives, prep.constraints, metrics, diverged, kind, alpha, cap
+            prep.objectives, prep.constraints, metrics, diverged, kind, alpha, cap, margins
         )
         feasible = (G <= 0).all(axis=1)
         obj = np.where(feasible, F[:, 0], cap)  # history: the first objective when feasible

@@ -1,0 +1,229 @@
+r"""The sampled closed loop linearised at its operating point: is it stable at a given Ts?
+
+The sampled loop is a hybrid system: the plant runs in continuous time between samples,
+driven by the held command; the controller updates once per sample
+(:mod:`aiofl.engine.sampled`).  Its linearisation at the operating point is a
+discrete-time system in the deviations :math:`(\delta x_k, \delta c_k)` of the plant
+state and the discrete controller's state at :math:`t_k = kT_s`, built here from two
+exact-or-nearly pieces:
+
+* **the plant**: the continuous linearisation at the operating point
+  :math:`(x^*, u^*)` of :meth:`aiofl.analysis.closed_loop.ClosedLoop.linear_model` (the
+  loop broken at the plant input, complex-step Jacobians),
+  :math:`\dot{\delta x} = A_p\delta x + B_p\delta u`, :math:`\delta y = C_p\delta x`,
+  discretised exactly under the zero-order hold,
+
+  .. math:: \Phi_p = e^{A_pT_s},\qquad \Gamma_p = \int_0^{T_s} e^{A_p s}\,ds\,B_p
+
+  (one matrix exponential of the augmented matrix :math:`[[A_p, B_p], [0, 0]]T_s`; Franklin,
+  Powell & Workman, *Digital Control of Dynamic Systems*, 3rd ed., §4.3.3);
+* **the controller**: the engine's own one-sample update
+  (:class:`aiofl.engine.sampled.DiscreteController`, the coefficients of
+  :func:`aiofl.engine.discrete.sampling_rows`), linearised by central finite differences
+  in its state and in the measurement,
+  :math:`\delta c_{k+1} = J_{cc}\delta c_k + J_{cy}\delta y_k`,
+  :math:`\delta u_k = J_{uc}\delta c_k + J_{uy}\delta y_k`, at its equilibrium
+  :math:`c^*` for :math:`y = y^*, r = r^*, u = u^*` (Newton on the fixed point, least
+  squares for the ESO's one-parameter family of equilibria).  The linear ESO, the linear
+  SEF and the prefilter are affine, so the differences are exact up to rounding; fal, fhan
+  and the INLSEF give their slope at zero error (the local linearisation).
+
+Closing the loop, :math:`\delta u_k` is applied over :math:`[t_k, t_{k+1})`, or with a
+one-sample computation delay the previous command (a controller state), so
+
+.. math:: \begin{bmatrix}\delta x\\ \delta c\end{bmatrix}_{k+1} =
+          \begin{bmatrix}\Phi_p + \Gamma_pJ_{uy}C_p & \Gamma_pJ_{uc}\\
+          J_{cy}C_p & J_{cc}\end{bmatrix}
+          \begin{bmatrix}\delta x\\ \delta c\end{bmatrix}_k
+
+(delay: the first row is :math:`[\Phi_p,\ \Gamma_p e_{u_{k-1}}^T]`).  The loop is
+locally asymptotically stable at the operating point iff the spectral radius of this
+matrix is below 1.  Controller states the update neither reads nor writes (unused slots
+of the engine's fixed-size state) are dropped; quantisation is ignored (it is not
+differentiable).  The IOFL law evaluates the plant model inside the controller and has no
+:class:`DiscreteController`: no linearisation then.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from aiofl.analysis.closed_loop import DEFAULT_AMPLITUDE, ClosedLoop
+from aiofl.engine.discrete import Sampling
+
+__all__ = ["SampledLoop", "zoh"]
+
+
+def zoh(a: NDArray[np.float64], b: NDArray[np.float64], ts: float) -> tuple[Any, Any]:
+    r""":math:`(\Phi, \Gamma) = (e^{AT_s}, \int_0^{T_s}e^{As}ds\,B)` by one matrix
+    exponential of :math:`\begin{bmatrix}A & B\\0 & 0\end{bmatrix}T_s`."""
+    from scipy.linalg import expm
+
+    n, m = a.shape[0], b.shape[1]
+    big = np.zeros((n + m, n + m))
+    big[:n, :n], big[:n, n:] = a * ts, b * ts
+    e = expm(big)
+    return e[:n, :n], e[:n, n:]
+
+
+class SampledLoop:
+    """The linearised sampled loop of one config (module docstring), for any Ts.
+
+    The continuous linearisation (operating point, :math:`A_p, B_p, C_p`) is computed once
+    on construction; :meth:`matrix` and :meth:`spectral_radius` then cost one matrix
+    exponential and a few dozen controller steps per Ts.  ``available`` is False (and
+    ``reason`` says why) when there is no linearisation: the IOFL law, or no operating
+    point.
+
+    Parameters
+    ----------
+    config
+        A :class:`aiofl.config.RunConfig`.
+    amplitude
+        Error amplitude of the continuous linearisation's secant gains (only the plant's
+        Jacobians are used here, which do not depend on it).
+    """
+
+    def __init__(self, config: Any, amplitude: float = DEFAULT_AMPLITUDE) -> None:
+        self.config = config
+        self.base: Sampling = config.sampling or Sampling(config.dt)
+        self.available, self.reason = True, ""
+        c = config.controller
+        if c.law != "aiofl":
+            self.available, self.reason = False, "the IOFL law has no discrete controller model"
+            return
+        try:
+            loop = ClosedLoop(
+                config.plant, c, config.scenario, mode="linearise", amplitude=amplitude
+            )
+            z = loop.operating_point()
+            a, b, _, _ = loop.linear_model(z, broken=True)
+            a_cl, _, c_cl, _ = loop.linear_model(z)
+        except Exception as exc:  # no operating point, a plant without derivatives, ...
+            self.available, self.reason = False, f"no linearisation: {exc}"
+            return
+        n = loop.n
+        self.ap, self.bp, self.cp = a[:n, :n], b[:n, :1], c_cl[:1, :n]
+        self.continuous_eigenvalues = np.linalg.eigvals(a_cl)
+        _, y, u = loop.rhs(z)
+        self.y_op, self.u_op, self.r_op = float(y), float(u), float(loop.r_op)
+        self.rho = c.rho
+
+    @property
+    def continuous_stable(self) -> bool | None:
+        """Whether the continuous loop's linearisation is stable (None: not available)."""
+        if not self.available:
+            return None
+        eig = self.continuous_eigenvalues
+        return bool(np.all(eig.real < -1e-9 * max(1.0, float(np.max(np.abs(eig))))))
+
+    def _controller(self, ts: float) -> Any:
+        from aiofl.engine.sampled import DiscreteController
+
+        cfg = self.config
+        c = cfg.controller
+        plant = cfg.plant if c.eso_model != "none" else None
+        return DiscreteController(c, replace(self.base, ts=ts), plant, x0=cfg.scenario.x0)
+
+    def _jacobian(
+        self, dc: Any, c0: NDArray[np.float64], rr: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """``(J, c+, u)`` at ``c0``: J (n_c+1, n_c+1) maps (δc, δy) to (δc+, δu)."""
+        y0 = self.y_op
+
+        def step(c: NDArray[np.float64], y: float) -> NDArray[np.float64]:
+            dc.state = c
+            u = dc.step(rr, y)
+            return np.append(dc.state, u)
+
+        base = step(c0, y0)
+        nc = c0.size
+        jac = np.zeros((nc + 1, nc + 1))
+        for j in range(nc + 1):
+            x = c0[j] if j < nc else y0
+            h = 1e-6 * max(1.0, abs(x))
+            if j < nc:
+                cp, cm = c0.copy(), c0.copy()
+                cp[j] += h
+                cm[j] -= h
+                jac[:, j] = (step(cp, y0) - step(cm, y0)) / (2 * h)
+            else:
+                jac[:, j] = (step(c0, y0 + h) - step(c0, y0 - h)) / (2 * h)
+        return jac, base[:nc], base[nc]
+
+    def _equilibrium(self, dc: Any, rr: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The controller state with :math:`c^+ = c` and :math:`u = u^*` at
+        :math:`y^*, r^*`: from a few steps at :math:`y^*` (if they stay finite), two
+        Newton steps solved by least squares."""
+        dc.init(self.y_op)
+        c = dc.state
+        for _ in range(50):
+            dc.step(rr, self.y_op)
+        if np.all(np.isfinite(dc.state)) and np.max(np.abs(dc.state)) < 1e8:
+            c = dc.state
+        for _ in range(3):
+            jac, cn, u = self._jacobian(dc, c, rr)
+            nc = c.size
+            lhs = np.vstack([jac[:nc, :nc] - np.eye(nc), jac[nc:, :nc]])
+            rhs = -np.append(cn - c, u - self.u_op)
+            if np.max(np.abs(rhs)) <= 1e-12 * max(1.0, float(np.max(np.abs(c)))):
+                break
+            c = c + np.linalg.lstsq(lhs, rhs, rcond=None)[0]
+        return c
+
+    def matrix(self, ts: float) -> NDArray[np.float64]:
+        """The closed loop's one-sample matrix at sample time ``ts`` (module docstring)."""
+        from aiofl.engine.sampled import C_UPREV
+
+        if not self.available:
+            raise ValueError(self.reason)
+        dc = self._controller(ts)
+        rr = np.zeros(self.rho + 1)
+        rr[0] = self.r_op
+        c = self._equilibrium(dc, rr)
+        jac, _, _ = self._jacobian(dc, c, rr)
+        nc = c.size
+        jcc, jcy, juc, juy = jac[:nc, :nc], jac[:nc, nc], jac[nc, :nc], jac[nc, nc]
+        eye = np.eye(nc)
+        inert = [
+            i
+            for i in range(nc)
+            if np.allclose(jcc[:, i], eye[:, i], atol=1e-9, rtol=0)
+            and np.allclose(jcc[i, :], eye[i, :], atol=1e-9, rtol=0)
+            and abs(juc[i]) < 1e-12
+            and abs(jcy[i]) < 1e-12
+            and i != C_UPREV
+        ]
+        keep = np.array([i for i in range(nc) if i not in inert], dtype=int)
+        phi, gam = zoh(self.ap, self.bp, ts)
+        n = phi.shape[0]
+        m = np.zeros((n + keep.size, n + keep.size))
+        cp = self.cp[0]
+        if self.base.delay:
+            m[:n, :n] = phi
+            m[:n, n + int(np.nonzero(keep == C_UPREV)[0][0])] = gam[:, 0]
+        else:
+            m[:n, :n] = phi + np.outer(gam[:, 0] * juy, cp)
+            m[:n, n:] = np.outer(gam[:, 0], juc[keep])
+        m[n:, :n] = np.outer(jcy[keep], cp)
+        m[n:, n:] = jcc[np.ix_(keep, keep)]
+        return m
+
+    def spectral_radius(self, ts: float) -> float | None:
+        """:math:`\\max_i|\\lambda_i|` of :meth:`matrix` (None when not available, when the
+        controller cannot be built at ``ts`` (``reason`` says why) or the matrix is not
+        finite)."""
+        if not self.available:
+            return None
+        try:
+            m = self.matrix(ts)
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
+            self.reason = f"no linearisation at Ts = {ts:g}: {exc}"
+            return None
+        if not np.all(np.isfinite(m)):
+            return None
+        return float(np.max(np.abs(np.linalg.eigvals(m))))
