@@ -194,7 +194,7 @@ def compute_robustness(
                 }
     n_beta = 0
     if beta and run:
-        stage(f"robustness: β/b0 stability range of {len(run)} designs")
+        stage(f"β/b0 stability range of {len(run)} designs (grid, then bisection)")
         ranges, n_beta = beta_ranges([c.config for c in run])
         for c, b in zip(run, ranges, strict=True):
             results[c.preset]["beta_range"] = b.to_dict()
