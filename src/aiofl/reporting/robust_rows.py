@@ -288,15 +288,14 @@ def _beta_cell(rec: dict[str, Any] | None) -> str:
     if rec is None:
         return DASH
     rng = rec["beta_over_b0"]
+    lo_mark, hi_mark = ("≤ " if rec["capped"][0] else ""), ("≥ " if rec["capped"][1] else "")
     if rng is None:
-        if rec["s"] is not None:  # no b0 (IOFL): the factor on β
+        if rec["s"] is not None:  # no b0 (IOFL): the factor on the model's β
             lo, hi = rec["s"]
-            return f"β×{lo:.2g} – β×{hi:.2g}"
+            return f"β × {lo_mark}{lo:.3g} – {hi_mark}{hi:.3g} (no b0)"
         return rec["reason"] or DASH
     lo, hi = rng
-    a = ("≤ " if rec["capped"][0] else "") + f"{lo:.2g}"
-    b = ("≥ " if rec["capped"][1] else "") + f"{hi:.2g}"
-    return f"{a} – {b} (nominal {rec['beta_over_b0_nominal']:.3g})"
+    return f"{lo_mark}{lo:.3g} – {hi_mark}{hi:.3g} (nominal {rec['beta_over_b0_nominal']:.3g})"
 
 
 def robust_notes(rep: Reproduction) -> list[str]:
