@@ -19,7 +19,7 @@ PACKAGE = SRC / "aiofl"
 LAYERS: tuple[tuple[str, ...], ...] = (
     # lowest first; a module may import from its own layer (without a cycle) or below
     # the paper's pieces; atomic file output; the bounds on every input size; the disk cache
-    ("aiofl.components", "aiofl.outputs", "aiofl.limits", "aiofl.cache"),
+    ("aiofl.components", "aiofl.outputs", "aiofl.limits", "aiofl.cache", "aiofl.checks"),
     ("aiofl.layout",),  # the member vocabulary: component kinds, parameter columns
     # plain descriptions of a design, a test and the model error (uncertainty)
     ("aiofl.controller", "aiofl.scenario", "aiofl.uncertainty"),
