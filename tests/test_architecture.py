@@ -30,6 +30,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("aiofl.export",),
     ("aiofl.tuning",),
     ("aiofl.reporting",),
+    ("aiofl.design",),  # the notebook API: plant + controller + scenario -> every command
     ("aiofl.cli", "aiofl.__main__"),
 )
 """The layers, lowest first."""
