@@ -30,7 +30,7 @@ from aiofl import Controller, Design, Plant, Reference, Scenario
 from aiofl.cli.app import app
 from aiofl.config import ConfigError, parse_config
 from aiofl.config.objects import config_dict
-from aiofl.controller import _VALUE_RANGES, value_range
+from aiofl.controller import _VALUE_RANGES, controller_batch, value_range
 from aiofl.engine.simulation import simulate, simulate_batch
 from aiofl.plants import get_plant
 from aiofl.tuning.space import to_toml
@@ -96,6 +96,16 @@ ISSUE_CASES = {
         "MiB",
     ),
 }
+
+
+ISSUE_CASES["omega0 = -40 in a packed batch"] = (
+    lambda: controller_batch(CTRL, {"eso.omega0": np.array([40.0, -40.0])}),
+    "controller.eso.omega0 (member 1)",
+)
+ISSUE_CASES["b0 = 0 in a packed batch"] = (
+    lambda: controller_batch(CTRL, {"law.b0": np.array([0.0])}),
+    "controller.law.b0 (member 0)",
+)
 
 
 @pytest.mark.parametrize("case", list(ISSUE_CASES))

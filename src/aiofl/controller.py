@@ -565,7 +565,9 @@ def controller_batch(
         for name, col in values.items():
             if name not in L.FLOAT_COLUMNS:
                 raise ValueError(f"unknown controller parameter {name!r}")
-            floats[:, L.FLOAT_COLUMNS[name]] = np.asarray(col, dtype=np.float64)
+            column = np.asarray(col, dtype=np.float64)
+            _check_column(name, column)
+            floats[:, L.FLOAT_COLUMNS[name]] = column
         kalman = ints[:, L.I_ESO_GAINS] == L.ESO_GAINS_KALMAN
         derived = sorted(n for n in values if n == "eso.omega0" or n.startswith("eso.alpha"))
         if derived and kalman.any():
@@ -575,6 +577,23 @@ def controller_batch(
             )
         resolve_kalman_rows(ints, floats)
     return ControllerBatch(np.ascontiguousarray(ints), np.ascontiguousarray(floats))
+
+
+def _check_column(name: str, column: NDArray[np.float64]) -> None:
+    """Refuse a batch column with a value outside the parameter's range (:func:`value_range`;
+    ``law.b0`` also non-zero), naming the parameter and the first bad member."""
+    bounds, finite = value_range(name)
+    ok = ~np.isnan(column) & (np.isfinite(column) | (not finite))
+    ops = {"gt": np.greater, "ge": np.greater_equal, "lt": np.less, "le": np.less_equal}
+    for key, edge in bounds.items():
+        ok &= ops[key](column, edge)
+    if name == "law.b0":
+        ok &= column != 0.0
+    bad = np.flatnonzero(~ok)
+    if bad.size:
+        i = int(bad[0])
+        check_number(f"controller.{name} (member {i})", float(column[i]), finite=finite, **bounds)
+        raise ValueError(f"controller.{name} (member {i}) = 0.0; allowed: finite and non-zero")
 
 
 def resolve_kalman_rows(ints: NDArray[np.int64], floats: NDArray[np.float64]) -> None:
