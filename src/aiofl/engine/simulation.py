@@ -173,12 +173,18 @@ def _check_members(controllers: Any, scenarios: Any, sampling: Any) -> None:
         )
 
 
+#: most bytes of a batch's stored trajectories together (members x points x columns x 8):
+#: 8 x the per-member bound of :func:`aiofl.limits.check_run_size`, room for the reports'
+#: batches of stored runs, refusing a batch that would exhaust the machine's memory
+MAX_BATCH_TRAJECTORY_BYTES = 8 * MAX_TRAJECTORY_BYTES
+
+
 def _check_size(
     plant: Plant, scens: list[Scenario], b: int, dt: float, *, store: bool, decimation: int
 ) -> None:
     """The run's size, bounded before anything is allocated (:func:`aiofl.limits.check_run_size`:
     a whole number of steps, at most ``MAX_STEPS``, the noise table, a stored trajectory),
-    and the batch's stored trajectories together at most ``MAX_TRAJECTORY_BYTES``."""
+    and the batch's stored trajectories together at most :data:`MAX_BATCH_TRAJECTORY_BYTES`."""
     t_final = scens[0].t_final
     if any(abs(s.t_final - t_final) > 1e-12 for s in scens):
         raise ValueError("all scenarios in one batch must share t_final")
@@ -191,11 +197,11 @@ def _check_size(
         decimation=decimation,
     )
     nbytes = b * (n // decimation + 1) * columns * 8
-    if store and nbytes > MAX_TRAJECTORY_BYTES:
+    if store and nbytes > MAX_BATCH_TRAJECTORY_BYTES:
         raise ValueError(
             f"the batch's stored trajectories need {nbytes / 2**20:.0f} MiB ({b} members x "
             f"{n // decimation + 1} points x {columns} columns x 8 bytes; simulation.decimation"
-            f" = {decimation}); allowed: at most {MAX_TRAJECTORY_BYTES // 2**20} MiB (store "
+            f" = {decimation}); allowed: at most {MAX_BATCH_TRAJECTORY_BYTES // 2**20} MiB (store "
             "fewer members, or raise decimation or dt)"
         )
 
