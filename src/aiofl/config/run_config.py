@@ -245,6 +245,7 @@ class RunConfig:
         from aiofl.engine.discrete import sampling_rows
 
         try:
+            self.sampling.check_horizon(self.scenario.t_final)
             self.sampling.check(self.controller)
             sampling_rows(controller_batch(self.controller), [self.sampling], self.dt)
         except ValueError as exc:
