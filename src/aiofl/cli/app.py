@@ -413,6 +413,8 @@ def simulate_command(
             f"{cfg.controller.structure} controller, sensor {cfg.sensor.describe()}; "
             "nothing run or written"
         )
+        for line in cfg.defaults:  # documented defaults the config relies on
+            typer.echo(f"  default: {line}")
         return
     with bad_input_exits(run=True), atomic_output_dir(out) as stage:
         with console.status(f"simulating {cfg.name} (first run compiles the kernel)"):

@@ -140,6 +140,7 @@ class RunConfig:
     sampling: Any = None  # aiofl.engine.discrete.Sampling: [controller.discrete], or None
     uncertainty: UncertaintyModel | None = None  # [uncertainty] (aiofl.uncertainty), or None
     sensor: Sensor = field(default_factory=Sensor)  # the measurement ([sensor] or old keys)
+    defaults: tuple[str, ...] = ()  # "KEY = default" for documented defaults it relies on
 
     def simulate(self, *, store: bool = True) -> Any:
         """Run this config once (see :func:`aiofl.engine.simulation.simulate`)."""
@@ -490,6 +491,7 @@ def parse_config(
         weights=model.metrics.build(),
         raw=data,
         uncertainty=model.uncertainty,
+        defaults=tuple(model.defaults_used()),
     )
     if sampling is not None:  # [controller.discrete]: a sampled controller
         cfg = replace(cfg, sampling=sampling)

@@ -167,7 +167,8 @@ class Sampling:
             raise ValueError(
                 f"controller.discrete.td = {self.td!r}; allowed: {', '.join(TD_METHODS)}"
             )
-        check_h0(self.h0, self.ts)
+        if self.h0 is not None and not (math.isfinite(self.h0) and self.h0 > 0):
+            raise ValueError(f"controller.discrete.h0 = {self.h0}; allowed: > 0 [s]")
 
     def eso_method(self, controller: Controller) -> str:
         """The ESO discretisation used for ``controller`` (resolving ``eso = None``)."""
@@ -259,6 +260,7 @@ def _row(
     rho = int(ints[L.I_RHO])
     row = np.zeros(N_DISC)
     row[D_STEPS] = sample_steps(s.ts, dt)
+    check_h0(s.h0, s.ts)  # after ts: an absurd ts is named as such, not through h0
     row[D_TS] = s.ts
     row[D_DELAY] = s.delay
     row[D_YQ] = s.y_quantum
