@@ -245,8 +245,8 @@ class DiscreteModel(_Model):
     """``[controller.discrete]``: run the controller sampled (:mod:`aiofl.engine.discrete`).
 
     ``delay`` is the integer 0 or 1 (``true`` is refused); ``h0`` is bounded by the sample
-    time (:data:`aiofl.engine.discrete.H0_RANGE`, checked with dt); the sample count over the horizon is
-    checked with the scenario (:meth:`aiofl.engine.discrete.Sampling.check_horizon`).
+    time (:data:`aiofl.engine.discrete.H0_RANGE`, checked with dt); the sample count over
+    the horizon with the scenario (:meth:`aiofl.engine.discrete.Sampling.check_horizon`).
     """
 
     ts: Annotated[float, Field(gt=0, le=1.0, allow_inf_nan=False)]
@@ -492,7 +492,7 @@ class ConfigModel(_Model):
         out = []
         if not given:
             out.append(
-                "scenario.reference = the paper's (π/4)·sin 2t (kind = \"sine\", amplitude = "
+                'scenario.reference = the paper\'s (π/4)·sin 2t (kind = "sine", amplitude = '
                 f"{ref.amplitude:.6g}, omega = {ref.omega:g})"
             )
         else:
