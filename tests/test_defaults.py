@@ -132,7 +132,7 @@ def test_sampling_refuses_a_bool_delay_and_a_huge_h0_in_python() -> None:
     ctrl = _parse(LADRC).controller
     with pytest.raises(ValueError, match="h0"):
         sampling_rows(controller_batch(ctrl), [Sampling(1e-3, h0=1.0)], 1e-4)
-    with pytest.raises(ValueError, match="scenario.t_final"):
+    with pytest.raises(ValueError, match=r"scenario\.t_final"):
         Sampling(1e-3).check_horizon(5e-3)
     Sampling(1e-3).check_horizon(1e-2)
 
