@@ -260,7 +260,6 @@ def _row(
     rho = int(ints[L.I_RHO])
     row = np.zeros(N_DISC)
     row[D_STEPS] = sample_steps(s.ts, dt)
-    check_h0(s.h0, s.ts)  # after ts: an absurd ts is named as such, not through h0
     row[D_TS] = s.ts
     row[D_DELAY] = s.delay
     row[D_YQ] = s.y_quantum
@@ -282,6 +281,7 @@ def _row(
             "coefficients (an observer or prefilter bandwidth too large for this sample "
             "time, or Ts too small to represent its powers); allowed: a larger ts"
         )
+    check_h0(s.h0, s.ts)  # after ts: an absurd ts is named as such, not through h0
     return row
 
 
