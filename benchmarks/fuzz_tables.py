@@ -146,14 +146,7 @@ PLAUSIBLE: dict[str, tuple[str, ...]] = {
 TABLE_KEYS = ("ts", "delay", "h0", "y_quantum", "u_quantum", "eso", "td", "draws", "seed", "J_h")
 
 #: objective / constraint strings for the nsga2 campaign (PWNED: an injected command ran)
-NSGA_VALID: tuple[str, ...] = (
-    "itae",
-    "isu",
-    "iae",
-    "itae:nominal",
-    "itae:cvar",
-    "isu:worst",
-)
+NSGA_VALID: tuple[str, ...] = ("itae", "isu", "iae", "itae:cvar", "isu:worst")
 NSGA_VALID_CONSTRAINTS: tuple[str, ...] = (
     "isu <= 1e3",
     "stable_fraction >= 1",
@@ -245,14 +238,29 @@ def _toml_string(text: str) -> str:
     return json.dumps(text, ensure_ascii=False)
 
 
+def _key_at(table: str, index: int) -> str:
+    """The key of the line a mutation with ``index`` replaces (as apply_mutation picks it)."""
+    lines = table.splitlines()
+    keyed = fuzz._key_lines(lines)
+    if not keyed:
+        return ""
+    m = fuzz._KEY_LINE.match(lines[keyed[index % len(keyed)]])
+    return m.group(2) if m else ""
+
+
 def _mutate(table: str, rng: random.Random) -> tuple[str, list[str]]:
+    """One or two mutations of ``table``; half the replaced values fit their key."""
     muts = []
     for _ in range(rng.choice((1, 1, 2))):
         kind = rng.choice(("replace",) * 24 + fuzz.MUTATION_KINDS)
+        index = rng.randrange(10_000)
         literal = rng.choice(TABLE_LITERALS)
-        if rng.random() < 0.4:
+        fits = PLAUSIBLE.get(_key_at(table, index))
+        if kind == "replace" and fits and rng.random() < 0.5:
+            literal = rng.choice(fits)
+        elif rng.random() < 0.2:
             literal = repr(10 ** rng.uniform(-5, 0.5))
-        muts.append(fuzz.Mutation(kind, rng.randrange(10_000), literal, key=rng.choice(TABLE_KEYS)))
+        muts.append(fuzz.Mutation(kind, index, literal, key=rng.choice(TABLE_KEYS)))
     for m in muts:
         table = fuzz.apply_mutation(table, m)
     return table, [m.describe() for m in muts]
@@ -287,7 +295,7 @@ def draw_case(campaign: str, rng: random.Random) -> dict[str, Any]:
         def pick(valid: tuple[str, ...]) -> str:  # one hostile string in about three
             return rng.choice(valid if rng.random() < 0.7 else NSGA_STRINGS)
 
-        objectives = [pick(NSGA_VALID) for _ in range(rng.choice((1, 2, 2, 3)))]
+        objectives = [pick(NSGA_VALID) for _ in range(rng.choice((1, 2, 2, 2, 3)))]
         constraints = [pick(NSGA_VALID_CONSTRAINTS) for _ in range(rng.choice((0, 1, 2)))]
         tune = TUNE.replace('["itae", "isu"]', "[" + ", ".join(map(_toml_string, objectives)) + "]")
         tune = tune.replace(
