@@ -141,7 +141,7 @@ app = typer.Typer(
 
 EXAMPLES: dict[str, tuple[str, ...]] = {
     "presets": ("aiofl presets",),
-    "show": ("aiofl show paper-s1-leso > my-run.toml",),
+    "show": ("aiofl show assisted-s1-ladrc > my-run.toml",),
     "simulate": (
         "aiofl simulate paper-s1-inleso --out runs/s1",
         "aiofl simulate my-run.toml -o runs/mine --dt 5e-5 --method euler --force",

@@ -4,7 +4,9 @@ A config file (or a preset name such as ``paper-s1-leso``) describes one run: th
 the scenario, the controller, the simulation settings and the OPI weights.  Every table
 rejects unknown keys; every number is range-checked and strictly typed (``true`` or
 ``"50 "`` is no number; an integer field takes only an integer); a config must set the
-:data:`REQUIRED_KEYS` (an empty or cut-off file is refused, not run with defaults); the
+:data:`REQUIRED_KEYS` (an empty or cut-off file is refused, not run with defaults) and
+the parameters its controller's kinds use (:data:`~aiofl.config.schema.REQUIRED_BY_KIND`:
+LADRC needs ``eso.omega0``, ``td.omega``, ``sef.omega_c``, ``law.b0``); the
 horizon must be a whole number of steps, events must fall within it, and the run's size
 is bounded before anything is allocated (:mod:`aiofl.limits`).  A bad file raises
 :class:`ConfigError` whose message names the field and the allowed range.
