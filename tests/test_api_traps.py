@@ -264,7 +264,14 @@ def test_toml_rho_other_than_the_relative_degree_is_refused_unless_allowed():
         "plant": "pendulum",
         "scenario": {"t_final": 1.0},
         "simulation": {"dt": 1e-3},
-        "controller": {"structure": "LADRC", "rho": 3},
+        "controller": {
+            "structure": "LADRC",
+            "rho": 3,
+            "eso": {"omega0": 40.0},
+            "sef": {"omega_c": 6.0},
+            "td": {"omega": 12.0},
+            "law": {"b0": 4.0},
+        },
     }
     with pytest.raises(ConfigError) as err:
         parse_config(data, "rho.toml")

@@ -174,6 +174,8 @@ def _text_config(tmp_path, text: str):
 
 
 MINIMAL = 'plant = "slfjm"\n[scenario]\nt_final = 2.0\n[controller]\nstructure = "LADRC"\n'
+MINIMAL += "[controller.eso]\nomega0 = 50.0\n[controller.td]\nomega = 10.0\n"
+MINIMAL += "[controller.sef]\nomega_c = 5.0\n[controller.law]\nb0 = 1.0\n"
 MINIMAL += "[simulation]\ndt = 1e-3\n"
 
 

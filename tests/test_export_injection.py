@@ -190,6 +190,15 @@ structure = "LADRC"
 td_kind = "exact"
 rho = 1
 
+[controller.eso]
+omega0 = 20.0
+
+[controller.sef]
+omega_c = 4.0
+
+[controller.law]
+b0 = 0.05
+
 [controller.discrete]
 ts = 1e-3
 """

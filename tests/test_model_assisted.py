@@ -216,6 +216,8 @@ def _config(**eso) -> dict:
         "controller": {
             "structure": "LADRC",
             "eso": {"omega0": 10.0, **eso},
+            "td": {"omega": 10.0},
+            "sef": {"omega_c": 1.0},
             "law": {"b0": 2.68e4},
         },
         "simulation": {"dt": 1e-4},

@@ -114,7 +114,14 @@ def test_a_continuous_loop_that_diverges_has_no_limits():
             {
                 "plant": "slfjm",
                 "scenario": {"t_final": 1.0},
-                "controller": {"structure": "LADRC", "n_feedback": 4, "law": {"b0": 1.0}},
+                "controller": {
+                    "structure": "LADRC",
+                    "n_feedback": 4,
+                    "eso": {"omega0": 10.0},
+                    "td": {"omega": 10.0},
+                    "sef": {"omega_c": 1.0},
+                    "law": {"b0": 1.0},  # a b0 far from the plant's 2.68e4: diverges
+                },
                 "simulation": {"dt": 1e-4},
             }
         )

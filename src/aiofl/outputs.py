@@ -82,6 +82,7 @@ def check_replaceable(out: str | Path, *, force: bool = True) -> None:
     out = Path(out)
     if out.is_symlink() or (out.exists() and not out.is_dir()):
         raise OutputDirError(f"--out {str(out)!r} exists and is not a directory")
+    _check_creatable(out)
     if out.exists() and Path.cwd().resolve().is_relative_to(out.resolve()):
         raise OutputDirError(
             f"--out {str(out)!r} is the working folder or contains it; choose a new folder"
@@ -98,6 +99,27 @@ def check_replaceable(out: str | Path, *, force: bool = True) -> None:
             f"--out {str(out)!r} is a non-empty directory that aiofl did not write (no "
             f"{MARKER} file); aiofl replaces its output directory as a whole, so choose an "
             "empty or new --out"
+        )
+
+
+def _check_creatable(out: Path) -> None:
+    """Refuse an ``out`` whose folder cannot be created or written: the nearest existing
+    ancestor must be a writable directory (``--out report.pdf/sub`` is refused before any
+    work, not after it)."""
+    parent = _absolute(out).parent
+    while not parent.exists() and parent != parent.parent:
+        if parent.is_symlink():  # a dangling link: mkdir would fail
+            break
+        parent = parent.parent
+    if not parent.is_dir():
+        raise OutputDirError(
+            f"--out {str(out)!r} cannot be created: {str(parent)!r} is not a directory; "
+            "choose an --out in a folder"
+        )
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputDirError(
+            f"--out {str(out)!r} cannot be created: the folder {str(parent)!r} is not "
+            "writable; choose another --out"
         )
 
 
@@ -128,12 +150,46 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
+def _process_start(pid: int) -> float | None:
+    """When process ``pid`` started (seconds since the epoch), from ``/proc``; None where
+    that is not known (not Linux, no access)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        boot = next(
+            float(line.split()[1])
+            for line in Path("/proc/stat").read_text().splitlines()
+            if line.startswith("btime ")
+        )
+        ticks = float(stat.rsplit(")", 1)[1].split()[19])  # field 22: starttime
+        return boot + ticks / os.sysconf("SC_CLK_TCK")
+    except (OSError, ValueError, IndexError, StopIteration):
+        return None
+
+
+def _owner_alive(pid: int, folder: Path) -> bool:
+    """Whether process ``pid`` is alive and can be the one that made ``folder``: a process
+    that started after the folder was last changed has reused the PID of a dead owner."""
+    if not _pid_alive(pid):
+        return False
+    if pid == os.getpid():
+        return True
+    start = _process_start(pid)
+    if start is None:
+        return True
+    try:
+        changed = folder.stat().st_mtime
+    except OSError:
+        return False
+    return start <= changed + 2.0  # 2 s: clock-tick rounding of the start time
+
+
 def remove_stale(out: str | Path) -> list[Path]:
     """Remove the staging and trash folders of ``out`` left by runs that were killed.
 
     A folder ``.NAME.staging-PID-*`` or ``.NAME.trash-PID-*`` next to ``out`` is removed
-    when process PID is no longer alive; folders of live processes (another run writing
-    the same ``out`` right now) are left alone.  A run killed between its two renames
+    when process PID is no longer alive (or the PID now belongs to a process started after
+    the folder was last changed: a reused PID); folders of live processes (another run
+    writing the same ``out`` right now) are left alone.  A run killed between its two renames
     leaves no ``out`` and the old directory in its trash folder: that old directory is put
     back as ``out`` first (the newest one if there are several), so nothing that was
     complete is lost.  Returns the removed paths.
@@ -148,7 +204,7 @@ def remove_stale(out: str | Path) -> list[Path]:
         m = _LEFTOVER.match(item.name)
         if m is None or m["name"] != out.name or not item.is_dir() or item.is_symlink():
             continue
-        if not _pid_alive(int(m["pid"])):
+        if not _owner_alive(int(m["pid"]), item):
             stale.append(item)
     if not out.exists():
         olds = [p / "old" for p in stale if ".trash-" in p.name and (p / "old").is_dir()]

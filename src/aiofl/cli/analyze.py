@@ -128,7 +128,15 @@ def analyze_command(
                     "names the plant and sets [scenario], [controller] and [simulation]); "
                     f"`aiofl analyze {target}` without --closed-loop analyses the plant itself"
                 ) from None
-            lin = linearize_closed_loop(cfg, amplitude=amplitude, r_op=r_op)
+            try:
+                lin = linearize_closed_loop(cfg, amplitude=amplitude, r_op=r_op)
+            except ValueError as exc:  # no operating point there: name the option that set it
+                if r_op is None:
+                    raise
+                raise ValueError(
+                    f"--r-op = {r_op:g}: {exc}; allowed: a reference value the loop can hold "
+                    "(within the plant's range)"
+                ) from None
             # the default operating point also gets the verdict per error amplitude
             info = (
                 closed_loop_verdict(cfg, amplitude=amplitude, linearization=lin)

@@ -141,7 +141,7 @@ app = typer.Typer(
 
 EXAMPLES: dict[str, tuple[str, ...]] = {
     "presets": ("aiofl presets",),
-    "show": ("aiofl show paper-s1-leso > my-run.toml",),
+    "show": ("aiofl show assisted-s1-ladrc > my-run.toml",),
     "simulate": (
         "aiofl simulate paper-s1-inleso --out runs/s1",
         "aiofl simulate my-run.toml -o runs/mine --dt 5e-5 --method euler --force",
@@ -413,6 +413,8 @@ def simulate_command(
             f"{cfg.controller.structure} controller, sensor {cfg.sensor.describe()}; "
             "nothing run or written"
         )
+        for line in cfg.defaults:  # documented defaults the config relies on
+            typer.echo(f"  default: {line}")
         return
     with bad_input_exits(run=True), atomic_output_dir(out) as stage:
         with console.status(f"simulating {cfg.name} (first run compiles the kernel)"):

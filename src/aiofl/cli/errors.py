@@ -34,12 +34,15 @@ def _check_out(out: Path, *, force: bool = True) -> None:
     """Reject an ``--out`` that the command could not replace, before any work.
 
     A file, a non-empty directory aiofl did not write, or (``force=False``, ``aiofl
-    simulate`` without ``--force``) any non-empty directory
-    (:func:`aiofl.outputs.check_replaceable`).
+    simulate`` without ``--force``) any non-empty directory, a folder that cannot be created
+    (:func:`aiofl.outputs.check_replaceable`).  The staging and trash folders that killed
+    runs left next to ``out`` are removed now (:func:`aiofl.outputs.remove_stale`), so a
+    run that then fails still cleans up.
     """
-    from aiofl.outputs import check_replaceable
+    from aiofl.outputs import check_replaceable, remove_stale
 
     check_replaceable(out, force=force)
+    remove_stale(out)  # staging / trash folders of killed runs, before the work
 
 
 def _out_or_check(out: Path | None, check: bool) -> Path | None:

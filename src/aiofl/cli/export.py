@@ -6,6 +6,11 @@ controller the C code cannot express (the IOFL law, which needs the plant model;
 model-assisted controller of a plant without symbolic expressions, whose nominal model is
 generated as C from them), a missing sample time or a bad option exits with status 2 and the
 reason; nothing is written then.
+
+Before writing, the design is simulated as the config describes it (sampled at the exported
+Ts when that is a multiple of the config's dt): a design that diverges there is still
+exported (exit 0), with a warning on stderr naming the time, so firmware is never generated
+from a diverging loop without a word.
 The config's name, description and path go into the files' comment block only, made inert
 by :func:`aiofl.export.c_text.comment_text` inside :func:`aiofl.export.export_c`.
 """
@@ -13,7 +18,7 @@ by :func:`aiofl.export.c_text.comment_text` inside :func:`aiofl.export.export_c`
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 import typer
 
@@ -66,7 +71,36 @@ def export_command(
             )
         except ExportError as exc:
             raise ValueError(f"cannot export {cfg.name!r}: {exc}") from None
+    warning = _divergence_warning(cfg, sampling, config)
     with bad_input_exits(run=True), atomic_output_dir(out) as stage:
         for name, text in files.items():
             atomic_write_text(stage / name, text)
     typer.echo(f"wrote {out}/{', '.join(files)} (Ts = {sampling.ts:g} s, {precision})")
+    if warning:
+        typer.echo(f"aiofl: warning: {warning}", err=True)
+
+
+def _divergence_warning(cfg: Any, sampling: Any, config: str) -> str | None:
+    """Why the exported design should not go on a rig: it diverges in its own simulation
+    (sampled at the exported Ts when that is a multiple of dt); None when it does not."""
+    from aiofl.config import ConfigError
+    from aiofl.plants.base import PlantError
+
+    run_cfg = cfg
+    if cfg.sampling is None or cfg.sampling.ts != sampling.ts:
+        try:
+            run_cfg = cfg.with_sample_time(sampling.ts)
+        except ConfigError:  # Ts not a multiple of dt: the config's own loop
+            run_cfg = cfg
+    try:
+        res = run_cfg.simulate(store=False)
+    except (PlantError, ValueError) as exc:
+        return f"{config}: could not simulate the design before export ({exc})"
+    if not res.diverged:
+        return None
+    how = f"sampled at Ts = {run_cfg.sampling.ts:g} s" if run_cfg.sampling else "continuous"
+    return (
+        f"{config} diverges at {res.diverged_at:.2f} s in its own simulation ({how}, "
+        f"{run_cfg.scenario.t_final:g}-s scenario); the exported controller is that design: "
+        "check it with `aiofl simulate` before running it on hardware"
+    )

@@ -4,7 +4,9 @@ A config file (or a preset name such as ``paper-s1-leso``) describes one run: th
 the scenario, the controller, the simulation settings and the OPI weights.  Every table
 rejects unknown keys; every number is range-checked and strictly typed (``true`` or
 ``"50 "`` is no number; an integer field takes only an integer); a config must set the
-:data:`REQUIRED_KEYS` (an empty or cut-off file is refused, not run with defaults); the
+:data:`REQUIRED_KEYS` (an empty or cut-off file is refused, not run with defaults) and
+the parameters its controller's kinds use (:data:`~aiofl.config.schema.REQUIRED_BY_KIND`:
+LADRC needs ``eso.omega0``, ``td.omega``, ``sef.omega_c``, ``law.b0``); the
 horizon must be a whole number of steps, events must fall within it, and the run's size
 is bounded before anything is allocated (:mod:`aiofl.limits`).  A bad file raises
 :class:`ConfigError` whose message names the field and the allowed range.
@@ -140,6 +142,7 @@ class RunConfig:
     sampling: Any = None  # aiofl.engine.discrete.Sampling: [controller.discrete], or None
     uncertainty: UncertaintyModel | None = None  # [uncertainty] (aiofl.uncertainty), or None
     sensor: Sensor = field(default_factory=Sensor)  # the measurement ([sensor] or old keys)
+    defaults: tuple[str, ...] = ()  # "KEY = default" for documented defaults it relies on
 
     def simulate(self, *, store: bool = True) -> Any:
         """Run this config once (see :func:`aiofl.engine.simulation.simulate`)."""
@@ -245,6 +248,7 @@ class RunConfig:
         from aiofl.engine.discrete import sampling_rows
 
         try:
+            self.sampling.check_horizon(self.scenario.t_final)
             self.sampling.check(self.controller)
             sampling_rows(controller_batch(self.controller), [self.sampling], self.dt)
         except ValueError as exc:
@@ -489,6 +493,7 @@ def parse_config(
         weights=model.metrics.build(),
         raw=data,
         uncertainty=model.uncertainty,
+        defaults=tuple(model.defaults_used()),
     )
     if sampling is not None:  # [controller.discrete]: a sampled controller
         cfg = replace(cfg, sampling=sampling)

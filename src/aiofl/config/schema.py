@@ -114,6 +114,41 @@ class ScenarioModel(_Model):
 
 
 # -------------------------------------------------------------------- controller
+#: the parameters each component kind uses that have no sensible default: a config whose
+#: controller uses the kind must give them ([controller.TABLE] KEY); the kinds come from
+#: ``structure`` (STRUCTURES) or the ``*_kind`` keys
+REQUIRED_BY_KIND: dict[tuple[str, str], tuple[str, ...]] = {
+    ("eso", "linear"): ("omega0",),  # bandwidth gains; Kalman gains need q instead
+    ("eso", "improved"): ("omega0", "k_alpha", "k_beta", "g_alpha", "g_beta"),
+    ("td", "han"): ("R",),
+    ("td", "improved"): ("a", "b", "c", "rho"),
+    ("td", "linear"): ("omega",),
+    ("td", "exact"): (),
+    ("sef", "nonlinear"): ("alpha", "delta"),
+    ("sef", "improved"): ("k", "kb", "mu", "alpha"),
+    ("sef", "linear"): ("omega_c",),
+    ("law", "aiofl"): ("b0",),
+    ("law", "iofl"): ("b0",),
+}
+
+#: documented defaults of parameters a kind uses, printed by ``aiofl simulate --check``
+#: when the config leaves them out: (table, key, kinds that use it, the default in words)
+DOCUMENTED_DEFAULTS: tuple[tuple[str, str, tuple[str, ...], str], ...] = (
+    ("eso", "alpha", ("linear", "improved"), '"binomial" (Gao: all observer poles at -omega0)'),
+    ("sef", "k", ("nonlinear",), "1 for every fed-back state"),
+    ("sef", "v_limit", ("improved",), "1"),
+    ("law", "u_max", ("aiofl", "iofl"), "inf (no actuator limit)"),
+)
+
+
+def controller_kinds(structure: str | None, chosen: dict[str, str | None]) -> dict[str, str]:
+    """The component kinds (eso, td, sef, law) of ``structure`` with the ``*_kind`` keys
+    ``chosen`` (None: the structure's)."""
+    kinds = dict(zip(("eso", "td", "sef", "law"), STRUCTURES[structure or "LESO"], strict=True))
+    kinds.update({k: v for k, v in chosen.items() if v is not None})
+    return kinds
+
+
 class ESOModel(_Model):
     omega0: PosFloat = 10.0
     alpha: list[NonNegFloat] | Literal["binomial"] = "binomial"
@@ -207,10 +242,15 @@ class LawModel(_Model):
 
 
 class DiscreteModel(_Model):
-    """``[controller.discrete]``: run the controller sampled (:mod:`aiofl.engine.discrete`)."""
+    """``[controller.discrete]``: run the controller sampled (:mod:`aiofl.engine.discrete`).
+
+    ``delay`` is the integer 0 or 1 (``true`` is refused); ``h0`` is bounded by the sample
+    time (:data:`aiofl.engine.discrete.H0_RANGE`, checked with dt); the sample count over
+    the horizon with the scenario (:meth:`aiofl.engine.discrete.Sampling.check_horizon`).
+    """
 
     ts: Annotated[float, Field(gt=0, le=1.0, allow_inf_nan=False)]
-    delay: Literal[0, 1] = 0
+    delay: Annotated[int, Field(ge=0, le=1)] = 0  # strict: an int, never a bool
     y_quantum: NonNegFloat = 0.0
     u_quantum: NonNegFloat = 0.0
     eso: Literal["zoh", "euler"] | None = None
@@ -249,17 +289,53 @@ class ControllerModel(_Model):
     law: LawModel = Field(default_factory=LawModel)
     discrete: DiscreteModel | None = None
 
+    def kinds(self) -> dict[str, str]:
+        """The component kinds this table selects (``structure`` and the ``*_kind`` keys)."""
+        chosen = {key: getattr(self, f"{key}_kind") for key in ("eso", "td", "sef", "law")}
+        return controller_kinds(self.structure, chosen)
+
+    @model_validator(mode="after")
+    def _required(self) -> ControllerModel:
+        # the parameters the chosen kinds use must be given: no silent b0 = 1, omega0 = 10
+        if self.structure is None:  # REQUIRED_KEYS reports it
+            return self
+        missing = []
+        kinds = self.kinds()
+        for part, kind in kinds.items():
+            table = getattr(self, part)
+            needed = REQUIRED_BY_KIND.get((part, kind), ())
+            if part == "eso" and self.eso.gains == "kalman":
+                needed = tuple(k for k in needed if k != "omega0")  # derived from q, r
+            missing += [
+                f"controller.{part}.{key}" for key in needed if key not in table.model_fields_set
+            ]
+        if missing:
+            parts = ", ".join(f"{v} {k}" for k, v in kinds.items())
+            raise ValueError(
+                f"{', '.join(missing)}: missing; the {self.structure} controller ({parts}) "
+                "uses them and they have no default, so give every one (`aiofl show "
+                "frontier-s1-ladrc` prints a complete config)"
+            )
+        return self
+
+    def defaults_used(self) -> list[str]:
+        """``controller.TABLE.KEY = default`` for every documented default the chosen kinds
+        use and this table leaves out (:data:`DOCUMENTED_DEFAULTS`)."""
+        kinds = self.kinds()
+        out = []
+        for part, key, used_by, words in DOCUMENTED_DEFAULTS:
+            if kinds[part] not in used_by or key in getattr(self, part).model_fields_set:
+                continue
+            if part == "eso" and key == "alpha" and self.eso.gains == "kalman":
+                continue  # derived from q and r
+            out.append(f"controller.{part}.{key} = {words}")
+        return out
+
     def build(self, default_rho: int, measurement_r: float = 0.0) -> Controller:
         """The :class:`Controller`; ``measurement_r`` is the run's measurement noise
         intensity (:func:`aiofl.components.kalman.measurement_noise_intensity`), the
         default of ``[controller.eso] r`` with Kalman gains."""
-        kinds = dict(
-            zip(("eso", "td", "sef", "law"), STRUCTURES[self.structure or "LESO"], strict=True)
-        )
-        for key in kinds:
-            chosen = getattr(self, f"{key}_kind")
-            if chosen is not None:
-                kinds[key] = chosen
+        kinds = self.kinds()
         rho = self.rho or default_rho
         values: dict[str, float] = {}
         eso = self.eso.model_dump()
@@ -406,6 +482,25 @@ class ConfigModel(_Model):
     uncertainty: UncertaintyModel | None = None
     # [sensor]: the measurement (aiofl.sensor); merged into [scenario] / [controller.discrete]
     sensor: SensorModel | None = None
+
+    def defaults_used(self) -> list[str]:
+        """``KEY = default`` for every documented default this config relies on: the
+        paper's reference (π/4)·sin 2t when ``[scenario.reference]`` leaves it out, and the
+        controller's (:meth:`ControllerModel.defaults_used`); printed by ``--check``."""
+        ref = self.scenario.reference
+        given = ref.model_fields_set
+        out = []
+        if not given:
+            out.append(
+                'scenario.reference = the paper\'s (π/4)·sin 2t (kind = "sine", amplitude = '
+                f"{ref.amplitude:.6g}, omega = {ref.omega:g})"
+            )
+        else:
+            keys = {"sine": ("amplitude", "omega"), "step": ("amplitude",)}.get(ref.kind, ())
+            out += [
+                f"scenario.reference.{k} = {getattr(ref, k):.6g}" for k in keys if k not in given
+            ]
+        return out + self.controller.defaults_used()
 
     @field_validator("plant")
     @classmethod

@@ -51,10 +51,13 @@ from aiofl.controller import Controller, ControllerBatch
 
 __all__ = [
     "ESO_METHODS",
+    "H0_RANGE",
+    "MIN_SAMPLES",
     "N_DISC",
     "QUANTUM_MIN",
     "TD_METHODS",
     "Sampling",
+    "check_h0",
     "sample_steps",
     "sampling_rows",
 ]
@@ -67,6 +70,27 @@ QUANTUM_MIN = 1e-12
 """Smallest non-zero ADC/DAC quantum q: Q(v) = q·floor(v/q + 1/2) needs 1/q and v/q finite
 (q = 5e-324 gives 1/q = inf and NaN at v = 0); 1e-12 is finer than any converter (a 32-bit
 ADC over ±1 has q ≈ 5e-10) and keeps v/q finite for every |v| < 1e296."""
+
+MIN_SAMPLES = 10
+"""Fewest controller samples over a run's horizon, t_final/Ts: a sampled controller that
+acts once or twice in the whole run (``ts = 1.0`` with ``t_final = 0.5``) is a typo, not a
+design (its ISU would be 0 and its ITAE that of a loop left open)."""
+H0_RANGE = (1e-3, 100.0)
+"""fhan's filter factor h0 in units of Ts: 1e-3·Ts <= h0 <= 100·Ts.  A larger h0 freezes
+Han's discrete TD (with h0 = 1e300 its output stays 0 and u ≡ 0); h0 of a few Ts filters
+noise, h0 = Ts is the default."""
+
+
+def check_h0(h0: float | None, ts: float) -> None:
+    """Raise ValueError unless ``h0`` is None (Ts) or within :data:`H0_RANGE` times ``ts``."""
+    lo, hi = H0_RANGE[0] * ts, H0_RANGE[1] * ts
+    if h0 is not None and not (math.isfinite(h0) and lo <= h0 <= hi):
+        raise ValueError(
+            f"controller.discrete.h0 = {h0:g} s; allowed: {H0_RANGE[0]:g}·ts <= h0 <= "
+            f"{H0_RANGE[1]:g}·ts, i.e. {lo:g} .. {hi:g} s with ts = {ts:g} s (fhan's filter "
+            "factor; a few ts filters noise, a huge one freezes the TD)"
+        )
+
 
 # ----------------------------------------------------------------------------- the row
 D_STEPS = 0  #: engine steps per sample N = Ts/dt (0: a continuous member)
@@ -124,8 +148,10 @@ class Sampling:
     def __post_init__(self) -> None:
         if not (math.isfinite(self.ts) and self.ts > 0):
             raise ValueError(f"controller.discrete.ts = {self.ts}; allowed: > 0 [s]")
-        if self.delay not in (0, 1):
-            raise ValueError(f"controller.discrete.delay = {self.delay}; allowed: 0, 1")
+        if isinstance(self.delay, bool) or self.delay not in (0, 1):
+            raise ValueError(
+                f"controller.discrete.delay = {self.delay!r}; allowed: the integer 0 or 1"
+            )
         for name in ("y_quantum", "u_quantum"):
             val = getattr(self, name)
             if not (math.isfinite(val) and (val == 0 or val >= QUANTUM_MIN)):
@@ -149,6 +175,16 @@ class Sampling:
         if self.eso is not None:
             return self.eso
         return "zoh" if controller.eso == "linear" else "euler"
+
+    def check_horizon(self, t_final: float) -> None:
+        """Raise ValueError unless the horizon holds at least :data:`MIN_SAMPLES` samples."""
+        if not t_final >= MIN_SAMPLES * self.ts:
+            raise ValueError(
+                f"controller.discrete.ts = {self.ts:g} s gives {t_final / self.ts:.3g} "
+                f"sample(s) over scenario.t_final = {t_final:g} s; allowed: ts <= "
+                f"t_final/{MIN_SAMPLES} = {t_final / MIN_SAMPLES:g} s (at least {MIN_SAMPLES} "
+                "controller samples over the horizon)"
+            )
 
     def check(self, controller: Controller) -> None:
         """Raise ValueError if ``controller`` cannot run with these settings."""
@@ -245,6 +281,7 @@ def _row(
             "coefficients (an observer or prefilter bandwidth too large for this sample "
             "time, or Ts too small to represent its powers); allowed: a larger ts"
         )
+    check_h0(s.h0, s.ts)  # after ts: an absurd ts is named as such, not through h0
     return row
 
 
