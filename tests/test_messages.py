@@ -477,12 +477,17 @@ def test_user_text_in_figure_titles_is_plain_text() -> None:
     import control
 
     from aiofl.analysis.frequency import loop_figure, loop_margins
-    from aiofl.analysis.sampling import SamplingLimits, sampling_figure
+    from aiofl.analysis.sampling import SamplingLimits, SamplingPoint, sampling_figure
     from aiofl.reporting.figures import result_figure
 
+    points = [
+        SamplingPoint(1e-4, 0.02, False, None, 0.0, 0.9, None),
+        SamplingPoint(1e-3, 0.021, False, None, 0.0, 0.95, None),
+        SamplingPoint(4e-3, None, True, 0.3, None, 1.2, None),
+    ]
     lim = SamplingLimits(
         MATHTEXT_BREAKER, 1e-4, 0.1, 0.02, False, 1e-3, 2e-3, (1e-3, 2e-3), (2e-3, 4e-3), 1e-2,
-        [(1e-4, 0.02, False, None), (1e-3, 0.021, False, None), (4e-3, None, True, 0.3)],
+        points,
     )  # fmt: skip
     loop = control.ss(control.tf([8.0], [1.0, 3.0, 2.0, 0.0]))
     margins = loop_margins(loop, control.feedback(loop, 1).poles())
