@@ -21,7 +21,11 @@ from numpy.typing import NDArray
 
 from aiofl import layout as L
 
-__all__ = ["Reference", "Scenario", "noise_sequence", "realisation_seed"]
+__all__ = ["DELAY_MAX", "Reference", "Scenario", "noise_sequence", "realisation_seed"]
+
+DELAY_MAX = 1.0
+"""Largest input or output transport delay [s] a scenario accepts (the engine's delay
+buffer is bounded before it is allocated; see :func:`aiofl.engine.discrete.delay_steps`)."""
 
 
 @dataclass(frozen=True)
@@ -84,6 +88,13 @@ class Scenario:
         Gaussian output noise, held constant over ``noise_hold`` seconds, seeded.
     x0
         Initial plant state (zeros if empty).
+    input_delay, output_delay
+        Transport delays [s], :math:`0 \\le \\tau \\le` :data:`DELAY_MAX`: the plant sees
+        :math:`u(t - \\tau_{in})` (0 before :math:`t = \\tau_{in}`) and the controller's ADC
+        reads :math:`y(t - \\tau_{out})` (:math:`y(0)` before :math:`t = \\tau_{out}`) plus the
+        noise at t.  Held exactly by the sampled engine; each must be an integer multiple of
+        the step dt, and the continuous controller refuses them
+        (:func:`aiofl.engine.discrete.delay_steps`).
     """
 
     name: str = "custom"
@@ -98,8 +109,14 @@ class Scenario:
     noise_hold: float = 1e-3
     noise_seed: int = 0
     x0: tuple[float, ...] = ()
+    input_delay: float = 0.0
+    output_delay: float = 0.0
 
     def __post_init__(self) -> None:
+        for key in ("input_delay", "output_delay"):
+            v = getattr(self, key)
+            if not 0.0 <= v <= DELAY_MAX:  # (NaN fails)
+                raise ValueError(f"scenario.{key} = {v} s; allowed: 0 <= {key} <= {DELAY_MAX:g} s")
         if not self.t_final > 0:
             raise ValueError(f"scenario.t_final = {self.t_final}; allowed: > 0")
         if self.noise_variance < 0:
@@ -132,6 +149,8 @@ class Scenario:
         row[L.S_PCHANGE_TIME] = self.parameter_change_time
         row[L.S_NOISE_STD] = np.sqrt(self.noise_variance)
         row[L.S_NOISE_HOLD] = self.noise_hold
+        row[L.S_IN_DELAY] = self.input_delay
+        row[L.S_OUT_DELAY] = self.output_delay
         return row
 
 
