@@ -257,3 +257,49 @@ def test_frontier_sampled_delay_margin_at_1ms_against_the_engine():
 
     res = simulate_batch(cfg.plant, [cfg.controller] * 2, scens, sampling=Sampling(1e-3), dt=1e-4)
     assert not res.diverged[0] and res.diverged[1]
+
+
+def test_analyze_sampling_reports_both_delay_margins(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from aiofl.analysis.sampled_loop import SampledLoop
+    from aiofl.cli.app import app
+    from aiofl.config import load_config
+
+    (tmp_path / "first.toml").write_text(FIRST_ORDER_PLANT)
+    run = tmp_path / "run.toml"
+    run.write_text(FIRST_ORDER_RUN.replace("t_final = 1.0", "t_final = 0.5"))
+    loop = SampledLoop(load_config(str(run)))
+    runner = CliRunner()
+    res = runner.invoke(app, ["analyze", str(run), "--sampling", "--json"])
+    assert res.exit_code == 0, res.output
+    info = json.loads(res.stdout)
+    assert info["delay_ts"] == 1e-3  # the config's [controller.discrete] ts
+    assert info["delay_margin_sampled_s"] == pytest.approx(loop.delay_margin(1e-3), rel=1e-9)
+    assert info["delay_margin_continuous_s"] == pytest.approx(loop.continuous_delay_margin())
+    text = runner.invoke(app, ["analyze", str(run), "--sampling"]).stdout
+    assert "delay margin at Ts = 0.001 s: sampled" in text and "continuous" in text
+
+
+def test_the_report_note_gives_both_delay_margins():
+    from aiofl.reporting.sampling_note import sampling_paragraph
+
+    lim = {
+        "tolerance": 0.1,
+        "dt": 1e-4,
+        "ts_upper": 0.05,
+        "ts_max": 2e-3,
+        "ts_stable": 3e-3,
+        "ts_max_bracket": [2e-3, 2.1e-3],
+        "ts_stable_bracket": [3e-3, 3.1e-3],
+        "continuous_diverged": False,
+        "itae_continuous": 0.01,
+        "delay_ts": 1e-3,
+        "delay_margin_sampled_s": 2.2e-3,
+        "delay_margin_continuous_s": 1.95e-3,
+    }
+    text = " ".join(sampling_paragraph([("LADRC", "a", "frontier", 1)], {"a": lim}))
+    assert "sampled at Ts = 1 ms" in text
+    assert "LADRC of scenario 1 2.2 ms (continuous 1.95 ms)" in text
