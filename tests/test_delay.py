@@ -143,6 +143,8 @@ dt = 1e-4
         parse_config(tomllib.loads(text.replace("input_delay = 0.002", "input_delay = -1.0")))
     with pytest.raises(ConfigError, match="output_delay"):
         parse_config(tomllib.loads(text.replace("output_delay = 0.001", "output_delay = 5.0")))
+    with pytest.raises(ConfigError, match=r"scenario\.output_delay = 0\.00015 s is not an integer"):
+        parse_config(tomllib.loads(text.replace("output_delay = 0.001", "output_delay = 1.5e-4")))
 
 
 # ----------------------------------------------------------------- the delay margin

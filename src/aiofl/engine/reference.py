@@ -400,6 +400,12 @@ def reference_simulate(
     ReferenceResult
         States and signals at ``t_eval`` and the metrics (22) at ``t_final``.
     """
+    for key in ("input_delay", "output_delay"):  # the sampled path holds them
+        if getattr(scenario, key) != 0.0:
+            raise ValueError(
+                f"scenario.{key} = {getattr(scenario, key):g} s: the continuous reference "
+                "path has no transport delay (reference_sampled_simulate has); allowed: 0"
+            )
     controller.check_plant(plant, scenario.x0 or None)
     s = setup_loop(plant, controller, scenario)
     t_end = float(scenario.t_final if t_final is None else t_final)
