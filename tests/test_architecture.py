@@ -18,8 +18,9 @@ PACKAGE = SRC / "aiofl"
 
 LAYERS: tuple[tuple[str, ...], ...] = (
     # lowest first; a module may import from its own layer (without a cycle) or below
-    # the paper's pieces; atomic file output; the bounds on every input size; the disk cache
-    ("aiofl.components", "aiofl.outputs", "aiofl.limits", "aiofl.cache"),
+    # the paper's pieces; atomic file output; the bounds on every input size; the disk cache;
+    # single-value checks shared by the Python objects and the config schema
+    ("aiofl.components", "aiofl.outputs", "aiofl.limits", "aiofl.cache", "aiofl.checks"),
     ("aiofl.layout",),  # the member vocabulary: component kinds, parameter columns
     # plain descriptions of a design, a test and the model error (uncertainty)
     ("aiofl.controller", "aiofl.scenario", "aiofl.uncertainty"),
@@ -30,6 +31,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("aiofl.export",),
     ("aiofl.tuning",),
     ("aiofl.reporting",),
+    ("aiofl.design",),  # the notebook API: plant + controller + scenario -> every command
     ("aiofl.cli", "aiofl.__main__"),
 )
 """The layers, lowest first."""

@@ -121,7 +121,7 @@ def test_delays_that_cannot_be_held_are_refused_naming_the_field(slfjm):
             dt=1e-5,
         )
     for bad in (-1e-3, 2.0, float("nan")):
-        with pytest.raises(ValueError, match=r"scenario\.output_delay = .*allowed: 0 <="):
+        with pytest.raises(ValueError, match=r"scenario\.output_delay = .*allowed:"):
             Scenario(output_delay=bad)
 
 

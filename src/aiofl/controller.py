@@ -47,6 +47,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
+from aiofl.checks import check_integer, check_number
 from aiofl.components.kalman import kalman_gain_parameters
 from aiofl.components.observers import binomial_alphas
 
@@ -58,6 +59,7 @@ __all__ = [
     "controller_batch",
     "default_n_feedback",
     "resolve_kalman_rows",
+    "value_range",
 ]
 
 STRUCTURES = MappingProxyType(
@@ -97,6 +99,44 @@ for _i in range(1, L.RHO_MAX + 1):
     _DEFAULTS[f"sef.k{_i}"] = 1.0
     _DEFAULTS[f"sef.alpha{_i}"] = 1.0
     _DEFAULTS[f"sef.delta{_i}"] = 1.0
+
+
+#: allowed values of the parameters, by name or vector prefix (``sef.alpha`` covers
+#: ``sef.alpha1..8``): the ranges of the config's ``[controller.*]`` tables
+#: (:mod:`aiofl.config.schema`; ``tests/test_api_parity.py`` checks they agree)
+_VALUE_RANGES: dict[str, dict[str, float]] = {
+    "eso.omega0": {"gt": 0.0},
+    "eso.alpha": {"ge": 0.0},
+    "eso.k_alpha": {"ge": 0.0},
+    "eso.k_beta": {"ge": 0.0},
+    "eso.g_alpha": {"gt": 0.0, "le": 2.0},
+    "eso.g_beta": {"ge": 0.0, "le": 2.0},
+    "eso.q": {"gt": 0.0, "le": 1e300},
+    "eso.r": {"gt": 0.0, "le": 1e300},
+    "td.R": {"gt": 0.0},
+    "td.a": {"ge": 0.0, "lt": 1.0},
+    "td.b": {"gt": 0.0},
+    "td.c": {"gt": 0.0},
+    "td.rho": {"gt": 0.0},
+    "td.omega": {"gt": 0.0},
+    "sef.k": {},
+    "sef.kb": {},
+    "sef.alpha": {"gt": 0.0, "le": 3.0},
+    "sef.delta": {"gt": 0.0},
+    "sef.mu": {"ge": 0.0},
+    "sef.v_limit": {"gt": 0.0},
+    "sef.omega_c": {"gt": 0.0},
+    "law.b0": {},  # and non-zero (Controller.__post_init__)
+}
+
+
+def value_range(name: str) -> tuple[dict[str, float], bool]:
+    """The bounds (``gt``/``ge``/``lt``/``le``) of parameter ``name`` and whether it must be
+    finite (the actuator limits ``law.u_max`` / ``law.u_min`` may be ±inf)."""
+    if name in ("law.u_max", "law.u_min"):
+        return {}, False
+    key = name if name in _VALUE_RANGES else name.rstrip("0123456789")
+    return dict(_VALUE_RANGES[key]), True
 
 
 def default_n_feedback(rho: int, td: str) -> int:
@@ -201,7 +241,7 @@ class Controller:
             ("eso_model", L.ESO_MODEL_KINDS),
             ("eso_gains", L.ESO_GAINS_KINDS),
         ):
-            if getattr(self, kind) not in table:
+            if not isinstance(getattr(self, kind), str) or getattr(self, kind) not in table:
                 raise ValueError(
                     f"controller.{kind} = {getattr(self, kind)!r}; allowed: {', '.join(table)}"
                 )
@@ -214,8 +254,19 @@ class Controller:
             raise ValueError(f"controller.rho = {self.rho!r}; allowed: an integer 1..{L.RHO_MAX}")
         if not 1 <= self.rho <= L.RHO_MAX:
             raise ValueError(f"controller.rho = {self.rho}; allowed: 1..{L.RHO_MAX}")
+        object.__setattr__(self, "rho", int(self.rho))
         if self.n_feedback is None:
             object.__setattr__(self, "n_feedback", default_n_feedback(self.rho, self.td))
+        nfb = check_integer("controller.n_feedback", self.n_feedback, ge=1, le=L.RHO_MAX)
+        object.__setattr__(self, "n_feedback", nfb)
+        for flag in ("allow_rho_mismatch", "allow_b0_sign_mismatch"):
+            if not isinstance(getattr(self, flag), (bool, np.bool_)):
+                raise ValueError(f"controller.{flag} = {getattr(self, flag)!r}; allowed: a bool")
+        if not isinstance(self.values, Mapping):
+            raise ValueError(
+                f"controller.values = {self.values!r}; allowed: a mapping of parameter names "
+                "(e.g. 'eso.omega0') to numbers"
+            )
         if not 1 <= self.n_feedback <= self.rho:  # type: ignore[operator]
             raise ValueError(
                 f"controller.n_feedback = {self.n_feedback}; allowed: 1..rho ({self.rho})"
@@ -229,7 +280,10 @@ class Controller:
         unknown = sorted(set(self.values) - set(L.FLOAT_COLUMNS))
         if unknown:
             raise ValueError(f"unknown controller parameter(s): {', '.join(unknown)}")
-        vals = {k: float(v) for k, v in self.values.items()}
+        vals = {}
+        for name, value in self.values.items():  # the ranges of the config's tables
+            bounds, finite = value_range(name)
+            vals[name] = check_number(f"controller.{name}", value, finite=finite, **bounds)
         object.__setattr__(self, "values", MappingProxyType(vals))
         b0 = self.value("law.b0")
         if not (math.isfinite(b0) and b0 != 0.0):
@@ -511,7 +565,9 @@ def controller_batch(
         for name, col in values.items():
             if name not in L.FLOAT_COLUMNS:
                 raise ValueError(f"unknown controller parameter {name!r}")
-            floats[:, L.FLOAT_COLUMNS[name]] = np.asarray(col, dtype=np.float64)
+            column = np.asarray(col, dtype=np.float64)
+            _check_column(name, column)
+            floats[:, L.FLOAT_COLUMNS[name]] = column
         kalman = ints[:, L.I_ESO_GAINS] == L.ESO_GAINS_KALMAN
         derived = sorted(n for n in values if n == "eso.omega0" or n.startswith("eso.alpha"))
         if derived and kalman.any():
@@ -521,6 +577,23 @@ def controller_batch(
             )
         resolve_kalman_rows(ints, floats)
     return ControllerBatch(np.ascontiguousarray(ints), np.ascontiguousarray(floats))
+
+
+def _check_column(name: str, column: NDArray[np.float64]) -> None:
+    """Refuse a batch column with a value outside the parameter's range (:func:`value_range`;
+    ``law.b0`` also non-zero), naming the parameter and the first bad member."""
+    bounds, finite = value_range(name)
+    ok = ~np.isnan(column) & (np.isfinite(column) | (not finite))
+    ops = {"gt": np.greater, "ge": np.greater_equal, "lt": np.less, "le": np.less_equal}
+    for key, edge in bounds.items():
+        ok &= ops[key](column, edge)
+    if name == "law.b0":
+        ok &= column != 0.0
+    bad = np.flatnonzero(~ok)
+    if bad.size:
+        i = int(bad[0])
+        check_number(f"controller.{name} (member {i})", float(column[i]), finite=finite, **bounds)
+        raise ValueError(f"controller.{name} (member {i}) = 0.0; allowed: finite and non-zero")
 
 
 def resolve_kalman_rows(ints: NDArray[np.int64], floats: NDArray[np.float64]) -> None:

@@ -20,12 +20,36 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
+from aiofl.checks import check_integer, check_number
+from aiofl.limits import T_FINAL_MAX
 
 __all__ = ["DELAY_MAX", "Reference", "Scenario", "noise_sequence", "realisation_seed"]
 
 DELAY_MAX = 1.0
 """Largest input or output transport delay [s] a scenario accepts (the engine's delay
 buffer is bounded before it is allocated; see :func:`aiofl.engine.discrete.delay_steps`)."""
+
+
+#: allowed values of the reference's numbers (as ``[scenario.reference]`` in a config)
+_REFERENCE_RANGES: dict[str, dict[str, float]] = {
+    "amplitude": {},
+    "omega": {"ge": 0.0},
+    "phase": {},
+    "offset": {},
+    "t_step": {"ge": 0.0},
+    "sample_dt": {"ge": 0.0},
+}
+#: allowed values of the scenario's numbers (as ``[scenario]`` in a config)
+_SCENARIO_RANGES: dict[str, dict[str, float]] = {
+    "t_final": {"gt": 0.0, "le": T_FINAL_MAX},
+    "disturbance_amplitude": {},
+    "disturbance_time": {"ge": 0.0},
+    "parameter_change_time": {"ge": 0.0},
+    "noise_variance": {"ge": 0.0},
+    "noise_hold": {"gt": 0.0},
+    "input_delay": {"ge": 0.0, "le": DELAY_MAX},
+    "output_delay": {"ge": 0.0, "le": DELAY_MAX},
+}
 
 
 @dataclass(frozen=True)
@@ -48,13 +72,25 @@ class Reference:
     sample_dt: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.kind not in L.REF_KINDS:
+        if not isinstance(self.kind, str) or self.kind not in L.REF_KINDS:
             raise ValueError(f"reference.kind = {self.kind!r}; allowed: {', '.join(L.REF_KINDS)}")
-        if self.kind == "samples" and (len(self.samples) < 2 or not self.sample_dt > 0):
+        # the ranges of the config's [scenario.reference] (aiofl.config.schema.ReferenceModel)
+        for name, bounds in _REFERENCE_RANGES.items():
+            value = check_number(f"scenario.reference.{name}", getattr(self, name), **bounds)
+            object.__setattr__(self, name, value)
+        if isinstance(self.samples, (str, bytes)) or not hasattr(self.samples, "__iter__"):
+            raise ValueError(
+                f"scenario.reference.samples = {self.samples!r}; allowed: a sequence of finite "
+                "numbers"
+            )
+        samples = tuple(
+            check_number(f"scenario.reference.samples[{i}]", v) for i, v in enumerate(self.samples)
+        )
+        if self.kind == "samples" and (len(samples) < 2 or not self.sample_dt > 0):
             raise ValueError(
                 "reference.samples needs at least 2 values and reference.sample_dt > 0"
             )
-        object.__setattr__(self, "samples", tuple(float(s) for s in self.samples))
+        object.__setattr__(self, "samples", samples)
 
     def evaluate(self, t: NDArray[np.float64] | float) -> NDArray[np.float64]:
         """r(t), vectorised (the same formula the engine uses)."""
@@ -113,19 +149,38 @@ class Scenario:
     output_delay: float = 0.0
 
     def __post_init__(self) -> None:
-        for key in ("input_delay", "output_delay"):
-            v = getattr(self, key)
-            if not 0.0 <= v <= DELAY_MAX:  # (NaN fails)
-                raise ValueError(f"scenario.{key} = {v} s; allowed: 0 <= {key} <= {DELAY_MAX:g} s")
-        if not self.t_final > 0:
-            raise ValueError(f"scenario.t_final = {self.t_final}; allowed: > 0")
-        if self.noise_variance < 0:
-            raise ValueError(f"scenario.noise_variance = {self.noise_variance}; allowed: >= 0")
-        if not self.noise_hold > 0:
-            raise ValueError(f"scenario.noise_hold = {self.noise_hold}; allowed: > 0")
-        object.__setattr__(self, "plant_scale", MappingProxyType(dict(self.plant_scale)))
-        object.__setattr__(self, "plant_overrides", MappingProxyType(dict(self.plant_overrides)))
-        object.__setattr__(self, "x0", tuple(float(v) for v in self.x0))
+        if not isinstance(self.name, str):
+            raise ValueError(f"scenario.name = {self.name!r}; allowed: a string")
+        if not isinstance(self.reference, Reference):
+            raise ValueError(
+                f"scenario.reference = {self.reference!r}; allowed: an aiofl.Reference"
+            )
+        # the ranges of the config's [scenario] (aiofl.config.schema.ScenarioModel)
+        for name, bounds in _SCENARIO_RANGES.items():
+            object.__setattr__(
+                self, name, check_number(f"scenario.{name}", getattr(self, name), **bounds)
+            )
+        seed = check_integer("scenario.noise_seed", self.noise_seed, ge=0, lt=2**63)
+        object.__setattr__(self, "noise_seed", seed)
+        for table, bounds in (("plant_scale", {"gt": 0.0}), ("plant_overrides", {})):
+            given = getattr(self, table)
+            if not isinstance(given, Mapping):
+                raise ValueError(
+                    f"scenario.{table} = {given!r}; allowed: a mapping of plant parameter "
+                    "names to numbers"
+                )
+            checked = {}
+            for key, value in given.items():
+                if not isinstance(key, str):
+                    raise ValueError(
+                        f"scenario.{table} key {key!r}; allowed: a plant parameter name"
+                    )
+                checked[key] = check_number(f"scenario.{table}.{key}", value, **bounds)
+            object.__setattr__(self, table, MappingProxyType(checked))
+        if isinstance(self.x0, (str, bytes)) or not hasattr(self.x0, "__iter__"):
+            raise ValueError(f"scenario.x0 = {self.x0!r}; allowed: a sequence of finite numbers")
+        x0 = tuple(check_number(f"scenario.x0[{i}]", v) for i, v in enumerate(self.x0))
+        object.__setattr__(self, "x0", x0)
 
     @property
     def noise_samples(self) -> int:

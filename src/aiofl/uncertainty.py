@@ -62,10 +62,15 @@ from aiofl.scenario import Scenario, realisation_seed
 __all__ = [
     "AGGREGATES",
     "MAX_DRAWS",
+    "MAX_FULL_FACTORIAL",
     "Distribution",
     "Draws",
     "UncertaintyModel",
     "aggregate",
+    "box_bounds",
+    "box_draws",
+    "corner_design",
+    "corner_draws",
     "cvar",
     "sample_draws",
 ]
@@ -133,6 +138,18 @@ class Distribution(_Model):
             return np.clip(1.0 + self.normal * z, np.nextafter(0.0, 1.0), None)
         a, b = self.log_uniform  # type: ignore[misc]
         return np.exp(math.log(a) + u * (math.log(b) - math.log(a)))
+
+    def bounds(self) -> tuple[float, float]:
+        r"""The box edge of this factor: ``uniform`` :math:`[1-p, 1+p]`, ``log_uniform``
+        :math:`[a, b]` (the support), ``normal`` :math:`1 \pm 3\sigma` (99.7 % of the
+        untruncated law) clipped to :math:`[0.01, 1.99]` (the truncated support is (0, 2))."""
+        if self.uniform is not None:
+            return 1.0 - self.uniform, 1.0 + self.uniform
+        if self.normal is not None:
+            half = min(3.0 * self.normal, 0.99)
+            return 1.0 - half, 1.0 + half
+        a, b = self.log_uniform  # type: ignore[misc]
+        return float(a), float(b)
 
 
 #: a range [a, b] of non-negative numbers
@@ -248,6 +265,26 @@ class Draws:
             noise_seeds=cut(self.noise_seeds),
         )
 
+    def concat(self, other: Draws) -> Draws:
+        """These draws followed by ``other`` (the same quantities drawn; the seed is
+        this one's).  Raises ``ValueError`` when the drawn quantities differ."""
+        if set(self.factors) != set(other.factors) or any(
+            (getattr(self, a) is None) != (getattr(other, a) is None)
+            for a in ("ts", "noise_variance", "noise_seeds")
+        ):
+            raise ValueError("Draws.concat: the two sets draw different quantities")
+
+        def cat(a: NDArray[Any] | None, b: NDArray[Any] | None) -> NDArray[Any] | None:
+            return None if a is None or b is None else np.concatenate([a, b])
+
+        return Draws(
+            seed=self.seed,
+            factors={k: np.concatenate([v, other.factors[k]]) for k, v in self.factors.items()},
+            ts=cat(self.ts, other.ts),
+            noise_variance=cat(self.noise_variance, other.noise_variance),
+            noise_seeds=cat(self.noise_seeds, other.noise_seeds),
+        )
+
     def __len__(self) -> int:
         for arr in (*self.factors.values(), self.ts, self.noise_variance):
             if arr is not None:
@@ -328,6 +365,109 @@ def sample_draws(
         np.random.PCG64(np.random.SeedSequence(s, spawn_key=(zlib.crc32(b"noise_seed"),)))
     ).integers(0, 2**62, n, dtype=np.int64)
     return Draws(seed=s, factors=factors, ts=ts, noise_variance=nv, noise_seeds=ns)
+
+
+# ------------------------------------------------------------------ the box and its corners
+#: a box of at most this many dimensions is checked at all its 2^k corners
+MAX_FULL_FACTORIAL = 12
+
+
+def box_bounds(spec: UncertaintyModel, *, dt: float = 1e-4) -> dict[str, tuple[float, float]]:
+    """The uncertainty box: per drawn quantity (parameters sorted by name, then ``ts``,
+    ``noise_variance``) its ``(low, high)`` edge (:meth:`Distribution.bounds`; ``ts``: the
+    smallest and largest multiple of ``dt`` in range)."""
+    out = {name: spec.parameters[name].bounds() for name in sorted(spec.parameters)}
+    if spec.ts is not None:
+        lo, hi = _ts_steps(spec.ts, dt)
+        out["ts"] = (lo * dt, hi * dt)
+    if spec.noise_variance is not None:
+        out["noise_variance"] = (float(spec.noise_variance[0]), float(spec.noise_variance[1]))
+    return out
+
+
+def _generators(n: int) -> list[tuple[int, ...]]:
+    """The first ``n`` subsets of odd size >= 3 of the 12 base factors (by size, then
+    lexicographically): the generators of the extra factors of a fractional factorial."""
+    import itertools
+
+    out: list[tuple[int, ...]] = []
+    for size in range(3, MAX_FULL_FACTORIAL + 1, 2):
+        for combo in itertools.combinations(range(MAX_FULL_FACTORIAL), size):
+            out.append(combo)
+            if len(out) == n:
+                return out
+    raise ValueError(
+        f"a box of {MAX_FULL_FACTORIAL + n} dimensions; allowed: at most "
+        f"{MAX_FULL_FACTORIAL + len(out)} (the resolution-IV corner design runs out of generators)"
+    )
+
+
+def corner_design(k: int) -> tuple[NDArray[np.int8], str]:
+    r"""The corners checked of a k-dimensional box, as a (N, k) table of signs ±1.
+
+    :math:`k \le` :data:`MAX_FULL_FACTORIAL`: the full factorial, all :math:`N = 2^k`
+    corners (row i, column j: +1 when bit j of i is set).  Larger k: a two-level
+    :math:`2^{k-p}` fractional factorial with :math:`N = 2^{12}` runs (Box, Hunter &
+    Hunter, *Statistics for Experimenters*, 2nd ed., 2005, ch. 6): the first 12 factors
+    full factorial, factor 12 + m the product of the base factors of generator m, the
+    odd-sized subsets of size >= 3 in order.  Every word of the defining relation then has
+    even length >= 4, so the design has resolution IV (no main effect aliased with another
+    main effect or a two-factor interaction).  Returns the table and a one-line description.
+    """
+    if k < 1:
+        raise ValueError("a corner design needs at least one dimension")
+    n_base = min(k, MAX_FULL_FACTORIAL)
+    rows = np.arange(2**n_base)[:, None]
+    base = np.where((rows >> np.arange(n_base)) & 1, 1, -1).astype(np.int8)
+    if k <= MAX_FULL_FACTORIAL:
+        return base, f"full factorial: all 2^{k} = {2**k} corners"
+    extra = [np.prod(base[:, list(g)], axis=1) for g in _generators(k - n_base)]
+    table = np.column_stack([base, *extra]).astype(np.int8)
+    return table, (
+        f"2^({k}-{k - n_base}) fractional factorial of resolution IV: {2**n_base} of the "
+        f"2^{k} corners (first {n_base} factors full, the others products of odd-sized "
+        "generator sets)"
+    )
+
+
+def _box_values(
+    box: Mapping[str, tuple[float, float]], unit: NDArray[np.float64], dt: float, seed: int
+) -> Draws:
+    """Draws at the points ``unit`` (N, k) of the unit cube mapped onto ``box`` (``ts``
+    rounded to a multiple of ``dt``); noise seeds from the stream ``"box_noise_seed"``."""
+    names = list(box)
+    cols = {}
+    for j, name in enumerate(names):
+        lo, hi = box[name]
+        cols[name] = lo + np.clip(unit[:, j], 0.0, 1.0) * (hi - lo)
+    ts = cols.pop("ts", None)
+    if ts is not None:
+        ts = np.round(ts / dt) * dt
+    nv = cols.pop("noise_variance", None)
+    ns = np.random.Generator(
+        np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(zlib.crc32(b"box_noise_seed"),)))
+    ).integers(0, 2**62, len(unit), dtype=np.int64)
+    return Draws(seed=seed, factors=cols, ts=ts, noise_variance=nv, noise_seeds=ns)
+
+
+def corner_draws(spec: UncertaintyModel, *, dt: float = 1e-4) -> tuple[Draws, str]:
+    """The corners of the box of ``spec`` (:func:`box_bounds`, :func:`corner_design`) as
+    :class:`Draws` (one per corner, in the design's row order), and the design's
+    description.  Deterministic: the same table gives the same corners (their noise seeds,
+    used only with a noisy measurement, come from the table's seed)."""
+    box = box_bounds(spec, dt=dt)
+    signs, text = corner_design(len(box))
+    return _box_values(box, (signs + 1.0) / 2.0, dt, spec.seed), text
+
+
+def box_draws(spec: UncertaintyModel, unit: ArrayLike, *, dt: float = 1e-4) -> Draws:
+    """Draws at points of the box of ``spec`` given in unit coordinates: ``unit`` (N, k),
+    column j in [0, 1] from the low to the high edge of :func:`box_bounds`'s j-th entry."""
+    u = np.atleast_2d(np.asarray(unit, dtype=np.float64))
+    box = box_bounds(spec, dt=dt)
+    if u.shape[1] != len(box):
+        raise ValueError(f"box points have {u.shape[1]} columns; the box has {len(box)}")
+    return _box_values(box, u, dt, spec.seed)
 
 
 # ------------------------------------------------------------------ aggregates

@@ -212,6 +212,13 @@ class RobustnessResult(_DrawStatistics):
     engine_calls: int
     seconds: float
     uncertainty: dict[str, Any] = field(default_factory=dict)
+    #: the box corners run with the draws (:func:`aiofl.uncertainty.corner_draws`), or None
+    corners: Draws | None = None
+    corner_itae: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    corner_diverged: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    corner_diverged_at: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    #: records added to :meth:`to_dict` (:func:`aiofl.analysis.corners.run_box_robustness`)
+    extra: dict[str, Any] = field(default_factory=dict)
 
     def worst_index(self) -> int:
         """The worst draw: largest ITAE; a diverged draw (earliest first) beats any finite."""
@@ -272,6 +279,7 @@ class RobustnessResult(_DrawStatistics):
                 "quantiles: numpy inverted_cdf over all draws, a diverged draw counting as "
                 "+inf; null = the value falls on a diverged draw (infeasible)"
             ),
+            **self.extra,
         }
 
 
@@ -282,11 +290,14 @@ def run_robustness(
     seed: int | None = None,
     client: Any = None,
     chunks: int | None = None,
+    corners: Draws | None = None,
 ) -> RobustnessResult:
     """Draw ``cfg.uncertainty`` and run the design over the draws (module docstring).
 
-    Raises ``ValueError`` if the config has no ``[uncertainty]`` table or ``draws``/``seed``
-    are out of range (before anything runs).
+    ``corners`` (e.g. :func:`aiofl.uncertainty.corner_draws`) run in the same engine
+    call(s), after the draws; their results are the ``corner_*`` fields.  Raises
+    ``ValueError`` if the config has no ``[uncertainty]`` table or ``draws``/``seed`` are
+    out of range (before anything runs).
     """
     if cfg.uncertainty is None:
         raise ValueError(
@@ -297,11 +308,15 @@ def run_robustness(
     d = sample_draws(cfg.uncertainty, draws=draws, seed=seed, dt=cfg.dt)
     d.scenarios(cfg.scenario)  # refuses an incompatible scenario before anything runs
     t0 = time.perf_counter()
-    runs = simulate_draws(cfg, d, client=client, chunks=chunks)
+    n_c = 0 if corners is None else len(corners)
+    runs = simulate_draws(
+        cfg, d if corners is None else d.concat(corners), client=client, chunks=chunks
+    )
     seconds = time.perf_counter() - t0
     m, div = runs.metrics, runs.diverged
     itae = np.where(div, np.inf, m[:, L.METRIC_NAMES.index("itae")])
     isu = np.where(div, np.inf, m[:, L.METRIC_NAMES.index("isu")])
+    k_end = len(div) - n_c  # members 1..K are the draws, then the corners
     nominal = {
         "itae": _num(itae[0]),
         "isu": _num(isu[0]),
@@ -314,16 +329,20 @@ def run_robustness(
         name=cfg.name,
         draws=d,
         nominal_params=dict(cfg.plant.params),
-        itae=itae[1:],
-        isu=isu[1:],
-        diverged=div[1:],
-        diverged_at=runs.diverged_at[1:],
+        itae=itae[1:k_end],
+        isu=isu[1:k_end],
+        diverged=div[1:k_end],
+        diverged_at=runs.diverged_at[1:k_end],
         nominal=nominal,
         t=runs.t,
-        error=runs.error[1:],
+        error=runs.error[1:k_end],
         engine_calls=runs.engine_calls,
         seconds=seconds,
         uncertainty=spec,
+        corners=corners,
+        corner_itae=itae[k_end:],
+        corner_diverged=div[k_end:],
+        corner_diverged_at=runs.diverged_at[k_end:],
     )
 
 
@@ -480,6 +499,35 @@ def _ecdf(ax: Any, res: RobustnessResult, values: NDArray[np.float64], name: str
     ax.legend(loc="lower right", fontsize=8)
 
 
+def _mark_corners(ax: Any, res: RobustnessResult, xname: str, top: float) -> None:
+    """The box corners on an ITAE-against-parameter panel: black squares, a diverged
+    corner a red square at the top."""
+    xc = res.corners.columns()[xname]  # type: ignore[union-attr]
+    ok = ~res.corner_diverged
+    if ok.any():
+        top = max(top, 2.0 * float(res.corner_itae[ok].max()))
+    if ok.any():
+        ax.scatter(
+            xc[ok],
+            res.corner_itae[ok],
+            marker="s",
+            s=24,
+            facecolors="none",
+            edgecolors="k",
+            label="corners",
+        )
+    if (~ok).any():
+        ax.scatter(
+            xc[~ok],
+            np.full(int((~ok).sum()), top),
+            marker="s",
+            s=30,
+            color="r",
+            label="diverged corner",
+        )
+    ax.legend(loc="best", fontsize=8)
+
+
 def robustness_figure(res: RobustnessResult) -> Any:
     """A matplotlib ``Figure`` of a robustness run, in two rows of three panels.
 
@@ -535,6 +583,8 @@ def robustness_figure(res: RobustnessResult) -> Any:
             n_bad = int((~finite).sum())
             ax.scatter(x[~finite], np.full(n_bad, top), marker="x", color="r", label="diverged")
             ax.legend(loc="upper left", fontsize=8)
+        if res.corners is not None and xname in res.corners.columns():
+            _mark_corners(ax, res, xname, top)
         if xname == "ITAE":
             title = "ISU against ITAE per stable draw"
         else:
@@ -542,9 +592,13 @@ def robustness_figure(res: RobustnessResult) -> Any:
         label = xname + (" factor" if xname in res.draws.factors else "")
         ax.set(xlabel=label, ylabel=yname)
         ax.set_title(title, parse_math=False)
+    corners = ""
+    if res.corners is not None:
+        n_c = len(res.corners)
+        corners = f"; corners stable {n_c - int(res.corner_diverged.sum())} of {n_c}"
     fig.suptitle(  # the config's name: plain text, never mathtext
         f"{res.name}: stable {100 * res.stable_fraction:.1f} % of {k} draws "
-        f"(seed {res.draws.seed})",
+        f"(seed {res.draws.seed}){corners}",
         parse_math=False,
     )
     return fig

@@ -1,8 +1,11 @@
 """``aiofl robustness CONFIG [--draws N] [--seed S] [--scheduler ...] --out DIR``.
 
-Runs the design of CONFIG over the draws of its ``[uncertainty]`` table
-(:func:`aiofl.analysis.robustness.run_robustness`) and writes ``DIR/robustness.json``
-(stable fraction, ITAE/ISU quantiles, the worst draw, the nominal run) and
+Runs the design of CONFIG over the draws of its ``[uncertainty]`` table and, in the same
+batched engine call, the corners of its box; then a local worst-case search from the worst
+corner or draw and the β/b0 stability range
+(:func:`aiofl.analysis.corners.run_box_robustness`; ``--no-corners`` runs the draws alone)
+and writes ``DIR/robustness.json`` (stable fraction, ITAE/ISU quantiles, the worst draw,
+the nominal run, ``corners`` with ``corners_stable``, ``worst_case``, ``beta_range``) and
 ``DIR/robustness.png`` (ECDFs of ITAE and ISU, the envelope of y - r, ITAE against the
 two most influential parameters, ISU against ITAE), all or nothing.  A config without
 ``[uncertainty]``, a bad table or option exits with status 2 and writes nothing.
@@ -46,6 +49,53 @@ def _fmt(x: float | None) -> str:
     return "diverged" if x is None else f"{x:.4g}"
 
 
+def _point(p: dict[str, float]) -> str:
+    return ", ".join(
+        f"{k} x {v:.4g}" if k not in ("ts", "noise_variance") else f"{k} = {v:.4g}"
+        for k, v in p.items()
+    )
+
+
+def _box_text(info: dict[str, Any]) -> str:
+    """The corners, worst case and β/b0 lines of the summary ("" without them)."""
+    c = info.get("corners")
+    if c is None:
+        return ""
+    out = [
+        f"corners_stable {c['corners_stable']:.4g} ({c['stable']} of {c['count']}; {c['design']})"
+    ]
+    for d in c["diverged"][:8]:
+        out.append(f"  corner {d['corner']} diverged at t = {d['t']:.3g} s: {_point(d['point'])}")
+    if len(c["diverged"]) > 8:
+        out.append(f"  ... {len(c['diverged']) - 8} more diverged corners in robustness.json")
+    w = info.get("worst_case")
+    if w is not None:
+        what = (
+            f"diverged at t = {w['diverged_at']:.3g} s"
+            if w["itae"] is None
+            else f"ITAE {w['itae']:.4g}"
+        )
+        out.append(
+            f"worst case (search from {w['start']}, {w['evaluations']} evaluation(s)): {what} "
+            f"at {_point(w['point'])}"
+        )
+    b = info.get("beta_range")
+    if b is not None:
+        if b["beta_over_b0"] is not None:
+            lo, hi = b["beta_over_b0"]
+            caps = b["capped"]
+            out.append(
+                f"beta/b0 stability range: {'<= ' if caps[0] else ''}{lo:.3g} .. "
+                f"{'>= ' if caps[1] else ''}{hi:.3g} (nominal {b['beta_over_b0_nominal']:.3g}; "
+                f"beta scaled by s via {b['scaling']})"
+            )
+        elif b["s"] is not None:
+            out.append(f"beta factor stability range s: {b['s'][0]:.3g} .. {b['s'][1]:.3g}")
+        else:
+            out.append(f"beta/b0 range: not computed ({b['reason']})")
+    return "\n".join(out) + "\n"
+
+
 def robustness_command(
     config: Annotated[
         str, typer.Argument(help="A TOML config file or preset, with an [uncertainty] table.")
@@ -64,11 +114,19 @@ def robustness_command(
         typer.Option("--dask-workers", help="Start a local Dask cluster with N workers."),
     ] = None,
     sensor: Annotated[str | None, SENSOR_OPTION] = None,
+    corners: Annotated[
+        bool,
+        typer.Option(
+            "--corners/--no-corners",
+            help="Also check the box corners, search the worst case and the beta/b0 range.",
+        ),
+    ] = True,
 ) -> None:
     """Measure a design's robustness over the draws of its [uncertainty] table.
 
     Every draw has its own measurement-noise realisation (seeded from the draw); --sensor
     measures with a sensor preset."""
+    from aiofl.analysis.corners import run_box_robustness
     from aiofl.analysis.robustness import robustness_figure, run_robustness
     from aiofl.config import load_config
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
@@ -97,7 +155,10 @@ def robustness_command(
         client, owned = _client(scheduler, dask_workers)
     try:
         with bad_input_exits(run=True):
-            res = run_robustness(cfg, draws=draws, seed=seed, client=client)
+            if corners:
+                res = run_box_robustness(cfg, draws=draws, seed=seed, client=client)
+            else:
+                res = run_robustness(cfg, draws=draws, seed=seed, client=client)
             info = res.to_dict()
             import io
 
@@ -117,6 +178,7 @@ def robustness_command(
         f"{_fmt(itae['q05'])} / {_fmt(itae['q50'])} / {_fmt(itae['q95'])} / "
         f"{_fmt(itae['max'])} (nominal {_fmt(info['nominal']['itae'])}); "
         f"{res.engine_calls} engine call(s), {res.seconds:.1f} s\n"
+        f"{_box_text(info)}"
         f"sensor: {cfg.sensor.describe()}\n"
         f"wrote {out}/robustness.json, robustness.png"
     )

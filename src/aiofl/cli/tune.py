@@ -145,7 +145,7 @@ def check_text(prep: Any) -> str:
     (algorithm, budget, simulations, objective(s), parameters, horizon and step)."""
     st = prep.settings
     candidates = st.population * st.generations
-    sims = candidates * (1 + st.robust.draws) if st.robust is not None else candidates
+    sims = candidates * (1 + len(prep.spec.draws))
     sims *= st.noise_realisations
     if st.objectives:
         goal = f"objectives {', '.join(st.objectives)}"

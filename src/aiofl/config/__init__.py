@@ -4,9 +4,11 @@
 scenario, controller, simulation settings, OPI weights); a bad file raises
 :class:`ConfigError` whose message names the field and the allowed range.  The schema of
 every table is :mod:`aiofl.config.schema`; reading and checking is
-:mod:`aiofl.config.run_config`.
+:mod:`aiofl.config.run_config`; :func:`run_config_from_objects` builds the same validated
+config from a Python ``Plant``, ``Controller`` and ``Scenario`` (:mod:`aiofl.config.objects`).
 """
 
+from aiofl.config.objects import run_config_from_objects
 from aiofl.config.run_config import (
     PlantFileGiven,
     RunConfig,
@@ -28,4 +30,5 @@ __all__ = [
     "parse_config",
     "preset_text",
     "resolve_plant",
+    "run_config_from_objects",
 ]

@@ -24,12 +24,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
+from aiofl.checks import check_integer, check_number
 from aiofl.components.metrics import OPIWeights, opi
 from aiofl.controller import Controller, ControllerBatch, controller_batch
 from aiofl.engine.batch import Batch, Outputs
 from aiofl.engine.discrete import D_STEPS, N_DISC, Sampling, check_delays, sampling_rows
 from aiofl.engine.instances import instance_for, plan_groups, run_groups
 from aiofl.engine.observer_gains import model_jacobians, with_model_gains
+from aiofl.limits import DT_MAX, MAX_STEPS, MAX_TRAJECTORY_BYTES, check_run_size
 from aiofl.plants.base import Plant
 from aiofl.scenario import Scenario, noise_sequence
 
@@ -121,6 +123,89 @@ def _as_list(x: Any, n: int, what: str) -> list[Any]:
     return [x] * n
 
 
+def _check_settings(
+    plant: Any, method: Any, dt: Any, decimation: Any, divergence_threshold: Any
+) -> tuple[float, int, float]:
+    """The run settings, refused as the config's ``[simulation]`` table refuses them
+    (:class:`aiofl.config.schema.SimulationModel`): ``ValueError`` naming the argument."""
+    if not isinstance(plant, Plant):
+        raise ValueError(f"plant = {plant!r}; allowed: an aiofl.Plant (e.g. get_plant('slfjm'))")
+    if not isinstance(method, str) or method not in L.METHODS:
+        raise ValueError(f"simulation.method = {method!r}; allowed: {', '.join(L.METHODS)}")
+    return (
+        check_number("simulation.dt", dt, gt=0.0, le=DT_MAX),
+        check_integer("simulation.decimation", decimation, ge=1, le=MAX_STEPS),
+        # finite: an infinite threshold would switch divergence detection off
+        check_number("simulation.divergence_threshold", divergence_threshold, gt=0.0, le=1e300),
+    )
+
+
+def _check_members(controllers: Any, scenarios: Any, sampling: Any) -> None:
+    """Refuse controllers, scenarios or sampling settings of the wrong kind, or none."""
+    if not isinstance(controllers, (Controller, ControllerBatch)):
+        if isinstance(controllers, (str, bytes)) or not isinstance(controllers, Sequence):
+            raise ValueError(
+                f"controllers = {controllers!r}; allowed: a Controller, a non-empty sequence "
+                "of Controllers or a ControllerBatch"
+            )
+        bad = [i for i, c in enumerate(controllers) if not isinstance(c, Controller)]
+        if not controllers or bad:
+            got = "an empty sequence" if not controllers else repr(controllers[bad[0]])
+            raise ValueError(
+                f"controllers: {got}"
+                + (f" at index {bad[0]}" if bad else "")
+                + "; allowed: a Controller, a non-empty sequence of Controllers or a "
+                "ControllerBatch (e.g. Controller.from_structure('LESO'))"
+            )
+    elif isinstance(controllers, ControllerBatch) and len(controllers) == 0:
+        raise ValueError("controllers: an empty ControllerBatch; allowed: at least one member")
+    many = isinstance(scenarios, (list, tuple))
+    scens = list(scenarios) if many else [scenarios]
+    if not scens or not all(isinstance(s, Scenario) for s in scens):
+        raise ValueError(
+            f"scenarios = {scenarios!r}; allowed: a Scenario or a non-empty list of Scenarios"
+        )
+    samp = list(sampling) if isinstance(sampling, (list, tuple)) else [sampling]
+    if not all(s is None or isinstance(s, Sampling) for s in samp):
+        raise ValueError(
+            f"sampling = {sampling!r}; allowed: None, a Sampling, or a list of them (one per "
+            "member)"
+        )
+
+
+#: most bytes of a batch's stored trajectories together (members x points x columns x 8):
+#: 8 x the per-member bound of :func:`aiofl.limits.check_run_size`, room for the reports'
+#: batches of stored runs, refusing a batch that would exhaust the machine's memory
+MAX_BATCH_TRAJECTORY_BYTES = 8 * MAX_TRAJECTORY_BYTES
+
+
+def _check_size(
+    plant: Plant, scens: list[Scenario], b: int, dt: float, *, store: bool, decimation: int
+) -> None:
+    """The run's size, bounded before anything is allocated (:func:`aiofl.limits.check_run_size`:
+    a whole number of steps, at most ``MAX_STEPS``, the noise table, a stored trajectory),
+    and the batch's stored trajectories together at most :data:`MAX_BATCH_TRAJECTORY_BYTES`."""
+    t_final = scens[0].t_final
+    if any(abs(s.t_final - t_final) > 1e-12 for s in scens):
+        raise ValueError("all scenarios in one batch must share t_final")
+    columns = len(L.trajectory_columns(plant.n_states))
+    n = check_run_size(
+        t_final,
+        dt,
+        noise_hold=min(s.noise_hold for s in scens),
+        trajectory_columns=columns if store else None,
+        decimation=decimation,
+    )
+    nbytes = b * (n // decimation + 1) * columns * 8
+    if store and nbytes > MAX_BATCH_TRAJECTORY_BYTES:
+        raise ValueError(
+            f"the batch's stored trajectories need {nbytes / 2**20:.0f} MiB ({b} members x "
+            f"{n // decimation + 1} points x {columns} columns x 8 bytes; simulation.decimation"
+            f" = {decimation}); allowed: at most {MAX_BATCH_TRAJECTORY_BYTES // 2**20} MiB (store "
+            "fewer members, or raise decimation or dt)"
+        )
+
+
 def simulate_batch(
     plant: Plant,
     controllers: Controller | Sequence[Controller] | ControllerBatch,
@@ -172,12 +257,10 @@ def simulate_batch(
     BatchResult
     """
     engine = _engine_choice(engine)
-    if method not in L.METHODS:
-        raise ValueError(f"method = {method!r}; allowed: {', '.join(L.METHODS)}")
-    if not dt > 0:
-        raise ValueError(f"dt = {dt}; allowed: > 0")
-    if decimation < 1:
-        raise ValueError(f"decimation = {decimation}; allowed: >= 1")
+    dt, decimation, divergence_threshold = _check_settings(
+        plant, method, dt, decimation, divergence_threshold
+    )
+    _check_members(controllers, scenarios, sampling)
     batch = (
         controllers
         if isinstance(controllers, ControllerBatch)
@@ -187,6 +270,7 @@ def simulate_batch(
     )
     b = len(batch)
     scens = _as_list(scenarios, b, "scenarios")
+    _check_size(plant, scens, b, dt, store=store, decimation=decimation)
     if not isinstance(controllers, ControllerBatch):  # a packed batch is checked when built
         ctrls = [controllers] * b if isinstance(controllers, Controller) else list(controllers)
         pairs = {(id(c), id(s)): (c, s) for c, s in zip(ctrls, scens, strict=True)}
@@ -197,9 +281,6 @@ def simulate_batch(
     jac = model_jacobians(plant, batch, [s.x0 for s in scens])
     disc = sampling_rows(batch, samplings, dt, jac) if any(samplings) else None
     batch = with_model_gains(batch, jac)
-    t_final = scens[0].t_final
-    if any(abs(s.t_final - t_final) > 1e-12 for s in scens):
-        raise ValueError("all scenarios in one batch must share t_final")
     rec, out = pack(
         plant,
         batch,

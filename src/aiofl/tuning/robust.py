@@ -281,11 +281,15 @@ def objective_matrix(
     return f, g, raw
 
 
-def draw_fields(config: Any, draws: int, dt: float) -> tuple[dict[str, Any], ...]:
+def draw_fields(
+    config: Any, draws: int, dt: float, *, corners: bool = False
+) -> tuple[dict[str, Any], ...]:
     """The K per-draw changes of ``config``'s ``[uncertainty]`` table, as plain data.
 
     Drawn by :func:`aiofl.uncertainty.sample_draws` with the table's seed and ``draws`` =
-    K (common random numbers: the same for every candidate and every run with that seed).
+    K (common random numbers: the same for every candidate and every run with that seed);
+    ``corners`` appends the box corners (:func:`aiofl.uncertainty.corner_draws`), so
+    ``draws == 0`` with ``corners`` gives the corners alone.
     Each draw is a dict of :class:`aiofl.scenario.Scenario` fields that differ from the
     nominal scenario (``plant_scale``, ``noise_variance`` ...), plus ``"ts"`` when the
     sample time is drawn, so it travels to Dask workers in the picklable evaluation spec.
@@ -294,7 +298,7 @@ def draw_fields(config: Any, draws: int, dt: float) -> tuple[dict[str, Any], ...
     from dataclasses import fields
 
     from aiofl.config import ConfigError
-    from aiofl.uncertainty import sample_draws
+    from aiofl.uncertainty import corner_draws, sample_draws
 
     unc = getattr(config, "uncertainty", None)
     if unc is None:
@@ -303,7 +307,11 @@ def draw_fields(config: Any, draws: int, dt: float) -> tuple[dict[str, Any], ...
             "robust against), e.g. [uncertainty] parameters = { J_l = { uniform = 0.2 } }"
         )
     try:
-        d = sample_draws(unc, draws=draws, dt=dt)
+        if corners:
+            c = corner_draws(unc, dt=dt)[0]
+            d = c if draws == 0 else sample_draws(unc, draws=draws, dt=dt).concat(c)
+        else:
+            d = sample_draws(unc, draws=draws, dt=dt)
         scenarios = d.scenarios(config.scenario)
     except ValueError as exc:
         raise ConfigError(f"tune.robust: {exc}") from None

@@ -41,6 +41,7 @@ from aiofl.tuning.checkpoint import (
 )
 from aiofl.tuning.progress import TuneProgress
 from aiofl.tuning.space import (
+    MAX_POPULATION,
     SearchSpace,
     TuneSettings,
     config_with_values,
@@ -149,6 +150,8 @@ class TuneResult:
             r = s.robust
             agg = f"cvar alpha = {r.alpha:g}" if r.aggregate == "cvar" else r.aggregate
             rob = f", robust over the nominal plant + {r.draws} [uncertainty] draws ({agg})"
+            if r.corners:
+                rob = rob[:-1] + "; and the box corners)"
         if s.noise_realisations > 1:
             rob += f", mean over {s.noise_realisations} noise realisations"
         if self.front is not None:
@@ -190,7 +193,10 @@ def describe_tuning(run_config: RunConfig) -> str | None:
     else:
         obj_text = f"objective {obj_text}"
     if st.robust is not None:
-        obj_text += f", robust ({st.robust.aggregate} over nominal + {st.robust.draws} draws)"
+        corners = " + the box corners" if st.robust.corners else ""
+        obj_text += (
+            f", robust ({st.robust.aggregate} over nominal + {st.robust.draws} draws{corners})"
+        )
     return f"{st.budget()}, {obj_text} over {st.t_final:g} s (aiofl tune)"
 
 
@@ -299,6 +305,16 @@ def prepare(
             raise ConfigError(
                 f"tune.robust.draws = {st.robust.draws} but {len(robust_draws)} draws given"
             )
+        if st.robust.corners:  # the box corners after the draws (given or drawn)
+            robust_draws += draw_fields(cfg, 0, st.dt or cfg.dt, corners=True)
+            k1 = (1 + len(robust_draws)) * st.noise_realisations
+            if st.population * k1 > MAX_POPULATION:
+                raise ConfigError(
+                    f"invalid [tune] of {source}: population x (robust.draws + corners + 1) "
+                    f"x noise_realisations = {st.population} x {k1} = {st.population * k1} "
+                    f"members per generation; allowed: at most {MAX_POPULATION} (one "
+                    "batched engine call)"
+                )
     elif draws is not None:
         raise ConfigError("draws given but the [tune] table has no robust = {...} setting")
     from aiofl.tuning.robust import parse_constraint, parse_quantity
@@ -323,10 +339,13 @@ def prepare(
         )
     coeffs = objective_coefficients(st, cfg)
     initial = _initial_population(space, cfg, st)
+    fp_settings = st.model_dump(exclude={"generations", "chunks"}, mode="json")
+    if fp_settings.get("robust") and not fp_settings["robust"]["corners"]:
+        del fp_settings["robust"]["corners"]  # checkpoints from before the option resume
     fp_data = {
         "format": CHECKPOINT_FORMAT,
         "spec": spec.key(),
-        "settings": st.model_dump(exclude={"generations", "chunks"}, mode="json"),
+        "settings": fp_settings,
         "initial": hashlib.sha256(initial.tobytes()).hexdigest(),
         "coefficients": coeffs.tolist(),
     }

@@ -10,7 +10,8 @@ r"""The ``[tune]`` table: settings, search space, objective, and writing a tuned
     generations = 50
     seed = 1
     divergence_penalty = 1e6  # objective of a member that diverged (see below)
-    robust = { draws = 16, aggregate = "cvar", alpha = 0.9 }  # optional; needs [uncertainty]
+    robust = { draws = 16, aggregate = "cvar", alpha = 0.9, corners = true }  # optional;
+                              # needs [uncertainty]; corners: also the 2^k box corners
     noise_realisations = 1    # K > 1: a noisy measurement scored over K noise realisations
     # nsga2 only: objectives (2 or 3) and constraints, see aiofl.tuning.robust
     # objectives = ["itae", "isu"]          # METRIC or METRIC:AGGREGATE
@@ -113,11 +114,22 @@ class ParameterBounds(_Model):
 
 
 class RobustSettings(_Model):
-    """``robust = { draws = K, aggregate = "mean" | "worst" | "cvar", alpha = 0.9 }``."""
+    """``robust = { draws = K, aggregate = "mean" | "worst" | "cvar", alpha = 0.9,
+    corners = false }``.
+
+    ``corners = true`` adds the corners of the ``[uncertainty]`` box
+    (:func:`aiofl.uncertainty.corner_draws`: :math:`2^k` plants for k <= 12 drawn
+    quantities) to the K random draws, so a candidate is scored on K + 2^k + 1 plants; the
+    extremes of the true plant's input gain β sit at the corners, where random draws rarely
+    go (:mod:`aiofl.analysis.corners`).  Recommended for new recipes.  The default stays
+    false so that the shipped presets' ``[tune]`` tables, written before the option
+    existed, keep reproducing their shipped values.
+    """
 
     draws: Annotated[int, Field(ge=1, le=MAX_ROBUST_DRAWS)]
     aggregate: Literal["mean", "worst", "cvar"] = "mean"
     alpha: Annotated[float, Field(gt=0, lt=1, allow_inf_nan=False)] = 0.9
+    corners: bool = False
 
 
 class TuneSettings(_Model):

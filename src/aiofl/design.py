@@ -1,0 +1,264 @@
+"""The notebook API: one object from ``Plant`` + ``Controller`` + ``Scenario`` to every command.
+
+:class:`Design` holds a plant (built-in or defined in Python), a controller and a scenario
+with the run settings, validated exactly as a TOML config is (it builds one, with a
+``raw`` dict that round-trips through :func:`aiofl.config.parse_config`:
+:mod:`aiofl.config.objects`), and offers what the command line does::
+
+    d = Design(plant, controller, scenario, dt=1e-3)
+    d.simulate()                                        # aiofl simulate
+    result = d.tune({"eso.omega0": (10, 200)}, population=16, generations=5)  # aiofl tune
+    tuned = d.with_values(result.best_values)
+    tuned.robustness(draws=32)                          # aiofl robustness
+    tuned.analyze()                                     # aiofl analyze --closed-loop
+    tuned.export("out", ts=1e-3)                        # aiofl export
+
+A bad value raises ``ValueError`` (a :class:`aiofl.config.ConfigError` from the config
+checks) naming the field and the allowed range, as the command line's exit 2 does.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+from aiofl.components.metrics import OPIWeights
+from aiofl.config import RunConfig
+from aiofl.config.objects import run_config_from_objects
+from aiofl.controller import Controller
+from aiofl.plants.base import Plant
+from aiofl.scenario import Scenario
+
+__all__ = ["Design"]
+
+
+@dataclass(frozen=True)
+class Design:
+    """A plant, a controller and a scenario with the run settings, validated like a config.
+
+    Parameters
+    ----------
+    plant
+        An :class:`aiofl.Plant`: a registered one (``aiofl.get_plant("pendulum")``) or
+        one defined in Python, which is registered in this process under its name (so the
+        tuner, which rebuilds the config from its dict, finds it; see
+        :mod:`aiofl.config.objects`).
+    controller, scenario
+        The :class:`aiofl.Controller` and :class:`aiofl.Scenario`.
+    dt, method, decimation, divergence_threshold
+        The ``[simulation]`` settings.
+    sampling
+        An :class:`aiofl.engine.discrete.Sampling` (``[controller.discrete]``): run the
+        controller sampled; None: continuous (or the sensor's sample time).
+    sensor
+        A sensor preset name (``"encoder-12bit"``) or an :class:`aiofl.sensor.Sensor`
+        (``[sensor]``); None: the scenario's own measurement.
+    uncertainty
+        The ``[uncertainty]`` table as a dict (``{"draws": 32, "parameters": {"m":
+        {"uniform": 0.2}}}``) or an :class:`aiofl.uncertainty.UncertaintyModel`, for
+        :meth:`robustness` and robust tuning.
+    weights
+        The OPI weights (:class:`aiofl.OPIWeights`; default the paper's).
+    name, description
+        Labels (reports, ``best.toml``, the C files' comment block).
+
+    Raises
+    ------
+    ValueError
+        A :class:`aiofl.config.ConfigError` naming the field and its allowed range.
+    """
+
+    plant: Plant
+    controller: Controller
+    scenario: Scenario
+    dt: float = 1e-4
+    method: str = "rk4"
+    decimation: int = 10
+    divergence_threshold: float = 1e10
+    sampling: Any = None
+    sensor: Any = None
+    uncertainty: Any = None
+    weights: OPIWeights | None = None
+    name: str = "design"
+    description: str = ""
+    config: RunConfig = field(init=False, repr=False, compare=False)
+
+    def __post_init__(self) -> None:
+        cfg = run_config_from_objects(
+            self.plant,
+            self.controller,
+            self.scenario,
+            dt=self.dt,
+            method=self.method,
+            decimation=self.decimation,
+            divergence_threshold=self.divergence_threshold,
+            sampling=self.sampling,
+            sensor=self.sensor,
+            uncertainty=self.uncertainty,
+            weights=self.weights,
+            name=self.name,
+            description=self.description,
+        )
+        # the objects given, not their rebuilt copies (the same values, checked)
+        object.__setattr__(
+            self, "config", replace(cfg, plant=self.plant, controller=self.controller)
+        )
+
+    # ------------------------------------------------------------------ variants
+    def with_values(self, values: Mapping[str, float] | None = None, **kw: float) -> Design:
+        """A copy with controller parameters replaced (e.g. a tuning result's
+        ``best_values``; dotted names also as ``**{"eso.omega0": 80}``)."""
+        merged = {**(values or {}), **kw}
+        return replace(self, controller=self.controller.with_values(**merged))
+
+    def replace(self, **changes: Any) -> Design:
+        """A copy with fields replaced (``scenario=...``, ``dt=...``, ``sensor=...``),
+        validated again."""
+        return replace(self, **changes)
+
+    # ------------------------------------------------------------------ commands
+    def simulate(self, *, store: bool = True) -> Any:
+        """One run (``aiofl simulate``): a :class:`aiofl.engine.simulation.SimulationResult`
+        (``.metrics``, ``.diverged``, ``.t``, ``["y"]``, ``.opi(weights)``)."""
+        return self.config.simulate(store=store)
+
+    def opi(self) -> float | None:
+        """The OPI (eq. 22) of one run with this design's weights; None if it diverged."""
+        return self.simulate(store=False).opi(self.config.weights)
+
+    def tune(
+        self,
+        parameters: Mapping[str, Any],
+        *,
+        progress: bool = False,
+        out: str | Path | None = None,
+        checkpoint_dir: str | Path | None = None,
+        resume: bool = False,
+        evaluator: Any = None,
+        **settings: Any,
+    ) -> Any:
+        """Tune the controller (``aiofl tune``): :func:`aiofl.tuning.search.tune`.
+
+        Parameters
+        ----------
+        parameters
+            The tuned parameters and their bounds, as ``[tune.parameters]``:
+            ``{"eso.omega0": (10, 200)}`` or ``{"eso.omega0": {"lo": 10, "hi": 200,
+            "log": True}}``.
+        progress, checkpoint_dir, resume, evaluator
+            As for :func:`aiofl.tuning.search.tune` (a Python-defined plant is known in
+            this process only: tune it locally, the default, not on Dask workers).
+        out
+            Also write the tuning outputs there (``best.toml``, ``evaluations.csv``,
+            figures: :func:`aiofl.tuning.results.write_outputs`).
+        **settings
+            The other ``[tune]`` settings (``population``, ``generations``, ``t_final``,
+            ``seed``, ``objective``, ``robust``, ``algorithm`` ...).
+
+        Returns
+        -------
+        aiofl.tuning.search.TuneResult
+            ``best_values`` (apply with :meth:`with_values`), ``best_objective``,
+            ``best_metrics``, the history and every evaluation.
+        """
+        from aiofl.tuning.search import tune
+
+        table = {"parameters": {k: _bounds(v) for k, v in parameters.items()}, **settings}
+        result = tune(
+            self.config,
+            table,
+            progress=progress,
+            checkpoint_dir=checkpoint_dir,
+            resume=resume,
+            evaluator=evaluator,
+        )
+        if out is not None:
+            from aiofl.tuning.results import write_outputs
+
+            write_outputs(result, out)
+        return result
+
+    def robustness(self, *, draws: int | None = None, seed: int | None = None) -> Any:
+        """The design over the draws of its ``uncertainty`` (``aiofl robustness``): an
+        :class:`aiofl.analysis.robustness.RobustnessResult` (``stable_fraction``,
+        ``quantiles(itae)``, ``to_dict()``; :func:`aiofl.analysis.robustness.
+        robustness_figure` draws it).  ``draws`` / ``seed`` override the table's."""
+        from aiofl.analysis.robustness import run_robustness
+
+        if self.config.uncertainty is None:
+            raise ValueError(
+                "uncertainty: this design has none; give Design(..., uncertainty={'draws': "
+                "32, 'parameters': {NAME: {'uniform': 0.2}}}) (the [uncertainty] table)"
+            )
+        return run_robustness(self.config, draws=draws, seed=seed)
+
+    def analyze(self, *, amplitude: float = 1e-3, r_op: float | None = None) -> dict[str, Any]:
+        """The linearised closed loop (``aiofl analyze --closed-loop``): verdict,
+        eigenvalues, damping and margins as a dict
+        (:func:`aiofl.analysis.linearize.closed_loop_verdict`; with ``r_op`` the
+        linearisation at that reference value)."""
+        import math
+
+        from aiofl.analysis.linearize import closed_loop_verdict, linearize_closed_loop
+
+        if not (isinstance(amplitude, (int, float)) and math.isfinite(amplitude) and amplitude > 0):
+            raise ValueError(f"amplitude = {amplitude!r}; allowed: a finite number, > 0")
+        if r_op is not None and not math.isfinite(r_op):
+            raise ValueError(f"r_op = {r_op!r}; allowed: a finite number")
+        lin = linearize_closed_loop(self.config, amplitude=amplitude, r_op=r_op)
+        if r_op is not None:
+            return dict(lin.to_dict())
+        return closed_loop_verdict(self.config, amplitude=amplitude, linearization=lin)
+
+    def export(
+        self, out: str | Path, *, ts: float | None = None, precision: str = "double"
+    ) -> dict[str, Path]:
+        """Write the controller as C99 (``aiofl export``): ``aiofl_controller.h`` and
+        ``.c`` in ``out``, sampled at ``ts`` (default: the design's sampling); returns the
+        paths by file name.  Raises ``ValueError`` for what the C code cannot express
+        (:class:`aiofl.export.ExportError`); nothing is written then."""
+        from aiofl.engine.discrete import Sampling
+        from aiofl.export import ExportError, export_c
+        from aiofl.outputs import atomic_write_text
+
+        cfg = self.config
+        if ts is not None:
+            if not (isinstance(ts, (int, float)) and 0 < ts <= 1.0):
+                raise ValueError(f"ts = {ts!r}; allowed: 0 < ts <= 1 [s]")
+            sampling = replace(cfg.sampling or Sampling(float(ts)), ts=float(ts))
+        else:
+            sampling = cfg.sampling
+        if precision not in ("double", "float"):
+            raise ValueError(f"precision = {precision!r}; allowed: double, float")
+        try:
+            files = export_c(
+                cfg.controller,
+                sampling,
+                precision=precision,
+                title=cfg.name,
+                notes=[cfg.description] if cfg.description else [],
+                plant=cfg.plant,
+                plant_source=cfg.plant.name,
+                x0=cfg.scenario.x0,
+            )
+        except ExportError as exc:
+            raise ValueError(f"cannot export {cfg.name!r}: {exc}") from None
+        folder = Path(out)
+        folder.mkdir(parents=True, exist_ok=True)
+        paths = {}
+        for name, text in files.items():
+            atomic_write_text(folder / name, text)
+            paths[name] = folder / name
+        return paths
+
+
+def _bounds(value: Any) -> Any:
+    """``(lo, hi)`` or ``(lo, hi, log)`` as the ``[tune.parameters]`` table's ``{lo, hi, log}``."""
+    if isinstance(value, (tuple, list)) and len(value) in (2, 3):
+        table = {"lo": value[0], "hi": value[1]}
+        if len(value) == 3:
+            table["log"] = value[2]
+        return table
+    return value
