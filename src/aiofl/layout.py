@@ -129,7 +129,9 @@ F_SEF_OMEGA_C = FLOAT_COLUMNS["sef.omega_c"]
 S_REF_KIND, S_REF_A, S_REF_OMEGA, S_REF_PHASE, S_REF_OFFSET, S_REF_TSTEP = range(6)
 S_DIST_AMP, S_DIST_TIME, S_PCHANGE_TIME, S_NOISE_STD, S_NOISE_HOLD = range(6, 11)
 S_REF_DT = 11  # sample spacing of a REF_SAMPLES reference
-N_SCEN = 12
+S_IN_DELAY = 12  # input (actuator) transport delay [s]: the plant sees u(t - τ_in)
+S_OUT_DELAY = 13  # output (sensor) transport delay [s]: the ADC reads y(t - τ_out)
+N_SCEN = 14
 
 # ------------------------------------------------------------------ metric columns
 METRIC_NAMES = ("itae", "iae", "ise", "isu", "iau")

@@ -23,7 +23,11 @@ from aiofl import layout as L
 from aiofl.checks import check_integer, check_number
 from aiofl.limits import T_FINAL_MAX
 
-__all__ = ["Reference", "Scenario", "noise_sequence", "realisation_seed"]
+__all__ = ["DELAY_MAX", "Reference", "Scenario", "noise_sequence", "realisation_seed"]
+
+DELAY_MAX = 1.0
+"""Largest input or output transport delay [s] a scenario accepts (the engine's delay
+buffer is bounded before it is allocated; see :func:`aiofl.engine.discrete.delay_steps`)."""
 
 
 #: allowed values of the reference's numbers (as ``[scenario.reference]`` in a config)
@@ -43,6 +47,8 @@ _SCENARIO_RANGES: dict[str, dict[str, float]] = {
     "parameter_change_time": {"ge": 0.0},
     "noise_variance": {"ge": 0.0},
     "noise_hold": {"gt": 0.0},
+    "input_delay": {"ge": 0.0, "le": DELAY_MAX},
+    "output_delay": {"ge": 0.0, "le": DELAY_MAX},
 }
 
 
@@ -118,6 +124,13 @@ class Scenario:
         Gaussian output noise, held constant over ``noise_hold`` seconds, seeded.
     x0
         Initial plant state (zeros if empty).
+    input_delay, output_delay
+        Transport delays [s], :math:`0 \\le \\tau \\le` :data:`DELAY_MAX`: the plant sees
+        :math:`u(t - \\tau_{in})` (0 before :math:`t = \\tau_{in}`) and the controller's ADC
+        reads :math:`y(t - \\tau_{out})` (:math:`y(0)` before :math:`t = \\tau_{out}`) plus the
+        noise at t.  Held exactly by the sampled engine; each must be an integer multiple of
+        the step dt, and the continuous controller refuses them
+        (:func:`aiofl.engine.discrete.delay_steps`).
     """
 
     name: str = "custom"
@@ -132,6 +145,8 @@ class Scenario:
     noise_hold: float = 1e-3
     noise_seed: int = 0
     x0: tuple[float, ...] = ()
+    input_delay: float = 0.0
+    output_delay: float = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str):
@@ -189,6 +204,8 @@ class Scenario:
         row[L.S_PCHANGE_TIME] = self.parameter_change_time
         row[L.S_NOISE_STD] = np.sqrt(self.noise_variance)
         row[L.S_NOISE_HOLD] = self.noise_hold
+        row[L.S_IN_DELAY] = self.input_delay
+        row[L.S_OUT_DELAY] = self.output_delay
         return row
 
 

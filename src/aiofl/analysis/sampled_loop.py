@@ -103,6 +103,7 @@ class SampledLoop:
             z = loop.operating_point()
             a, b, _, _ = loop.linear_model(z, broken=True)
             a_cl, _, c_cl, _ = loop.linear_model(z)
+            self.broken = loop.linear_model(z, broken=True)
         except Exception as exc:  # no operating point, a plant without derivatives, ...
             self.available, self.reason = False, f"no linearisation: {exc}"
             return
@@ -112,6 +113,7 @@ class SampledLoop:
         _, y, u = loop.rhs(z)
         self.y_op, self.u_op, self.r_op = float(y), float(u), float(loop.r_op)
         self.rho = c.rho
+        self._pieces: dict[float, tuple[Any, ...]] = {}
 
     @property
     def continuous_stable(self) -> bool | None:
@@ -175,12 +177,13 @@ class SampledLoop:
             c = c + np.linalg.lstsq(lhs, rhs, rcond=None)[0]
         return c
 
-    def matrix(self, ts: float) -> NDArray[np.float64]:
-        """The closed loop's one-sample matrix at sample time ``ts`` (module docstring)."""
+    def _controller_pieces(self, ts: float) -> tuple[Any, ...]:
+        """``(jcc, jcy, juc, juy, keep, i_uprev)`` of the controller's one-sample
+        linearisation at ``ts`` (module docstring), cached per Ts."""
         from aiofl.engine.sampled import C_UPREV
 
-        if not self.available:
-            raise ValueError(self.reason)
+        if ts in self._pieces:
+            return self._pieces[ts]
         dc = self._controller(ts)
         rr = np.zeros(self.rho + 1)
         rr[0] = self.r_op
@@ -199,19 +202,124 @@ class SampledLoop:
             and i != C_UPREV
         ]
         keep = np.array([i for i in range(nc) if i not in inert], dtype=int)
+        i_uprev = int(np.nonzero(keep == C_UPREV)[0][0])
+        out = (jcc[np.ix_(keep, keep)], jcy[keep], juc[keep], float(juy), keep, i_uprev)
+        self._pieces[ts] = out
+        return out
+
+    def matrix(self, ts: float, delay: float = 0.0) -> NDArray[np.float64]:
+        r"""The closed loop's one-sample matrix at sample time ``ts`` (module docstring),
+        with an unmodelled transport delay ``delay`` [s] in the loop.
+
+        The delay :math:`\tau = kT_s + \theta`, :math:`0 \le \theta < T_s`, shifts the
+        DAC's output :math:`v_i` (:math:`u_i`, or :math:`u_{i-1}` with the computation
+        delay): over :math:`[t_i, t_i + \theta)` the plant sees :math:`v_{i-k-1}`, over
+        :math:`[t_i + \theta, t_{i+1})` :math:`v_{i-k}`, so (the modified z-transform;
+        Franklin, Powell & Workman §4.3.4)
+
+        .. math:: \delta x_{i+1} = \Phi_p\delta x_i + \Gamma_b v_{i-k} + \Gamma_a v_{i-k-1},
+                  \quad \Gamma_b = \Gamma(T_s - \theta),
+                  \quad \Gamma_a = e^{A_p(T_s-\theta)}\Gamma(\theta),
+
+        with :math:`\Gamma(h) = \int_0^h e^{A_ps}ds\,B_p`; the past outputs
+        :math:`v_{i-1}, ..., v_{i-k-1}` are k + 1 more states (a shift register).  A delay
+        on the sensor side has the same loop (the plant and a delay commute), so one margin
+        covers both.  ``delay = 0`` gives the undelayed matrix (no shift register).
+        """
+        if not self.available:
+            raise ValueError(self.reason)
+        if not delay >= 0.0:
+            raise ValueError(f"delay = {delay}; allowed: >= 0")
+        jcc, jcy, juc, juy, keep, i_up = self._controller_pieces(ts)
         phi, gam = zoh(self.ap, self.bp, ts)
-        n = phi.shape[0]
-        m = np.zeros((n + keep.size, n + keep.size))
+        n, nk = phi.shape[0], keep.size
         cp = self.cp[0]
+        v = np.zeros(n + nk)  # v_i as a row of (δx, δc)
         if self.base.delay:
-            m[:n, :n] = phi
-            m[:n, n + int(np.nonzero(keep == C_UPREV)[0][0])] = gam[:, 0]
+            v[n + i_up] = 1.0
         else:
-            m[:n, :n] = phi + np.outer(gam[:, 0] * juy, cp)
-            m[:n, n:] = np.outer(gam[:, 0], juc[keep])
-        m[n:, :n] = np.outer(jcy[keep], cp)
-        m[n:, n:] = jcc[np.ix_(keep, keep)]
+            v[:n], v[n:] = juy * cp, juc
+        k = int(np.floor(delay / ts + 1e-12)) if delay > 0.0 else -1
+        nw = k + 1  # shift register v_{i-1}, ..., v_{i-k-1}
+        m = np.zeros((n + nk + nw, n + nk + nw))
+        m[:n, :n] = phi
+        m[n : n + nk, :n] = np.outer(jcy, cp)
+        m[n : n + nk, n : n + nk] = jcc
+        if k < 0:
+            m[:n, : n + nk] += np.outer(gam[:, 0], v)
+            return m
+        theta = max(delay - k * ts, 0.0)
+        if theta >= ts:  # (rounding of floor)
+            theta = 0.0
+        gb = zoh(self.ap, self.bp, ts - theta)[1][:, 0]
+        ga = zoh(self.ap, self.bp, theta)[1][:, 0] if theta > 0.0 else np.zeros(n)
+        if theta > 0.0:
+            ga = zoh(self.ap, self.bp, ts - theta)[0] @ ga
+        w0 = n + nk  # column of v_{i-1}
+        if k == 0:
+            m[:n, : n + nk] += np.outer(gb, v)
+        else:
+            m[:n, w0 + k - 1] += gb
+        m[:n, w0 + k] += ga
+        m[w0, : n + nk] = v
+        for j in range(1, nw):
+            m[w0 + j, w0 + j - 1] = 1.0
         return m
+
+    def delay_margin(
+        self, ts: float, *, d_max: float | None = None, rtol: float = 1e-4
+    ) -> float | None:
+        r"""The sampled loop's delay margin at ``ts`` [s]: the smallest transport delay
+        :math:`\tau` at which the spectral radius of :meth:`matrix` (``ts``, τ) reaches 1.
+
+        Scanned from 0 in steps of :math:`\max(T_s/4, \tau_c/40)`, :math:`\tau_c` the
+        continuous loop's margin (:meth:`continuous_delay_margin`; the radius is not
+        monotonic in τ in general: the first crossing found is the margin), then bisected
+        on the fractional-delay model to ``rtol``.  Returns 0.0 when the loop is not stable
+        without a delay, ``inf`` when it stays stable up to ``d_max`` (default
+        :math:`\min(\max(100T_s, 4\tau_c), 500T_s)`: the shift register has a state per
+        sample of delay), None when there is no linearisation (:attr:`reason`).
+        """
+        if self.spectral_radius(ts) is None:
+            return None
+        tau_c = self.continuous_delay_margin() or 0.0
+        if d_max is None:
+            d_max = min(max(100.0 * ts, 4.0 * tau_c), 500.0 * ts)
+
+        def stable(d: float) -> bool:
+            m = self.matrix(ts, d)
+            return bool(np.all(np.isfinite(m)) and np.max(np.abs(np.linalg.eigvals(m))) < 1.0)
+
+        if not stable(0.0):
+            return 0.0
+        step = max(ts / 4.0, tau_c / 40.0)
+        lo, hi = 0.0, None
+        d = step
+        while d <= d_max * (1 + 1e-12):
+            if not stable(d):
+                hi = d
+                break
+            lo, d = d, d + step
+        if hi is None:
+            return float("inf")
+        while hi - lo > rtol * hi:
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if stable(mid) else (lo, mid)
+        return lo
+
+    def continuous_delay_margin(self) -> float | None:
+        """The continuous loop's delay margin [s] at the same operating point
+        (:func:`aiofl.analysis.frequency.loop_margins` of the loop broken at the plant input;
+        None: no linearisation, or no finite margin)."""
+        from aiofl.analysis.frequency import loop_margins, loop_transfer
+
+        if not self.available:
+            return None
+        if hasattr(self, "_tau_c"):
+            return self._tau_c  # type: ignore[no-any-return]
+        dm = loop_margins(loop_transfer(*self.broken), self.continuous_eigenvalues).delay_margin_s
+        self._tau_c = float(dm) if np.isfinite(dm) else None
+        return self._tau_c
 
     def spectral_radius(self, ts: float) -> float | None:
         """:math:`\\max_i|\\lambda_i|` of :meth:`matrix` (None when not available, when the

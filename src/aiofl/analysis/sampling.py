@@ -39,6 +39,15 @@ about 4000 points over the horizon).
 The discretisation is the config's ``[controller.discrete]`` table (delay, quantisation,
 methods) with only Ts varied, or the defaults (ZOH ESO for the linear ESO, Euler for the
 INLESO, fhan for Han's TD, ...) when the config has none.
+
+**Delay margins.**  Beside the limits, the largest unmodelled transport delay the loop
+tolerates, at ``delay_ts`` (the config's ``[controller.discrete] ts``, else
+:data:`DELAY_TS` = 1 ms): the *sampled* loop's, from its discrete linearisation with the
+delay as a shift register and a fractional-delay ZOH
+(:meth:`aiofl.analysis.sampled_loop.SampledLoop.delay_margin`), and the *continuous*
+loop's, :math:`\min_i\varphi_{m,i}/\omega_{gc,i}` of the loop broken at the plant input
+(:func:`aiofl.analysis.frequency.loop_margins`).  They differ: the hold's half-sample lag
+is in the first, and the discrete observer's phase is not the continuous one's.
 """
 
 from __future__ import annotations
@@ -66,6 +75,9 @@ __all__ = [
     "sampling_limits_many",
 ]
 
+
+DELAY_TS = 1e-3
+"""Sample time [s] of the sampled delay margin of a config without ``[controller.discrete]``."""
 
 SATURATION_ALLOWANCE = 0.05
 """Largest extra fraction of the horizon a stable sampled loop may spend at |u| = u_max."""
@@ -142,6 +154,9 @@ class SamplingLimits:
     continuous_linear_stable: bool | None = None
     linearisation_note: str = ""
     omega0: float | None = None
+    delay_ts: float | None = None
+    delay_margin_sampled: float | None = None
+    delay_margin_continuous: float | None = None
 
     @property
     def criteria(self) -> str:
@@ -178,6 +193,9 @@ class SamplingLimits:
             "ts_max_bracket": list(self.ts_max_bracket),
             "ts_stable_bracket": list(self.ts_stable_bracket),
             "first_failure": self.first_failure,
+            "delay_ts": self.delay_ts,
+            "delay_margin_sampled_s": _finite(self.delay_margin_sampled),
+            "delay_margin_continuous_s": _finite(self.delay_margin_continuous),
             "discretisation": self.discretisation,
             "points": [
                 {
@@ -195,6 +213,10 @@ class SamplingLimits:
             "engine_calls": self.engine_calls,
             "seconds": self.seconds,
         }
+
+
+def _finite(v: float | None) -> float | None:
+    return v if v is None or math.isfinite(v) else None
 
 
 # (itae, diverged, diverged_at, saturated fraction)
@@ -360,6 +382,10 @@ def _limits(s: _Search, tolerance: float, calls: int, seconds: float) -> Samplin
     bm = s.bracket(True, tolerance) if not dead else (None, None)
     bs = s.bracket(False, tolerance) if not dead else (None, None)
     w0 = _omega0(cfg)
+    d_ts = cfg.sampling.ts if cfg.sampling is not None else DELAY_TS
+    dm_s = dm_c = None
+    if lin is not None and lin.available and not dead:
+        dm_s, dm_c = lin.delay_margin(d_ts), lin.continuous_delay_margin()
     points = [
         SamplingPoint(
             k * cfg.dt, *s.results[k], s.radius.get(k), None if w0 is None else w0 * k * cfg.dt
@@ -386,6 +412,9 @@ def _limits(s: _Search, tolerance: float, calls: int, seconds: float) -> Samplin
         continuous_linear_stable=lin_stable,
         linearisation_note=note,
         omega0=w0,
+        delay_ts=d_ts,
+        delay_margin_sampled=dm_s,
+        delay_margin_continuous=dm_c,
     )
 
 

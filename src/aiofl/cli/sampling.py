@@ -3,7 +3,8 @@ r"""``aiofl analyze CONFIG --sampling [--json] [--out DIR]``: the largest usable
 Runs :func:`aiofl.analysis.sampling.sampling_limits` (batched engine runs over a ladder of
 sample times, each with the spectral radius of the linearised sampled loop) and prints the
 definitions, ``ts_max`` (stable and within the ITAE tolerance of the continuous design) and
-``ts_stable`` with :math:`\omega_0T_s`, and every run (Ts, ω0·Ts, spectral radius, time at
+``ts_stable`` with :math:`\omega_0T_s`, the sampled and continuous delay margins
+(:mod:`aiofl.analysis.sampling`), and every run (Ts, ω0·Ts, spectral radius, time at
 the saturation, ITAE, the criteria it fails); a design whose continuous loop is not stable
 gets neither limit; ``--json`` prints ``{"ts_max": ..., "ts_stable": ..., ...}``;
 ``--out DIR`` also writes ``DIR/sampling.json`` and ``DIR/sampling.png`` (ITAE against Ts).
@@ -24,6 +25,12 @@ __all__ = ["run_sampling"]
 
 def _fmt(x: float | None, unit: str = " s") -> str:
     return "—" if x is None else f"{x:.4g}{unit}"
+
+
+def _fmt_delay(x: float | None) -> str:
+    if x is None:
+        return "—"
+    return "∞ (none up to the largest delay tried)" if x == float("inf") else f"{1e3 * x:.4g} ms"
 
 
 def _w0(lim: Any, ts: float | None) -> str:
@@ -112,6 +119,12 @@ def run_sampling(target: str, *, as_json: bool, out: Path | None, tolerance: flo
                 f"  (nothing up to the largest Ts tried, {lim.ts_upper:g} s, failed: "
                 "ts_stable is a lower bound)"
             )
+    if lim.delay_ts is not None and not lim.continuous_diverged:
+        lines.append(
+            f"  delay margin at Ts = {_fmt(lim.delay_ts)}: sampled "
+            f"{_fmt_delay(lim.delay_margin_sampled)} (discrete model with the delay), "
+            f"continuous {_fmt_delay(lim.delay_margin_continuous)}"
+        )
     lines += [
         "  Ts [s]      ω0·Ts     radius    saturated  ITAE        fails",
         *(_point_line(lim, p) for p in lim.points),

@@ -96,6 +96,7 @@ from aiofl.components.kalman import measurement_noise_intensity
 from aiofl.components.metrics import OPIWeights
 from aiofl.config.schema import REQUIRED_KEYS, ConfigError, ConfigModel, DiscreteModel
 from aiofl.controller import Controller
+from aiofl.engine.discrete import delay_steps
 from aiofl.limits import (
     MAX_NOISE_SAMPLES,
     MAX_STEPS,
@@ -455,6 +456,8 @@ def parse_config(
         scenario = model.scenario.build()
         discrete = model.controller.discrete
         sampling = discrete.build() if discrete is not None else None
+        for key in ("input_delay", "output_delay"):  # k·dt, bounded (held by sampled runs)
+            delay_steps(key, getattr(scenario, key), sim.dt, sampled=True)
         # the default r of Kalman observer gains: this run's measurement noise
         noise_r = measurement_noise_intensity(scenario, sampling)
         controller = model.controller.build(plant.relative_degree or 1, measurement_r=noise_r)

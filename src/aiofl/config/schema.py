@@ -23,7 +23,7 @@ from aiofl.limits import (
     MAX_STEPS,
     T_FINAL_MAX,
 )
-from aiofl.scenario import Reference, Scenario
+from aiofl.scenario import DELAY_MAX, Reference, Scenario
 from aiofl.sensor import SENSOR_PRESETS, Sensor
 from aiofl.uncertainty import UncertaintyModel
 
@@ -88,6 +88,9 @@ class ScenarioModel(_Model):
     noise_hold: PosFloat = 1e-3
     noise_seed: Annotated[int, Field(ge=0, lt=2**63)] = 0
     x0: list[Finite] = Field(default_factory=list)
+    # transport delays [s] (sampled controllers; integer multiples of simulation.dt)
+    input_delay: Annotated[float, Field(ge=0, le=DELAY_MAX, allow_inf_nan=False)] = 0.0
+    output_delay: Annotated[float, Field(ge=0, le=DELAY_MAX, allow_inf_nan=False)] = 0.0
 
     @model_validator(mode="after")
     def _events_within_horizon(self) -> ScenarioModel:

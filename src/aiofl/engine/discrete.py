@@ -250,6 +250,53 @@ def sample_steps(ts: float, dt: float) -> int:
     return n
 
 
+DELAY_STEPS_MAX = 1 << 16
+"""Largest transport delay in engine steps (the loop's ring buffer holds this many + 1
+values per lane and delay: 2 × 65537 × 32 doubles = 34 MB at most for a group)."""
+
+
+def delay_steps(key: str, tau: float, dt: float, sampled: bool) -> int:
+    r"""Engine steps of the transport delay ``scenario.<key> = tau``: m = τ/dt.
+
+    The sampled engine holds a delay exactly when it is an integer multiple m of the step:
+    the command is piecewise constant with jumps on the step grid, so
+    :math:`u(t - m\,dt)` jumps on the grid too, and the sensor reads a stored
+    :math:`y(t_k - m\,dt)`.  A delay between grid points would put a jump inside an RK4
+    step, and the continuous controller's command varies inside a step: both are refused
+    (ValueError naming the field), as is a delay of more than :data:`DELAY_STEPS_MAX` steps.
+    """
+    if tau == 0.0:
+        return 0
+    if not sampled:
+        raise ValueError(
+            f"scenario.{key} = {tau:g} s needs a sampled controller ([controller.discrete]"
+            " or sampling=): the continuous controller's command varies inside a step, so"
+            " its delayed value is not held exactly; allowed: 0"
+        )
+    m = round(tau / dt)
+    if m < 1 or abs(m * dt - tau) > 1e-9 * tau:
+        raise ValueError(
+            f"scenario.{key} = {tau:g} s is not an integer multiple of the step "
+            f"dt = {dt:g} s; allowed: k·dt for k = 0, 1, 2, ... (e.g. {max(m, 1) * dt:g} s)"
+        )
+    if m > DELAY_STEPS_MAX:
+        raise ValueError(
+            f"scenario.{key} = {tau:g} s is {m} steps of dt = {dt:g} s; allowed: at most "
+            f"{DELAY_STEPS_MAX} steps"
+        )
+    return m
+
+
+def check_delays(scen: NDArray[np.float64], disc: NDArray[np.float64] | None, dt: float) -> None:
+    """:func:`delay_steps` for every member's scenario row (``scen``, one row per member;
+    ``disc`` its discrete rows, None or ``D_STEPS`` 0 for a continuous member)."""
+    cols = [L.S_IN_DELAY, L.S_OUT_DELAY]
+    for i in np.nonzero(np.any(scen[:, cols] != 0.0, axis=1))[0]:
+        sampled = disc is not None and disc[i, D_STEPS] > 0
+        for key, col in (("input_delay", L.S_IN_DELAY), ("output_delay", L.S_OUT_DELAY)):
+            delay_steps(key, float(scen[i, col]), dt, sampled)
+
+
 def _row(
     ints: NDArray[np.int64],
     floats: NDArray[np.float64],

@@ -230,6 +230,9 @@ def recipe(
         templates += [
             tpl("_SETUP", sampled._tpl_setup, opts),
             tpl("_SAMPLE", sampled._tpl_sample, opts),
+            tpl("_DELAY_SETUP", sampled._tpl_delay_setup, opts),
+            tpl("_DELAY_OUTPUT", sampled._tpl_delay_output, opts),
+            tpl("_DELAY_INPUT", sampled._tpl_delay_input, opts),
             tpl("_RHS", sampled._tpl_plant_deriv, inline),
             tpl("_CONTROLLER_BAD", sampled._tpl_controller_bad, inline),
             tpl("_STORE_CONTROLLER", sampled._tpl_store_controller, inline),

@@ -96,7 +96,10 @@ S_AMP = 10  #: amplitude times ω^k of the reference's k-th derivative
 S_BAD = 11  #: the number of the lane's states out of range (divergence)
 S_AHAT = 12  #: model-assisted observer: the nominal α at x̂ = Φ⁻¹(ξ̂)
 S_BHAT = 13  #: model-assisted observer: the nominal β at x̂
-N_S = 14
+S_UC = 14  #: sampled, input delay: the controller's held command (S_U is the delayed one)
+S_YD = 15  #: sampled, output delay: y(t_k - τ_out), what the ADC reads (plus noise)
+S_YDON = 16  #: sampled: 1 in a lane with an output delay, else 0
+N_S = 17
 
 # Placeholders for what an instance binds (see aiofl.engine.instances).
 _W = WIDTH
@@ -108,6 +111,7 @@ _CONTROLLER_SIZE = 1  # row length of the discrete controller's state (sampled i
 _PH = None
 _UNMANAGED = _KEEP_ALIVE = _RHS = _SETUP = _SAMPLE = _CONTROLLER_BAD = None
 _STORE_ROW = _STORE_CONTROLLER = _REFERENCE = _STEP_INPUTS = None
+_DELAY_SETUP = _DELAY_OUTPUT = _DELAY_INPUT = None
 _ASSIGN_LANES = _LOAD_LANES = _START_MEMBERS = _STOP_LANE = _FINISH_LANES = None
 _BLK_STAGE = _BLK_OUT_OF_RANGE = _BLK_COPY = _BLK_FILL = _BLK_INPUTS = None
 _BLK_SINE = _BLK_SINE_DERIVATIVE = _BLK_STEP = None
@@ -173,6 +177,13 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
     n_per = _SETUP(lanes, batch, q, qt, iq, ctrl)
     _LOAD_LANES(lanes, batch, pp, sc, rrow, nrow, zz)
     _START_MEMBERS(lanes, real, out)
+    # transport delays (sampled): ring buffers of the held commands and of y, per lane
+    dsteps = np.zeros((2, _W), dtype=np.int64)  # input, output delay in steps
+    nbuf = 1
+    if _SAMPLED:
+        nbuf = _DELAY_SETUP(sc, dt, dsteps, s) + 1
+    delayed = nbuf > 1
+    ring = np.zeros((2, nbuf, _W))  # [0]: held command per step, [1]: y per step
     rho = iq[IQ_RHO]
     nza = _N + L.N_METRIC if _SAMPLED else iq[IQ_NZ]
     nd = rho if iq[IQ_TD] == L.TD_EXACT else 0
@@ -195,9 +206,14 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
             _REFERENCE((k + 1) * dt, t, sc, ref_t, rrow, rrs, 2, nd_stage, ref_kind, s)
         dany = _STEP_INPUTS(t, sc, noise_t, nrow, s, switched, pp)
         if _SAMPLED:
-            if k % n_per == 0 and k < n_steps:  # a sample: ADC, controller, DAC
+            sample = k % n_per == 0 and k < n_steps
+            if delayed:  # y(t_k) into the ring, y(t_k - τ_out) into s[S_YD]
+                _DELAY_OUTPUT(k, z, p, s, ring, dsteps)
+            if sample:  # a sample: ADC, controller, DAC
                 _REFERENCE(t, t, sc, ref_t, rrow, rrs, 3, nd, ref_kind, s)
                 _SAMPLE(k, z, p, pn, s, rrs, rl, iq, q, ctrl)
+            if delayed:  # the plant's command u(t_k - τ_in) into s[S_U]
+                _DELAY_INPUT(k, sample, s, ring, dsteps)
         elif k == 0 and init_output:
             # ξ̂_1(0) = y_meas(0) = h(x(0)) + n(0), the first measurement; ξ̂_2.. stay 0
             o_eso = iq[IQ_OESO]
@@ -238,6 +254,7 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
     _KEEP_ALIVE(lane_owner, real_owner, live_owner, rows_owner, switched_owner, iq_owner)
     _KEEP_ALIVE(q_owner, qt_owner, ctrl_owner, rl_owner, z_owner, p_owner)
     _KEEP_ALIVE(sc_owner, s_owner, rr_owner, rrow_owner, nrow_owner, nrow_owner)
+    _KEEP_ALIVE(dsteps, ring, dsteps, ring, dsteps, ring)
 
 
 def _tpl_store_row(row, t, lanes, live, rows, z, s, rrs, iq, ctrl, tr):  # pragma: no cover

@@ -68,7 +68,7 @@ from aiofl.engine.discrete import (
     Sampling,
     sampling_rows,
 )
-from aiofl.engine.loop import S_BAD, S_D, S_NOISE, S_U, S_Y, S_YM
+from aiofl.engine.loop import S_BAD, S_D, S_NOISE, S_U, S_UC, S_Y, S_YD, S_YDON, S_YM
 from aiofl.engine.member import (
     IQ_EINIT,
     IQ_ESO,
@@ -239,6 +239,8 @@ def _tpl_sample(k, z, p, pn, s, rrs, rl, iq, q, ctrl):  # pragma: no cover - com
     iofl = iq[IQ_LAW] == L.LAW_IOFL
     _BLK_OUTPUT(z, p, s[S_NOISE], s[S_Y], s[S_YM])
     for l in range(_W):
+        if s[S_YDON, l] != 0.0:  # a sensor delay: y(t_k - τ_out) + n(t_k)
+            s[S_YM, l] = s[S_YD, l] + s[S_NOISE, l]
         dsc = ctrl[0, l]
         cs = ctrl[1, l]
         yq = dsc[D_YQ]
@@ -259,6 +261,47 @@ def _tpl_sample(k, z, p, pn, s, rrs, rl, iq, q, ctrl):  # pragma: no cover - com
         ua = u_before if dsc[D_DELAY] > 0.0 else uc
         uq = dsc[D_UQ]
         s[S_U, l] = uq * np.floor(ua / uq + 0.5) if uq > 0.0 else ua
+
+
+def _tpl_delay_setup(sc, dt, dsteps, s):  # pragma: no cover - compiled
+    r"""The lanes' transport delays in steps, :math:`m = \tau/dt` (``dsteps[0]``: input,
+    ``[1]``: output; checked on the host to be integers, :func:`aiofl.engine.discrete.delay_steps`),
+    the lanes' output-delay flags ``s[S_YDON]``; returns the largest."""
+    most = 0
+    for l in range(_W):
+        for j in range(2):
+            m = int(np.floor(sc[L.S_IN_DELAY + j, l] / dt + 0.5))
+            dsteps[j, l] = m
+            most = max(most, m)
+        s[S_YDON, l] = 1.0 if dsteps[1, l] > 0 else 0.0
+    return most
+
+
+def _tpl_delay_output(k, z, p, s, ring, dsteps):  # pragma: no cover - compiled
+    r"""Step k's output :math:`y(t_k)` into the ring (slot k mod its length) and the
+    delayed :math:`y(t_k - m\,dt)` into ``s[S_YD]`` (:math:`y(0)` while
+    :math:`t_k < m\,dt`); the ADC reads it (:func:`_tpl_sample`)."""
+    nb = ring.shape[1]
+    _BLK_PLANT_OUTPUT(z, p, ring[1, k % nb])
+    for l in range(_W):
+        m = dsteps[1, l]
+        s[S_YD, l] = ring[1, (k - m) % nb, l] if k >= m else ring[1, 0, l]
+
+
+def _tpl_delay_input(k, sample, s, ring, dsteps):  # pragma: no cover - compiled
+    r"""Step k's held command into the ring and the plant's :math:`u(t_k - m\,dt)` into
+    ``s[S_U]`` (0 while :math:`t_k < m\,dt`); the controller's own held command is kept
+    in ``s[S_UC]`` (set from the DAC at a sample).  The command is constant over each step,
+    so the delayed one is too: the delay is exact."""
+    nb = ring.shape[1]
+    slot = k % nb
+    for l in range(_W):
+        if sample:
+            s[S_UC, l] = s[S_U, l]
+        ring[0, slot, l] = s[S_UC, l]
+        m = dsteps[0, l]
+        if m > 0:
+            s[S_U, l] = ring[0, (k - m) % nb, l] if k >= m else 0.0
 
 
 def _tpl_plant_deriv(t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - compiled

@@ -28,7 +28,7 @@ from aiofl.checks import check_integer, check_number
 from aiofl.components.metrics import OPIWeights, opi
 from aiofl.controller import Controller, ControllerBatch, controller_batch
 from aiofl.engine.batch import Batch, Outputs
-from aiofl.engine.discrete import D_STEPS, N_DISC, Sampling, sampling_rows
+from aiofl.engine.discrete import D_STEPS, N_DISC, Sampling, check_delays, sampling_rows
 from aiofl.engine.instances import instance_for, plan_groups, run_groups
 from aiofl.engine.observer_gains import model_jacobians, with_model_gains
 from aiofl.limits import DT_MAX, MAX_STEPS, MAX_TRAJECTORY_BYTES, check_run_size
@@ -355,6 +355,7 @@ def pack(
             ref_d[j, : len(s.reference.samples)] = s.reference.samples
             ref_d[j, len(s.reference.samples) :] = s.reference.samples[-1]
 
+    check_delays(scen_d[rows], disc, dt)  # transport delays: sampled, k·dt, bounded
     n_save = n_steps // decimation + 1 if store else 0
     n_cols = len(L.trajectory_columns(n))
     rec = Batch(

@@ -124,6 +124,9 @@ def sampling_paragraph(
             + "; ".join(_describe(f"{lbl} of scenario {s}", limits[p]) for lbl, p, s in printed)
             + "."
         )
+    margins = _delay_margins(cases, limits)
+    if margins:
+        out.append(margins)
     others = [(lbl, p, s) for lbl, p, src, s in cases if src != "printed" and p in limits]
     fails_at_dt = [f"{lbl} of scenario {s}" for lbl, p, s in others if _fails_at_dt(limits[p])]
     if fails_at_dt:
@@ -136,6 +139,35 @@ def sampling_paragraph(
             "reproduce, so it is not the ITAE a processor would achieve."
         )
     return out
+
+
+def _delay_margins(
+    cases: Sequence[tuple[str, str, str, int]], limits: Mapping[str, Mapping[str, Any]]
+) -> str:
+    """The sentence on the delay margins: sampled (the discrete model with the delay) against
+    continuous, per case, at the sample time they were computed for ('' if none)."""
+    items, ts_set = [], set()
+    for lbl, p, _src, s in cases:
+        lim = limits.get(p)
+        if lim is None or lim.get("delay_margin_sampled_s") is None:
+            continue
+        cont = lim.get("delay_margin_continuous_s")
+        ts_set.add(lim["delay_ts"])
+        items.append(
+            f"{lbl} of scenario {s} {_ms(lim['delay_margin_sampled_s'])} ms"
+            + ("" if cont is None else f" (continuous {_ms(cont)} ms)")
+        )
+    if not items:
+        return ""
+    at = f"Ts = {_ms(ts_set.pop())} ms" if len(ts_set) == 1 else "each design's Ts"
+    return (
+        "The largest unmodelled transport delay (actuator or sensor) each loop tolerates, "
+        f"sampled at {at}, from the discrete model with the delay (shift register and "
+        "fractional-delay hold) against the continuous loop's phase-margin delay: "
+        + "; ".join(items)
+        + ". The sampled margin is the one a processor has; the continuous one ignores the "
+        "hold and the discrete observer."
+    )
 
 
 def _join(items: Sequence[str]) -> str:
