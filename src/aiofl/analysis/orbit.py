@@ -11,7 +11,8 @@ answers the three questions separately and writes one sentence from them
 1. **Equilibrium**: the linearisation's verdict (``closed_loop_verdict``).
 2. **Limit cycle** (only when the equilibrium is unstable): simulate the exact loop
    (:class:`aiofl.analysis.orbit_loop.OrbitLoop`) with r held at :math:`r^*`, from the
-   equilibrium displaced by :data:`START` along the unstable mode, in chunks until the
+   equilibrium displaced along the unstable mode (to the describing-function amplitude
+   below when there is one, else by :data:`START`), in chunks of 10 cycles until the
    amplitude settles; the peak amplitudes of y and u and the dominant frequency of y over
    the last chunk (:func:`aiofl.analysis.variational.measure_oscillation`).  Cross-check:
    the harmonic balance of the describing functions of fal / g(e) / the INLSEF terms
@@ -77,8 +78,18 @@ def _outputs(loop: OrbitLoop, zs: NDArray[np.float64]) -> tuple[NDArray[Any], ND
     return np.array([o[0] for o in out]), np.array([o[1] for o in out])
 
 
+def _output_row(loop: OrbitLoop, z: NDArray[np.float64]) -> NDArray[np.float64]:
+    """∂y/∂z at z by the complex step."""
+    h = 1e-30
+    return np.array([complex(loop.rhs(z + 1j * h * e)[1]).imag / h for e in np.eye(loop.n_z)])
+
+
 def equilibrium_limit_cycle(
-    loop: OrbitLoop, z_op: NDArray[np.float64], a_lin: NDArray[np.float64]
+    loop: OrbitLoop,
+    z_op: NDArray[np.float64],
+    a_lin: NDArray[np.float64],
+    max_chunks: int = MAX_CHUNKS,
+    start_amplitude: float | None = None,
 ) -> dict[str, Any]:
     """Simulate the loop with r held at :math:`r^*` from the equilibrium displaced along
     its unstable mode (module docstring, step 2).
@@ -86,23 +97,32 @@ def equilibrium_limit_cycle(
     Returns
     -------
     dict
-        ``{"bounded": bool, "amplitude_y", "amplitude_u", "frequency" [rad/s],
-        "centre_y", "simulated_s"}`` (amplitudes and frequency None when it diverges).
+        ``{"bounded": bool, "settled": bool, "amplitude_y", "amplitude_u", "frequency"
+        [rad/s], "centre_y", "simulated_s"}`` (no amplitudes when it diverges; "settled":
+        the amplitude changed by at most 2 % over the last chunk of 10 cycles).  Started
+        at ``start_amplitude`` of y along the unstable mode (the describing-function
+        estimate, which saves the slow growth from a tiny start) or at :data:`START`.
     """
     lam, vec = np.linalg.eig(a_lin)
     i = int(np.argmax(lam.real))
     v = np.real(vec[:, i] if lam[i].imag == 0 else vec[:, i] + vec[:, i].conj())
     scale = np.maximum(np.abs(z_op), 1e-3 * max(float(np.max(np.abs(z_op[: loop.n]))), 1.0))
     v = v / max(float(np.max(np.abs(v) / scale)), 1e-300)
-    z = z_op + START * v
+    cy = _output_row(loop, z_op)
+    if start_amplitude is not None and abs(cy @ v) > 0:  # start on the predicted cycle
+        z = z_op + start_amplitude * v / abs(cy @ v)
+    else:
+        z = z_op + START * v
     # absolute tolerance well below the start: the growth from it must be integrated
     tol_scale = 1e-3 * START * scale
     f, jac = loop.field(hold=True, d=loop.d_op)
     growth = max(float(lam[i].real), 1e-3)
     omega = abs(float(lam[i].imag)) or growth
-    chunk = max(10 * 2 * math.pi / omega, 3.0 / growth)
-    t, prev, osc_y = 0.0, None, None
-    for _ in range(MAX_CHUNKS):
+    chunk = 10 * 2 * math.pi / omega
+    if start_amplitude is None:
+        chunk = max(chunk, 3.0 / growth)
+    t, prev, osc_y, settled = 0.0, None, None, False
+    for _ in range(max_chunks):
         try:
             with np.errstate(all="ignore"):
                 sol = trajectory(f, jac, z, t, t + chunk, scale=tol_scale, rtol=1e-6)
@@ -118,11 +138,13 @@ def equilibrium_limit_cycle(
         t += chunk
         z = sol.y[:, -1]
         if prev is not None and abs(osc_y.amplitude - prev) <= 0.02 * max(prev, 1e-300):
+            settled = True
             break
         prev = osc_y.amplitude
     assert osc_y is not None
     return {
         "bounded": True,
+        "settled": settled,
         "amplitude_y": osc_y.amplitude,
         "amplitude_u": osc_u.amplitude,
         "frequency": osc_y.frequency,
@@ -132,7 +154,7 @@ def equilibrium_limit_cycle(
 
 
 def limit_cycle_describing(
-    loop: OrbitLoop, z_op: NDArray[np.float64], a_lin: NDArray[np.float64]
+    loop: OrbitLoop, z_op: NDArray[np.float64], a_lin: NDArray[np.float64], points: int = 103
 ) -> dict[str, Any] | None:
     r"""The describing-function (harmonic-balance) estimate of the limit cycle: amplitude of
     y and frequency (module docstring, step 2); None without non-smooth elements or
@@ -141,7 +163,7 @@ def limit_cycle_describing(
     nls = loop.nonlinearities()
     if not nls:
         return None
-    grid = np.geomspace(1e-14, 1e3, 103)
+    grid = np.geomspace(1e-14, 1e3, points)
     tables = []
     for nl in nls:
         vals = np.array([describing_gain(nl.phi, a, nl.kinks) for a in grid])
@@ -166,9 +188,7 @@ def limit_cycle_describing(
             loop.describing = None
 
     rows = loop.error_rows(z_op)
-    cy = np.array(
-        [complex(loop.rhs(z_op + 1j * 1e-30 * e)[1]).imag / 1e-30 for e in np.eye(loop.n_z)]
-    )
+    cy = _output_row(loop, z_op)
     lam, vec = np.linalg.eig(a_lin)
     mode0 = vec[:, int(np.argmax(lam.real))]
     bal = harmonic_balance(
@@ -183,7 +203,9 @@ def limit_cycle_describing(
     }
 
 
-def tracking_floquet(loop: OrbitLoop, passes: int = 3, settle: int = 3) -> dict[str, Any]:
+def tracking_floquet(
+    loop: OrbitLoop, passes: int = 3, settle: int = 3, rtol: float = 1e-6
+) -> dict[str, Any]:
     """Floquet multipliers of the tracking orbit of a sine reference (module docstring,
     step 3): ``{"multipliers": [[re, im], ...], "largest", "period", "closing", "range",
     "passes"}`` (multipliers of the last of ``passes`` periods after ``settle``; "range" the
@@ -197,7 +219,15 @@ def tracking_floquet(loop: OrbitLoop, passes: int = 3, settle: int = 3) -> dict[
     z = loop.operating_point()
     f, jac = loop.field(d=loop.d_op)
     po = periodic_orbit(
-        f, jac, z, period, t0=t0, settle=settle, max_newton=passes, close_on=range(loop.n)
+        f,
+        jac,
+        z,
+        period,
+        t0=t0,
+        settle=settle,
+        max_newton=passes,
+        close_on=range(loop.n),
+        rtol=rtol,
     )
     return {
         "multipliers": [[float(m.real), float(m.imag)] for m in po.multipliers],
@@ -241,15 +271,25 @@ def reconciled_text(info: dict[str, Any], unit: str = "") -> tuple[str, str]:
     short = []
     lc = info.get("limit_cycle")
     if lc is not None:
-        if lc.get("bounded"):
+        if lc.get("estimate"):
+            parts.append(
+                f"with r held the describing functions predict a limit cycle of "
+                f"{_g(lc['amplitude_y'])}{u} at {_g(lc['frequency'], 3)} rad/s"
+            )
+            short.append(
+                f"limit cycle ≈ {_g(lc['amplitude_y'])}{u} at {_g(lc['frequency'], 3)} rad/s"
+            )
+        elif lc.get("bounded"):
             df = lc.get("describing")
             dtext = (
-                f"; describing function: {_g(df['amplitude_y'])}{u} at {_g(df['frequency'], 3)} rad/s"
+                f"; describing function: {_g(df['amplitude_y'])}{u} at "
+                f"{_g(df['frequency'], 3)} rad/s"
                 if df
                 else ""
             )
+            how = "settles on" if lc.get("settled", True) else "oscillates (not settled) in"
             parts.append(
-                f"with r held it settles on a limit cycle of {_g(lc['amplitude_y'])}{u} at "
+                f"with r held it {how} a limit cycle of {_g(lc['amplitude_y'])}{u} at "
                 f"{_g(lc['frequency'], 3)} rad/s (u ± {_g(lc['amplitude_u'])}{dtext})"
             )
             short.append(
@@ -271,8 +311,9 @@ def reconciled_text(info: dict[str, Any], unit: str = "") -> tuple[str, str]:
                 f"; the orbit closes only to {_g(100 * fl['closing'])} % and its largest "
                 f"multiplier ranges {_g(lo)}–{_g(hi)} over {fl['passes']} periods"
             )
-        parts.append(f"tracking orbit {word} (largest Floquet multiplier {_g(mu, 2)}{caveat})")
-        short.insert(0, f"tracking {word} (μ = {_g(mu, 2)})")
+        mu_text = _g(mu, 2) if mu >= 1e-12 else "< 1e-12"
+        parts.append(f"tracking orbit {word} (largest Floquet multiplier {mu_text}{caveat})")
+        short.insert(0, f"tracking {word} (μ {'' if mu < 1e-12 else '= '}{mu_text})")
     elif ft is not None:
         lam = ft["largest"]
         word = "perturbations decay" if lam < 0 else "perturbations grow"
@@ -286,8 +327,16 @@ def reconciled_text(info: dict[str, Any], unit: str = "") -> tuple[str, str]:
     return "; ".join(parts), "; ".join(short)
 
 
+QUICK = {"passes": 2, "settle": 2, "rtol": 1e-5, "simulate_cycle": False, "points": 52}
+"""The cheaper settings of ``orbit_analysis(quick=True)`` (the report): two settling and
+two measured periods at rtol 1e-5; the limit cycle from the describing functions
+(tabulated at 52 amplitudes) only, without the held-reference simulation (which costs
+several seconds for a loop with observer poles near −2000; ``aiofl analyze --closed-loop``
+runs it)."""
+
+
 def orbit_analysis(
-    cfg: Any, verdict: dict[str, Any] | None = None, *, unit: str = ""
+    cfg: Any, verdict: dict[str, Any] | None = None, *, unit: str = "", quick: bool = False
 ) -> dict[str, Any]:
     """The reconciled verdict of a run config (module docstring).
 
@@ -297,6 +346,10 @@ def orbit_analysis(
         A :class:`aiofl.config.RunConfig`.
     verdict
         Its :func:`aiofl.analysis.linearize.closed_loop_verdict` (computed if None).
+    unit
+        The plant's output unit, for the sentence.
+    quick
+        The cheaper settings :data:`QUICK` (for ``aiofl reproduce``).
 
     Returns
     -------
@@ -310,6 +363,10 @@ def orbit_analysis(
     from aiofl.analysis.linearize import closed_loop_verdict, linearize_closed_loop
 
     t_start = time.perf_counter()
+    q = QUICK if quick else {}
+    simulate_cycle = q.get("simulate_cycle", True)
+    points = {k: q[k] for k in ("points",) if k in q}
+    periods = {k: q[k] for k in ("passes", "settle", "rtol") if k in q}
     v = verdict if verdict is not None else closed_loop_verdict(cfg)
     out: dict[str, Any] = {
         "equilibrium": v.get("verdict", "not analysed"),
@@ -322,16 +379,22 @@ def orbit_analysis(
         try:
             lin = linearize_closed_loop(cfg, amplitude=float(v.get("amplitude", 1e-3)))
             loop = _loop(cfg)
-            lc = equilibrium_limit_cycle(loop, lin.z_op, lin.a)
-            if lc.get("bounded"):
-                lc["describing"] = limit_cycle_describing(loop, lin.z_op, lin.a)
+            df = limit_cycle_describing(loop, lin.z_op, lin.a, **points)
+            start = df["amplitude_y"] if df else None
+            if simulate_cycle:
+                lc = equilibrium_limit_cycle(loop, lin.z_op, lin.a, start_amplitude=start)
+                lc["describing"] = df
+            elif df is not None:  # the describing-function estimate alone
+                lc = {"bounded": True, "estimate": "describing function", **df, "describing": df}
+            else:
+                lc = None
             out["limit_cycle"] = lc
         except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
             out["limit_cycle_error"] = f"{type(exc).__name__}: {exc}"
     try:
         loop = _loop(cfg)
         if cfg.scenario.reference.kind == "sine":
-            out["floquet"] = tracking_floquet(loop)
+            out["floquet"] = tracking_floquet(loop, **periods)
         else:
             out["ftle"] = tracking_ftle(loop)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:

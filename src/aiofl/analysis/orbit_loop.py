@@ -40,6 +40,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 from aiofl.analysis.closed_loop import ClosedLoop
@@ -219,24 +220,16 @@ class OrbitLoop(ClosedLoop):
         big_r = c.value("td.R")
         ref = self.scenario.reference
         start = t0 - 1.0
-        n = int(math.ceil((t1 - start) / self.dt)) + 2
-        ts = start + self.dt * np.arange(n)
+        n = math.ceil((t1 - start) / self.dt) + 2
+        ts = start + self.dt * np.arange(n + 1)
         r = ref.evaluate(ts)
         rh = ref.evaluate(ts + 0.5 * self.dt)
-        out = np.empty((n, 2))
-        x = reference_derivatives(ref, start, 1)
-        h = self.dt
-        for i in range(n):
-            out[i] = x
-            k1 = np.array(han_td_rhs(x[0], x[1], r[i], big_r))
-            k2 = np.array(han_td_rhs(x[0] + 0.5 * h * k1[0], x[1] + 0.5 * h * k1[1], rh[i], big_r))
-            k3 = np.array(han_td_rhs(x[0] + 0.5 * h * k2[0], x[1] + 0.5 * h * k2[1], rh[i], big_r))
-            r_next = r[i + 1] if i + 1 < n else float(ref.evaluate(ts[i] + h))
-            k4 = np.array(han_td_rhs(x[0] + h * k3[0], x[1] + h * k3[1], r_next, big_r))
-            x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+        x0 = reference_derivatives(ref, start, 1)
+        out = _han_rk4(float(x0[0]), float(x0[1]), r, rh, big_r, self.dt, n)
+        ts = ts[:n]
         kernel = np.ones(20) / 20.0
         smooth = np.column_stack([np.convolve(out[:, j], kernel, mode="same") for j in range(2)])
-        self._han = (start, h, ts, smooth)
+        self._han = (start, self.dt, ts, smooth)
 
     def inputs_at(self, t: float) -> NDArray[np.float64]:
         """The reference inputs at t: :math:`(r, \\dot r, \\dots, r^{(\\rho)})`, or with Han's
@@ -302,6 +295,30 @@ class OrbitLoop(ClosedLoop):
             finally:
                 self._record = None
         return np.array(rows, dtype=np.float64).T.reshape(-1, self.n_z)
+
+
+@njit(cache=False)
+def _han_rk4(
+    r1: float,
+    r2: float,
+    r: NDArray[np.float64],
+    r_half: NDArray[np.float64],
+    big_r: float,
+    h: float,
+    n: int,
+) -> NDArray[np.float64]:
+    """Han's TD (18) by RK4 over n steps of h from (r1, r2), r sampled at the steps and
+    their midpoints: the outputs at the n steps."""
+    out = np.empty((n, 2))
+    for i in range(n):
+        out[i, 0], out[i, 1] = r1, r2
+        a1, b1 = han_td_rhs(r1, r2, r[i], big_r)
+        a2, b2 = han_td_rhs(r1 + 0.5 * h * a1, r2 + 0.5 * h * b1, r_half[i], big_r)
+        a3, b3 = han_td_rhs(r1 + 0.5 * h * a2, r2 + 0.5 * h * b2, r_half[i], big_r)
+        a4, b4 = han_td_rhs(r1 + h * a3, r2 + h * b3, r[i + 1], big_r)
+        r1 += h / 6.0 * (a1 + 2 * a2 + 2 * a3 + a4)
+        r2 += h / 6.0 * (b1 + 2 * b2 + 2 * b3 + b4)
+    return out
 
 
 def _inlsef_slope(e: float, k1: float, k2: float, mu: float, a: float) -> float:

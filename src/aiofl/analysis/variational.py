@@ -1,4 +1,4 @@
-r"""Variational equation, Floquet multipliers, Lyapunov exponents, limit cycles, describing functions.
+r"""Variational equation, Floquet multipliers, Lyapunov exponents, limit cycles, harmonic balance.
 
 Generic numerical tools for an ODE :math:`\dot z = F(t, z)` with an exact Jacobian
 :math:`J(t, z) = \partial F/\partial z` (in :mod:`aiofl.analysis.orbit` the closed loop's,
@@ -63,6 +63,7 @@ classical :math:`1 + N(A)G(j\omega) = 0`; for a relay around a third-order plant
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -108,7 +109,7 @@ def expm_small(a: NDArray[np.float64]) -> NDArray[np.float64]:
     :func:`scipy.linalg.expm` of a 9 × 9 matrix costs 10 ms under a busy threaded BLAS
     here, this 20 µs."""
     norm = float(np.max(np.sum(np.abs(a), axis=0))) if a.size else 0.0
-    s = max(0, int(math.ceil(math.log2(norm / 0.5)))) if norm > 0.5 else 0
+    s = max(0, math.ceil(math.log2(norm / 0.5))) if norm > 0.5 else 0
     x = a / 2.0**s
     n = a.shape[0]
     ident = np.eye(n)
@@ -134,7 +135,7 @@ def trajectory(
     scale: Vector | None = None,
     rtol: float = RTOL,
 ) -> Any:
-    """:func:`scipy.integrate.solve_ivp` (BDF, exact Jacobian, dense output) of
+    r""":func:`scipy.integrate.solve_ivp` (BDF, exact Jacobian, dense output) of
     :math:`\dot z = F(t, z)`; absolute tolerance ``rtol`` × the typical magnitudes
     ``scale`` (default :math:`|z_0|`, floored)."""
     from scipy.integrate import solve_ivp
@@ -192,10 +193,10 @@ def variational_flow(
     phi = np.eye(n) if phi0 is None else np.asarray(phi0, dtype=np.float64) / d[:, None]
     grid = np.asarray(sol.t, dtype=np.float64)
     fine = np.concatenate(
-        [np.linspace(a, b, split, endpoint=False) for a, b in zip(grid[:-1], grid[1:], strict=True)]
+        [np.linspace(a, b, split, endpoint=False) for a, b in itertools.pairwise(grid)]
         + [grid[-1:]]
     )
-    for a, b in zip(fine[:-1], fine[1:], strict=True):
+    for a, b in itertools.pairwise(fine):
         tm = 0.5 * (a + b)
         jw = jac(tm, sol.sol(tm)) * d[None, :] / d[:, None]
         phi = expm_small((b - a) * jw) @ phi
@@ -260,8 +261,9 @@ def periodic_orbit(
 ) -> PeriodicOrbit:
     r"""The T-periodic steady state reached from z0 at :math:`t_0` and its Floquet multipliers.
 
-    ``settle`` periods of plain simulation (at 100 × ``rtol``), then variational passes over
-    the following periods (with ``newton``, shooting steps instead; module docstring) until the states ``close_on`` (default all) close to ``tol`` relative to
+    ``settle`` periods of plain simulation (at 100 × ``rtol``), then variational passes
+    over the following periods (with ``newton``, shooting steps instead; module
+    docstring) until the states ``close_on`` (default all) close to ``tol`` relative to
     their typical magnitudes (the largest |z_i| seen while settling, floored at 1e-3 times
     the largest of them) or ``max_newton`` passes; the multipliers are those of the last
     pass.
@@ -279,7 +281,7 @@ def periodic_orbit(
     best: tuple[float, Vector, NDArray[np.float64]] | None = None
     largest: list[float] = []
     steps = 0
-    for steps in range(1, max_newton + 1):
+    for steps in range(1, max_newton + 1):  # noqa: B007 (steps is returned)
         z1, phi = variational_flow(f, jac, z, t, t + period, scale=sc, rtol=rtol, split=split)
         closing = float(np.max(np.abs(z1 - z)[idx] / sc[idx]))
         mu = np.linalg.eigvals(phi)
@@ -384,7 +386,7 @@ def describing_gain(
     pts = sorted(math.asin(k / a) for k in kinks if 0 < k < a)
     edges = [0.0, *pts, 0.5 * math.pi]
     total = 0.0
-    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+    for lo, hi in itertools.pairwise(edges):
         total += quad(lambda th: phi(a * math.sin(th)) * math.sin(th), lo, hi, limit=200)[0]
     return 4.0 * total / (math.pi * a)
 
