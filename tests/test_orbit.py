@@ -182,15 +182,54 @@ def test_frontier_s1_leso_reconciled_verdict() -> None:
         warnings.simplefilter("ignore", RuntimeWarning)
         info = orbit_analysis(cfg, unit="rad", quick=True)
     assert info["equilibrium"] == "unstable" and info["max_real"] > 0
-    lc = info["limit_cycle"]
+    df = info["limit_cycle"]["describing"]  # quick: the describing-function estimate
+    assert 3e-6 < df["amplitude_y"] < 3e-5 and 60 < df["frequency"] < 85
+    # the simulation with r held, started on the predicted cycle: it stays there
+    from aiofl.analysis.linearize import linearize_closed_loop
+    from aiofl.analysis.orbit import _loop, equilibrium_limit_cycle
+
+    lin = linearize_closed_loop(cfg)
+    lc = equilibrium_limit_cycle(
+        _loop(cfg), lin.z_op, lin.a, max_chunks=2, start_amplitude=df["amplitude_y"]
+    )
     assert lc["bounded"]
-    assert 3e-6 < lc["amplitude_y"] < 3e-5 and 0.003 < lc["amplitude_u"] < 0.03
-    assert 60 < lc["frequency"] < 85
-    df = lc["describing"]
-    assert df["amplitude_y"] == pytest.approx(lc["amplitude_y"], rel=0.3)
-    assert df["frequency"] == pytest.approx(lc["frequency"], rel=0.1)
+    assert lc["amplitude_y"] == pytest.approx(df["amplitude_y"], rel=0.3)
+    assert lc["frequency"] == pytest.approx(df["frequency"], rel=0.05)
+    assert 0.003 < lc["amplitude_u"] < 0.03
     fl = info["floquet"]
     assert fl["largest"] < 1 and max(fl["range"]) < 1
     text = info["verdict"]
     assert text.startswith("equilibrium unstable")
     assert "limit cycle of" in text and "tracking orbit stable" in text
+    assert info["short"].startswith("tracking stable (μ = ")
+
+
+def test_cli_json_carries_the_reconciled_verdict() -> None:
+    import json
+
+    from typer.testing import CliRunner
+
+    from aiofl.cli.app import app
+
+    res = CliRunner().invoke(app, ["analyze", "frontier-s1-ladrc", "--closed-loop", "--json"])
+    assert res.exit_code == 0, res.output
+    info = json.loads(res.stdout)
+    orbit = info["orbit"]
+    assert orbit["equilibrium"] == info["verdict"] == "stable"
+    assert orbit["limit_cycle"] is None and orbit["ftle"] is None
+    assert orbit["floquet"]["largest"] < 1e-6  # a fast linear loop: e^{λT}, λ ≈ −28.6
+    assert info["reconciled_verdict"] == orbit["verdict"]
+    assert (
+        orbit["verdict"].startswith("equilibrium stable")
+        and "tracking orbit stable" in (orbit["verdict"])
+    )
+
+
+def test_a_diverging_run_has_no_periodic_orbit() -> None:
+    from aiofl.analysis.variational import OrbitDiverges
+
+    a = np.array([[1.0]])  # grows e^{2π} ≈ 535-fold per period
+    with pytest.raises(OrbitDiverges):
+        periodic_orbit(
+            lambda t, z: a @ z + math.sin(t), lambda t, z: a, np.array([1.0]), 2 * math.pi
+        )

@@ -37,6 +37,7 @@ from numpy.typing import NDArray
 
 from aiofl.analysis.orbit_loop import OrbitLoop
 from aiofl.analysis.variational import (
+    OrbitDiverges,
     describing_gain,
     finite_time_lyapunov,
     harmonic_balance,
@@ -322,6 +323,9 @@ def reconciled_text(info: dict[str, Any], unit: str = "") -> tuple[str, str]:
             f"over {_g(ft['horizon'], 3)} s)"
         )
         short.insert(0, f"run: FTLE {_g(lam, 3)} 1/s")
+    elif info.get("orbit_diverges"):
+        parts.append(f"the tracking run diverges ({info['orbit_diverges']})")
+        short.insert(0, "tracking diverges")
     elif info.get("orbit_error"):
         parts.append(f"tracking orbit not analysed ({info['orbit_error']})")
     return "; ".join(parts), "; ".join(short)
@@ -397,6 +401,8 @@ def orbit_analysis(
             out["floquet"] = tracking_floquet(loop, **periods)
         else:
             out["ftle"] = tracking_ftle(loop)
+    except OrbitDiverges as exc:
+        out["orbit_diverges"] = str(exc)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
         out["orbit_error"] = f"{type(exc).__name__}: {exc}"
     out["verdict"], out["short"] = reconciled_text(out, unit)

@@ -73,6 +73,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
+    "OrbitDiverges",
     "Oscillation",
     "PeriodicOrbit",
     "describing_gain",
@@ -205,6 +206,10 @@ def variational_flow(
     return sol.y[:, -1], phi * d[:, None]
 
 
+class OrbitDiverges(ArithmeticError):
+    """The solution leaves every bounded set while settling: there is no periodic orbit."""
+
+
 @dataclass(frozen=True)
 class PeriodicOrbit:
     """A T-periodic solution and its Floquet multipliers (:func:`periodic_orbit`).
@@ -258,6 +263,7 @@ def periodic_orbit(
     split: int = SPLIT,
     close_on: Sequence[int] | None = None,
     newton: bool = False,
+    bound: float = 10.0,
 ) -> PeriodicOrbit:
     r"""The T-periodic steady state reached from z0 at :math:`t_0` and its Floquet multipliers.
 
@@ -266,14 +272,26 @@ def periodic_orbit(
     docstring) until the states ``close_on`` (default all) close to ``tol`` relative to
     their typical magnitudes (the largest |z_i| seen while settling, floored at 1e-3 times
     the largest of them) or ``max_newton`` passes; the multipliers are those of the last
-    pass.
+    pass.  Raises :class:`OrbitDiverges` when, while settling, the peak of a state of
+    ``close_on`` over a period grows more than ``bound``-fold over that of the period
+    before.
     """
     idx = np.arange(np.asarray(z0).size) if close_on is None else np.asarray(close_on)
     z = np.asarray(z0, dtype=np.float64)
     sc = np.maximum(np.abs(z), 1e-6 * max(float(np.max(np.abs(z))), 1.0))
     t = t0
+    peak = None
     for _ in range(settle):
         sol = trajectory(f, jac, z, t, t + period, scale=sc, rtol=100 * rtol)
+        new_peak = np.max(np.abs(sol.y[idx]), axis=1)
+        if not np.all(np.isfinite(sol.y)) or (
+            peak is not None and np.max(new_peak / np.maximum(peak, 1e-300)) > bound
+        ):
+            raise OrbitDiverges(
+                f"a state's peak grows more than {bound:g}-fold from one period to the next "
+                "while settling: no periodic orbit"
+            )
+        peak = new_peak
         sc = np.maximum(sc, np.max(np.abs(sol.y), axis=1))
         z = sol.y[:, -1]
         t += period

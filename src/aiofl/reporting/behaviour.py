@@ -245,6 +245,8 @@ def orbit_stable(verdict: Mapping[str, Any]) -> bool | None:
     """Whether the tracking orbit is stable (largest Floquet multiplier < 1, or largest
     finite-time Lyapunov exponent < 0); None where it was not analysed."""
     nums = orbit_numbers(verdict)
+    if (verdict.get("orbit") or {}).get("orbit_diverges"):
+        return False
     if nums["largest_multiplier"] is not None:
         return bool(nums["largest_multiplier"] < 1.0)
     if nums["ftle"] is not None:
