@@ -233,3 +233,13 @@ def test_a_diverging_run_has_no_periodic_orbit() -> None:
         periodic_orbit(
             lambda t, z: a @ z + math.sin(t), lambda t, z: a, np.array([1.0]), 2 * math.pi
         )
+
+
+def test_finite_time_lyapunov_of_a_linear_system_is_its_eigenvalues() -> None:
+    from aiofl.analysis.variational import finite_time_lyapunov
+
+    a = np.array([[-1.0, 5.0], [0.0, -3.0]])  # non-normal: transient growth, exponents −1, −3
+    exps = finite_time_lyapunov(
+        lambda t, z: a @ z, lambda t, z: a, np.array([1.0, 1.0]), 0.0, 20.0, renorm=1.0
+    )
+    assert exps == pytest.approx([-1.0, -3.0], abs=0.05)

@@ -18,16 +18,21 @@ stable when every :math:`|\mu_i| < 1` (Floquet theory; e.g. Hale, *Ordinary Diff
 Equations*, ch. III; Chicone, *Ordinary Differential Equations with Applications*, §2.4).
 For an autonomous system :math:`\dot z = F(z)` with the orbit's period a multiplier is
 exactly 1 (the direction along the orbit); a forced loop (the reference is a sine) has
-none.  The periodic state is found by shooting (:func:`periodic_orbit`): a few periods
-of plain simulation, then Newton steps :math:`z_0 \leftarrow z_0 + (I - \Phi)^{-1}
-(z(t_0 + T) - z_0)` with Φ from the same variational integration, so the multipliers
-come from the last, converged pass.  Both systems are integrated with
-:func:`scipy.integrate.solve_ivp`, method Radau (the loops are stiff: observer poles at
-:math:`-\omega_0 \approx -2000`), Newton matrix ``blockdiag(J, J ⊗ I)`` (the coupling of Φ
-to z through the second derivatives is left out of the Newton matrix only; it changes the
-iteration, not the solution).  Not finite differences of the flow: a difference quotient
-of a stiff flow with non-smooth elements depends on its step (25.7 or 214 for one design,
-where the variational equation gives 0.71).
+none.  The periodic state (:func:`periodic_orbit`): a few periods of plain simulation
+from the start, then variational passes over the following periods until the orbit
+closes, :math:`z(t_0 + T) \approx z(t_0)` (optionally Newton shooting steps
+:math:`z_0 \leftarrow z_0 + (I - \Phi)^{-1}(z(t_0 + T) - z_0)`; with a non-smooth loop whose
+Φ depends sharply on the orbit they need not converge, so the default is the plain return
+map); the multipliers are those of the last pass, and the range of the largest over the
+passes is reported.  z is integrated by :func:`scipy.integrate.solve_ivp`, method BDF with
+the exact Jacobian (the loops are stiff: observer poles near :math:`-\omega_0 \approx
+-2000`); Φ by the exponential midpoint rule on the solver's steps,
+:math:`\Phi_{k+1} = \exp(h_k J(t_k + h_k/2))\,\Phi_k` (Magnus' method of order 2), in the
+coordinates z / (typical magnitudes) so that the observer's couplings (up to
+:math:`\omega_0^5 \approx 10^{16}`) do not overflow the exponential.  Not finite
+differences of the flow: a difference quotient of a stiff flow with non-smooth elements
+depends on its step (25.7 or 214 for one design, where the variational equation gives
+about 0.7).
 
 Lyapunov exponents
 ------------------
