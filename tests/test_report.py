@@ -135,8 +135,10 @@ def test_every_sentence_matches_its_trajectory(rep) -> None:
             amp = 0.5 * (np.max(e) - np.min(e))
             assert f"oscillates with amplitude {amp:.3g} rad" in text
         verdict = rep.verdicts[run.case.preset]["verdict"]
-        if verdict in ("stable", "unstable"):
-            assert text.startswith(f"Linearisation {verdict}")
+        if verdict in ("stable", "unstable"):  # the reconciled sentence starts there
+            orbit = rep.verdicts[run.case.preset].get("orbit") or {}
+            first = "Equilibrium" if orbit.get("floquet") or orbit.get("ftle") else "Linearisation"
+            assert text.startswith(f"{first} {verdict}")
     # the shipped cases cover divergence, tracking and a bounded oscillation
     assert {"diverged", "tracks", "bounded"} <= kinds
     # an unstable verdict beside a bounded, oscillating run (e.g. the printed INLESO)

@@ -357,8 +357,8 @@ class ClosedLoop:
             if self.n_td:
                 dz[self.o_td], dz[self.o_td + 1] = han_td_rhs(td[0], td[1], r, c.value("td.R"))
                 prof[:2] = td[:2]
-            else:
-                prof[0] = r
+            else:  # the TD's outputs (r1, r2) given as (r, r') (aiofl.analysis.orbit)
+                prof[: min(2, rho)] = rdv[: min(2, rho)]
         elif c.td == "improved":
             if self.mode == "exact":
                 a, b, cc, rr = (c.value(k) for k in ("td.a", "td.b", "td.c", "td.rho"))

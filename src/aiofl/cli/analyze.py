@@ -14,7 +14,13 @@
   the loop broken at the plant input (:mod:`aiofl.analysis.frequency`); ``--json`` prints
   ``{"verdict": ..., "eigenvalues": [[re, im], ...], "gain_margin_db": ...,
   "phase_margin_deg": ..., "delay_margin_s": ..., "ms": ..., "min_damping": ..., ...}``;
-  ``--figure FILE.png`` writes its Bode and Nyquist plots.
+  ``--figure FILE.png`` writes its Bode and Nyquist plots.  Unless ``--no-orbit``, also
+  the reconciled verdict (:mod:`aiofl.analysis.orbit`): the limit cycle an unstable
+  equilibrium settles on with r held (amplitudes, frequency, describing-function
+  estimate), the tracking orbit's Floquet multipliers (sine) or largest finite-time
+  Lyapunov exponent (step, samples); ``--json`` adds ``"orbit": {"equilibrium",
+  "limit_cycle": {"amplitude_y", "amplitude_u", "frequency", "describing"}, "floquet":
+  {"multipliers", "largest"}, "ftle", "verdict"}`` and ``"reconciled_verdict"``.
 
 sympy, numpy and the engine are imported inside the command, so registering it keeps
 ``aiofl --help`` fast.
@@ -78,6 +84,15 @@ def analyze_command(
         Path | None,
         typer.Option("--out", "-o", help="With --sampling: write sampling.json, sampling.png."),
     ] = None,
+    orbit: Annotated[
+        bool,
+        typer.Option(
+            "--orbit/--no-orbit",
+            help="With --closed-loop: also the limit cycle of an unstable equilibrium, the "
+            "Floquet multipliers of the tracking orbit (or the largest Lyapunov exponent) and "
+            "one reconciled verdict (aiofl.analysis.orbit).",
+        ),
+    ] = True,
 ) -> None:
     """Analyse a plant symbolically (Section III), a closed loop by linearisation, or the
     sample times a design tolerates (--sampling)."""
@@ -143,6 +158,11 @@ def analyze_command(
                 if r_op is None
                 else lin.to_dict()
             )
+            if orbit and r_op is None:
+                from aiofl.analysis.orbit import orbit_analysis
+
+                info["orbit"] = orbit_analysis(cfg, info, unit=cfg.plant.output_unit)
+                info["reconciled_verdict"] = info["orbit"]["verdict"]
             if figure is not None:
                 from aiofl.analysis.frequency import loop_figure_bytes
                 from aiofl.outputs import atomic_write_bytes
@@ -160,6 +180,10 @@ def analyze_command(
                 typer.echo(json.dumps(info, indent=2))
             else:
                 console.print(format_linearization_text(lin, cfg.name, info))
+                if "orbit" in info:
+                    from aiofl.analysis.orbit import format_orbit_text
+
+                    console.print(format_orbit_text(info["orbit"]))
             return
         if r_op is not None:
             raise ValueError("--r-op applies only with --closed-loop")

@@ -42,6 +42,8 @@ __all__ = [
     "measure",
     "measure_result",
     "min_damping",
+    "orbit_numbers",
+    "orbit_stable",
     "reconcile",
     "window_for",
 ]
@@ -105,7 +107,7 @@ class Behaviour:
 
 
 def _finite(x: float | None) -> float | None:
-    return None if x is None or not math.isfinite(x) else float(x)
+    return None if x is None or not math.isfinite(float(x)) else float(x)
 
 
 def window_for(t_final: float, window: float = WINDOW) -> float:
@@ -217,7 +219,39 @@ def analysis_numbers(verdict: Mapping[str, Any]) -> dict[str, Any]:
         if key == "min_damping":
             val = min_damping(verdict)
         out[key] = _finite(float(val)) if val is not None else None
+    out.update(orbit_numbers(verdict))
     return out
+
+
+def orbit_numbers(verdict: Mapping[str, Any]) -> dict[str, Any]:
+    """The reconciled verdict's numbers for ``metrics.json`` (null where not analysed):
+    ``reconciled`` (the sentence), ``largest_multiplier`` (Floquet, sine references),
+    ``ftle`` (largest finite-time Lyapunov exponent, other references), the limit cycle's
+    ``limit_cycle_amplitude_y``, ``limit_cycle_amplitude_u``, ``limit_cycle_frequency``."""
+    orb = verdict.get("orbit") or {}
+    lc = orb.get("limit_cycle") or {}
+    bounded = bool(lc.get("bounded"))
+    return {
+        "reconciled": orb.get("verdict"),
+        "largest_multiplier": _finite((orb.get("floquet") or {}).get("largest")),
+        "ftle": _finite((orb.get("ftle") or {}).get("largest")),
+        "limit_cycle_amplitude_y": _finite(lc.get("amplitude_y")) if bounded else None,
+        "limit_cycle_amplitude_u": _finite(lc.get("amplitude_u")) if bounded else None,
+        "limit_cycle_frequency": _finite(lc.get("frequency")) if bounded else None,
+    }
+
+
+def orbit_stable(verdict: Mapping[str, Any]) -> bool | None:
+    """Whether the tracking orbit is stable (largest Floquet multiplier < 1, or largest
+    finite-time Lyapunov exponent < 0); None where it was not analysed."""
+    nums = orbit_numbers(verdict)
+    if (verdict.get("orbit") or {}).get("orbit_diverges"):
+        return False
+    if nums["largest_multiplier"] is not None:
+        return bool(nums["largest_multiplier"] < 1.0)
+    if nums["ftle"] is not None:
+        return bool(nums["ftle"] < 0.0)
+    return None
 
 
 def _g(x: float, digits: int = 3) -> str:
@@ -300,6 +334,23 @@ def reconcile(verdict: Mapping[str, Any], behaviour: Behaviour, unit: str = "") 
     first = verdict_text(verdict, unit)
     second = simulation_text(behaviour, unit)
     k = behaviour.kind
+    stable_orbit = orbit_stable(verdict)
+    if stable_orbit is not None:  # the reconciled verdict (aiofl.analysis.orbit)
+        first = str(verdict["orbit"]["verdict"])
+        if stable_orbit and k == "tracks":
+            why = "they agree: the run follows the stable orbit"
+        elif not stable_orbit and k in ("diverged", "growing"):
+            why = "they agree"
+        elif stable_orbit and k == "bounded":
+            why = "no contradiction: a stable orbit need not be within the tracking tolerance"
+        elif stable_orbit:
+            why = (
+                "they differ: the orbit is stable to small perturbations; the run's start "
+                "lies outside its basin"
+            )
+        else:
+            why = "they differ: the run stays near an orbit the analysis finds unstable"
+        return f"{first[:1].upper()}{first[1:]}; {second} — {why}."
     eps = verdict.get("amplitude") if verdict.get("verdicts_by_amplitude") else None
     near = "near the operating point (constant r" + (
         f", secant gains at error amplitude ε = {_g(float(eps))})" if eps is not None else ")"

@@ -434,15 +434,29 @@ def model_assistance(cfg: RunConfig) -> str | None:
 
 
 def closed_loop_verdict(cfg: RunConfig) -> dict[str, Any]:
-    """Closed-loop linearisation verdict of a case.
+    """Closed-loop linearisation verdict of a case, with its reconciled verdict.
 
     Uses :func:`aiofl.analysis.linearize.closed_loop_verdict` (``{"verdict": str, "eigenvalues":
-    [[re, im], ...]}``).  A failure of the analysis is reported in the verdict, not raised.
+    [[re, im], ...]}``) and adds ``"orbit"`` (:func:`orbit_verdict`: equilibrium, limit
+    cycle, tracking orbit).  A failure of the analysis is reported in the verdict, not raised.
     """
     try:
-        return dict(_linearized_verdict(cfg))
+        out = dict(_linearized_verdict(cfg))
     except Exception as exc:  # the report must not fail because one analysis did
-        return {"verdict": f"analysis failed: {type(exc).__name__}: {exc}", "eigenvalues": []}
+        out = {"verdict": f"analysis failed: {type(exc).__name__}: {exc}", "eigenvalues": []}
+    out["orbit"] = orbit_verdict(cfg, out)
+    return out
+
+
+def orbit_verdict(cfg: RunConfig, verdict: dict[str, Any]) -> dict[str, Any]:
+    """The reconciled verdict of a case (:func:`aiofl.analysis.orbit.orbit_analysis`, its
+    quick settings); a failure is reported in it, not raised."""
+    from aiofl.analysis.orbit import orbit_analysis
+
+    try:
+        return orbit_analysis(cfg, verdict, unit=cfg.plant.output_unit, quick=True)
+    except Exception as exc:  # the report must not fail because one analysis did
+        return {"verdict": f"orbit analysis failed: {type(exc).__name__}: {exc}", "short": "—"}
 
 
 # ----------------------------------------------------------------------- orchestration

@@ -106,18 +106,39 @@ def _how_runs_end(rep: Reproduction, recs: dict[str, dict[str, Any]]) -> str | N
 
 
 def _verdict_vs_simulation(rep: Reproduction, recs: dict[str, dict[str, Any]]) -> str | None:
-    unstable_bounded, stable_diverged = [], []
+    unstable_bounded, stable_diverged, reconciled = [], [], []
     for r in rep.runs:
         rec = recs[r.case.preset]
         lin, beh = rec.get("linearisation"), (rec.get("tracking") or {}).get("behaviour")
         if not lin or beh is None:
             continue
         mr = f"max Re λ = {fmt(lin['max_real'], 3)} 1/s" if lin["max_real"] is not None else ""
-        if lin["verdict"] == "unstable" and beh in ("tracks", "bounded"):
+        mu = lin.get("largest_multiplier")
+        if (
+            lin["verdict"] == "unstable"
+            and beh in ("tracks", "bounded")
+            and mu is not None
+            and mu < 1
+        ):
+            amp = lin.get("limit_cycle_amplitude_y")
+            cyc = (
+                f", limit cycle {fmt(amp, 2)}{r.unit_suffix} at "
+                f"{fmt(lin['limit_cycle_frequency'], 3)} rad/s"
+                if amp is not None and lin.get("limit_cycle_frequency") is not None
+                else ""
+            )
+            reconciled.append(f"{r.case.preset} (μ = {fmt(mu, 2)}{cyc})")
+        elif lin["verdict"] == "unstable" and beh in ("tracks", "bounded"):
             unstable_bounded.append((r, beh, mr))
         elif lin["verdict"] == "stable" and beh in ("diverged", "growing"):
             stable_diverged.append((r, beh, mr))
     parts = []
+    if reconciled:
+        parts.append(
+            f"{len(reconciled)} designs have an unstable equilibrium (linearisation, r held) "
+            "but a stable tracking orbit (largest Floquet multiplier μ < 1); with r held they "
+            f"settle on a limit cycle: {', '.join(reconciled)}"
+        )
     if unstable_bounded:
         n_track = sum(1 for _, beh, _ in unstable_bounded if beh == "tracks")
         names = [f"{r.case.preset} ({mr})" for r, _, mr in unstable_bounded]

@@ -310,14 +310,14 @@ def _horizon(rep: Reproduction, scenario: int) -> str:
 # ----------------------------------------------------------------- verdict vs run
 VERDICT_HEADER = (
     "Case",
-    "Verdict",
+    "Verdict (tracking orbit; equilibrium)",
     "max Re λ [1/s]",
     "min ζ",
     "GM [dB]",
     "PM [°]",
     "DM [s]",
     "Ms",
-    "Linearisation beside the simulation (measured from the trajectory)",
+    "Reconciled verdict beside the simulation (measured from the trajectory)",
 )
 
 
@@ -329,6 +329,11 @@ def verdict_rows(rep: Reproduction) -> list[list[str]]:
         v = rep.verdicts.get(run.case.preset, {})
         n = analysis_numbers(v)
         verdict = n["verdict"] if n["verdict"] in ("stable", "unstable", "marginal") else "—"
+        short = (v.get("orbit") or {}).get("short")
+        if short and verdict != "—":
+            verdict = f"{short} (equilibrium {verdict})" if "equilibrium" not in short else short
+        elif short:
+            verdict = short
         given = controller_access(run.case.config)
         rows.append(
             [
@@ -405,7 +410,13 @@ def sampling_text(rep: Reproduction) -> str:
 
 
 VERDICT_INTRO = (
-    "The verdict is that of the whole closed loop linearised at its operating point (the "
+    "One reconciled verdict per design (aiofl.analysis.orbit): the tracking orbit's largest "
+    "Floquet multiplier μ over one reference period (variational equation along the periodic "
+    "steady state; stable when |μ| < 1), and the equilibrium with the reference held: stable, "
+    "or unstable and then the limit cycle it settles on (amplitude of y and frequency from a "
+    "simulation, cross-checked by the describing functions of its nonlinearities). "
+    "The equilibrium's verdict is that of the whole closed loop linearised at its operating "
+    "point (the "
     "reference held constant, the disturbance at its final value; aiofl.analysis.linearize); "
     "min ζ is the least damping ratio −Re λ/|λ| of its eigenvalues; GM, PM, DM (gain, phase "
     "and delay margins, loop broken at the plant input) and Ms (sensitivity peak) are shown "
