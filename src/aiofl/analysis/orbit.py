@@ -331,12 +331,20 @@ def reconciled_text(info: dict[str, Any], unit: str = "") -> tuple[str, str]:
     return "; ".join(parts), "; ".join(short)
 
 
-QUICK = {"passes": 2, "settle": 2, "rtol": 1e-5, "simulate_cycle": False, "points": 52}
+QUICK = {
+    "passes": 2,
+    "settle": 2,
+    "rtol": 1e-5,
+    "simulate_cycle": False,
+    "points": 52,
+    "orbit_when_stable": False,
+}
 """The cheaper settings of ``orbit_analysis(quick=True)`` (the report): two settling and
 two measured periods at rtol 1e-5; the limit cycle from the describing functions
 (tabulated at 52 amplitudes) only, without the held-reference simulation (which costs
 several seconds for a loop with observer poles near −2000; ``aiofl analyze --closed-loop``
-runs it)."""
+runs it); the tracking orbit only where the equilibrium is not stable, i.e. where the
+linearisation alone could contradict the simulation (1–9 s per design otherwise)."""
 
 
 def orbit_analysis(
@@ -395,9 +403,12 @@ def orbit_analysis(
             out["limit_cycle"] = lc
         except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
             out["limit_cycle_error"] = f"{type(exc).__name__}: {exc}"
+    skip_orbit = out["equilibrium"] == "stable" and not q.get("orbit_when_stable", True)
     try:
         loop = _loop(cfg)
-        if cfg.scenario.reference.kind == "sine":
+        if skip_orbit:
+            out["orbit_skipped"] = "equilibrium stable (aiofl analyze --closed-loop runs it)"
+        elif cfg.scenario.reference.kind == "sine":
             out["floquet"] = tracking_floquet(loop, **periods)
         else:
             out["ftle"] = tracking_ftle(loop)
