@@ -134,6 +134,14 @@ input_delay = 0.002
 output_delay = 0.001
 [controller]
 structure = "LADRC"
+[controller.eso]
+omega0 = 50.0
+[controller.td]
+omega = 20.0
+[controller.sef]
+omega_c = 10.0
+[controller.law]
+b0 = 26833.0
 [simulation]
 dt = 1e-4
 """

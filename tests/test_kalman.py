@@ -369,7 +369,8 @@ def test_kalman_needs_a_measurement_noise(tmp_path: Path) -> None:
 
 def test_kalman_with_the_improved_eso_is_refused(tmp_path: Path) -> None:
     data = tomllib.loads(preset_text("paper-s1-inleso"))
-    data["controller"]["eso"] = {"gains": "kalman", "q": 1e12, "r": 1e-7}
+    eso = {k: v for k, v in data["controller"]["eso"].items() if k not in ("omega0", "alpha")}
+    data["controller"]["eso"] = {**eso, "gains": "kalman", "q": 1e12, "r": 1e-7}
     res = runner.invoke(
         app, ["simulate", str(_write(tmp_path, data)), "--out", str(tmp_path / "o")]
     )

@@ -63,9 +63,9 @@ def _idle() -> Controller:
 
 
 def test_engine_metrics_of_y_identically_zero_equal_closed_forms():
-    """With y ≡ 0 and r = A sin ωt over N half periods (T = Nπ/ω):
-    ITAE = ∫ t|A sin ωt| = A π N²/ω², IAE = 2 A N/ω, ISE = A² T/2."""
-    amp, omega, n_half = math.pi / 4, 2.0, 12
+    """With y ≡ 0 and r = A sin ωt over N half periods (T = Nπ/ω, here a whole number of
+    steps): ITAE = ∫ t|A sin ωt| = A π N²/ω², IAE = 2 A N/ω, ISE = A² T/2."""
+    amp, omega, n_half = math.pi / 4, math.pi, 12
     t_final = n_half * math.pi / omega
     scen = Scenario(t_final=t_final, reference=Reference(amplitude=amp, omega=omega))
     res = simulate(get_plant("slfjm"), _idle(), scen, dt=1e-4, store=True, decimation=1000)

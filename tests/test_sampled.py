@@ -173,7 +173,7 @@ def test_sample_time_must_be_a_multiple_of_dt(slfjm):
     assert sample_steps(3e-4, 1e-4) == 3
     with pytest.raises(ValueError, match=r"controller\.discrete\.ts = 0\.00015 s"):
         simulate(slfjm, ladrc(), Scenario(t_final=0.1), sampling=Sampling(1.5e-4))
-    with pytest.raises(ValueError, match="allowed: 0, 1"):
+    with pytest.raises(ValueError, match="allowed: the integer 0 or 1"):
         Sampling(1e-3, delay=2)
     with pytest.raises(ValueError, match="needs the linear ESO"):
         simulate(
