@@ -313,7 +313,7 @@ def test_a_sampled_members_numbers_do_not_depend_on_its_batch_or_lane() -> None:
     scen = replace(rc.scenario, t_final=0.3)
     ctrls = _population(2 * WIDTH + 5, seed=4)
     sampling = [
-        None if i % 5 == 0 else Sampling(1e-3 if i % 2 else 5e-4, delay=i % 3 == 0)
+        None if i % 5 == 0 else Sampling(1e-3 if i % 2 else 5e-4, delay=int(i % 3 == 0))
         for i in range(len(ctrls))
     ]
     kw = {"dt": rc.dt, "engine": "lanes", "store": True, "decimation": 25}

@@ -192,6 +192,20 @@ def plant_key(plant: Plant) -> str:
     return hashlib.sha256(ident.encode()).hexdigest()[:8]
 
 
+def plant_tag(plant: Plant) -> str:
+    """A name suffix unique to a plant's code (its key and a digest of its functions'
+    fingerprints, or of its identity when they cannot be fingerprinted).
+
+    Functions compiled from a template with a plant's functions bound (the per-member setup,
+    the discrete update with the model's α, β) carry it in their names: numba names a
+    compiled function's symbol after its qualified name, and two kernels in one process
+    whose callees share a symbol name can be linked to the same one (a kernel loaded from
+    the disk cache then called another plant's discrete update)."""
+    parts = _plant_parts(plant) or [f"id{id(plant)}"]
+    digest = hashlib.sha256("|".join(parts).encode()).hexdigest()[:12]
+    return f"{plant_key(plant)}_{digest}"
+
+
 def _plant_parts(plant: Plant | None) -> list[str] | None:
     if plant is None:
         return ["no plant"]

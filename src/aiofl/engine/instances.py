@@ -166,7 +166,8 @@ def recipe(
     ns_member = dict(vars(member))
     bindings.bind_private(ns_member, private)
     ns_member.update(_N=plant.n_states, **bindings.component_functions(private))
-    member_setup = compile_.instantiate(member._tpl_setup, ns_member, variant, **opts)
+    tag = f"{variant}_{compile_.plant_tag(plant)}"  # plant-specific names (see plant_tag)
+    member_setup = compile_.instantiate(member._tpl_setup, ns_member, tag, **opts)
 
     fns = plant.compiled
     if variant == "guarded":
@@ -225,8 +226,8 @@ def recipe(
         ns_ctrl = dict(ns_member)
         ns_ctrl["_PAB"] = ab
         sampled._bind(ns_ctrl, bindings.private_components(private)["discrete"])
-        ns["_CTRL_INIT"] = compile_.instantiate(sampled._tpl_ctrl_init, ns_ctrl, variant, **opts)
-        ns["_CTRL_STEP"] = compile_.instantiate(sampled._tpl_ctrl_step, ns_ctrl, variant, **opts)
+        ns["_CTRL_INIT"] = compile_.instantiate(sampled._tpl_ctrl_init, ns_ctrl, tag, **opts)
+        ns["_CTRL_STEP"] = compile_.instantiate(sampled._tpl_ctrl_step, ns_ctrl, tag, **opts)
         templates += [
             tpl("_SETUP", sampled._tpl_setup, opts),
             tpl("_SAMPLE", sampled._tpl_sample, opts),
