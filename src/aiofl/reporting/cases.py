@@ -433,18 +433,21 @@ def model_assistance(cfg: RunConfig) -> str | None:
     return text
 
 
-def closed_loop_verdict(cfg: RunConfig) -> dict[str, Any]:
+def closed_loop_verdict(cfg: RunConfig, *, orbit: bool = True) -> dict[str, Any]:
     """Closed-loop linearisation verdict of a case, with its reconciled verdict.
 
     Uses :func:`aiofl.analysis.linearize.closed_loop_verdict` (``{"verdict": str, "eigenvalues":
     [[re, im], ...]}``) and adds ``"orbit"`` (:func:`orbit_verdict`: equilibrium, limit
     cycle, tracking orbit).  A failure of the analysis is reported in the verdict, not raised.
+    ``orbit = False`` (the report, for a run that diverged: the simulation and an unstable
+    linearisation agree, nothing to reconcile) leaves the orbit out.
     """
     try:
         out = dict(_linearized_verdict(cfg))
     except Exception as exc:  # the report must not fail because one analysis did
         out = {"verdict": f"analysis failed: {type(exc).__name__}: {exc}", "eigenvalues": []}
-    out["orbit"] = orbit_verdict(cfg, out)
+    if orbit:
+        out["orbit"] = orbit_verdict(cfg, out)
     return out
 
 
@@ -561,7 +564,10 @@ def compute(
     t2 = time.perf_counter()
     trivial = {s: trivial_itae(next(c for c in cases if c.scenario == s).config) for s in SCENARIOS}
     stage("closed-loop analysis")
-    verdicts = {r.case.preset: closed_loop_verdict(r.case.config) for r in runs}
+    verdicts = {
+        r.case.preset: closed_loop_verdict(r.case.config, orbit=not r.result.diverged)
+        for r in runs
+    }
     t3 = time.perf_counter()
     stage("sampling limits (largest Ts per design, batched)")
     from aiofl.reporting.sampling_note import case_limits
