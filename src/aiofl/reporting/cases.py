@@ -565,8 +565,7 @@ def compute(
     trivial = {s: trivial_itae(next(c for c in cases if c.scenario == s).config) for s in SCENARIOS}
     stage("closed-loop analysis")
     verdicts = {
-        r.case.preset: closed_loop_verdict(r.case.config, orbit=not r.result.diverged)
-        for r in runs
+        r.case.preset: closed_loop_verdict(r.case.config, orbit=not r.result.diverged) for r in runs
     }
     t3 = time.perf_counter()
     stage("sampling limits (largest Ts per design, batched)")
