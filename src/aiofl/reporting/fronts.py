@@ -205,15 +205,26 @@ def parse_robust(text: str, front: ShippedFront, *, name: str) -> ShippedFront:
             f"({', '.join(front.names)}) and add statistics such as itae_q50, itae_q95, "
             f"stable_fraction; got {', '.join(header)}"
         )
-    stats = {h: np.full(len(front.itae), np.nan) for h in header[k:]}
+    stats = _match_rows(header, body, k, front.values, name)
+    return replace(front, robust=stats, robust_path=name)
+
+
+def _match_rows(
+    header: list[str], body: list[tuple[int, list[str]]], k: int, values: Any, name: str
+) -> dict[str, Any]:
+    """A companion file's statistics (columns after the first ``k``, the parameters) per
+    front row, matched by parameter values (relative tolerance 1e-9); NaN where no row
+    matches.  Shared by the ITAE/ISU fronts and the noise fronts
+    (:mod:`aiofl.reporting.noise_front`)."""
+    stats = {h: np.full(len(values), np.nan) for h in header[k:]}
     for n, row in body:
         nums = [_float(c, f"{name}, line {n}", h) for c, h in zip(row, header, strict=True)]
         par = np.array(nums[:k])
-        hit = np.flatnonzero(np.isclose(front.values, par, rtol=1e-9, atol=0.0).all(axis=1))
+        hit = np.flatnonzero(np.isclose(values, par, rtol=1e-9, atol=0.0).all(axis=1))
         for i in hit:
             for h, v in zip(header[k:], nums[k:], strict=True):
                 stats[h][i] = v
-    return replace(front, robust=stats, robust_path=name)
+    return stats
 
 
 def load_fronts(folder: str | Path | None = None) -> ShippedFronts:

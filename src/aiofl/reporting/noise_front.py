@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl.reporting.cases import Reproduction
-from aiofl.reporting.fronts import FrontFileError, _float, _rows
+from aiofl.reporting.fronts import FrontFileError, _float, _match_rows, _rows
 from aiofl.reporting.tables import DASH, fmt, metric_units
 
 __all__ = [
@@ -182,14 +182,7 @@ def parse_noise_robust(text: str, front: NoiseFront, *, name: str) -> NoiseFront
             f"{name}: the header must start with the front's parameters "
             f"({', '.join(front.names)}) and hold itae_q95; got {', '.join(header)}"
         )
-    stats = {h: np.full(len(front.itae), np.nan) for h in header[k:]}
-    for n, row in body:
-        nums = [_float(c, f"{name}, line {n}", h) for c, h in zip(row, header, strict=True)]
-        par = np.array(nums[:k])
-        hit = np.flatnonzero(np.isclose(front.values, par, rtol=1e-9, atol=0.0).all(axis=1))
-        for i in hit:
-            for h, v in zip(header[k:], nums[k:], strict=True):
-                stats[h][i] = v
+    stats = _match_rows(header, body, k, front.values, name)
     return replace(front, robust=stats, robust_path=name)
 
 
