@@ -181,13 +181,28 @@ def link_firmware(
     return elf
 
 
-def build_host(sources: list[Path], out: Path) -> Path:
+def build_host(sources: list[Path], out: Path, defines: dict[str, str] | None = None) -> Path:
     """The same closed loop for the host: ``cc -std=c99 -O2 -ffp-contract=off -DHOST``."""
     exe = out / "loop-host"
     inc = sources[0].parent
-    cmd = ["cc", *COMMON, "-O2", "-DHOST", f"-I{inc}", "-o", str(exe), str(FIRMWARE / "loop.c")]
-    _run([*cmd, *map(str, sources), "-lm"])
+    defs = [f"-D{k}={v}" for k, v in (defines or {}).items()]
+    cmd = ["cc", *COMMON, "-O2", "-DHOST", *defs, f"-I{inc}", "-o", str(exe)]
+    _run([*cmd, str(FIRMWARE / "loop.c"), *map(str, sources), "-lm"])
     return exe
+
+
+def write_replay(sources: list[Path], out: Path, steps: int) -> None:
+    """Record y(t_k), k < ``steps``, of the host's closed loop (-DRECORD; the same bits as
+    on the targets, tests/test_cortex_m.py) as ``replay.h`` in the export's directory, for a
+    -DREPLAY firmware: the controller's calls of the closed loop without the plant."""
+    values = run_host(build_host(sources, out, {"RECORD": "1", "N_STEPS": str(steps)}))
+    ys = [values[f"y_{k}"] for k in range(steps)]
+    body = ",\n".join(f"    {y.hex()}f" for y in ys)
+    text = (
+        "/* y(t_k) of a recorded closed loop (loop.c -DRECORD) */\n"
+        f"static const float Y_REC[{steps}] = {{\n{body}\n}};\n"
+    )
+    (sources[0].parent / "replay.h").write_text(text)
 
 
 def parse(text: str) -> dict[str, float]:

@@ -32,6 +32,7 @@ from cortex_m import (
     run_host,
     run_qemu,
     traced_instructions,
+    write_replay,
 )
 
 REASON = missing_tools()
@@ -107,18 +108,22 @@ def test_instructions_per_step_icount_equals_the_trace(build):
     instructions.  Under -icount shift=0 (1 ns per instruction) the AN386's 25 MHz SysTick
     ticks every 40 instructions: SysTick around 2000 steps and around the same loop with a
     trivial function gives the step's instructions beyond the trivial call; an instruction
-    trace (-singlestep -d exec,nochain) of a short run counts each call exactly.  They agree
-    to the tick's resolution (40 / 2000 per step, twice)."""
-    small = link_firmware(
-        build["ctrl"][M4F],
-        build["sources"][0].parent,
-        build["tmp"],
-        {"N_STEPS": "3", "N_COUNT": "50"},
-        name="trace",
+    trace (-singlestep -d exec,nochain) counts each call exactly.  They agree to the tick's
+    resolution (40 / 2000 per step, twice).  The trace runs a replay of the closed loop's
+    first 200 samples (loop.c -DREPLAY, the recorded y, no plant): its commands are the
+    closed loop's, bit for bit."""
+    steps = 200
+    write_replay(build["sources"], build["tmp"], steps)
+    defines = {"REPLAY": "1", "N_STEPS": str(steps), "N_COUNT": "50"}
+    elf = link_firmware(
+        build["ctrl"][M4F], build["sources"][0].parent, build["tmp"], defines, name="replay"
     )
-    counts = traced_instructions(small, M4F.board, ("aiofl_step", "trivial"), build["tmp"])
+    replayed = run_qemu(elf, M4F.board)
+    for key in ("u_0", "u_1", "u_2", "u_10", "u_100"):
+        assert replayed[key] == build["target"][M4F][key], key
+    counts = traced_instructions(elf, M4F.board, ("aiofl_step", "trivial"), build["tmp"])
     step, trivial = counts["aiofl_step"], counts["trivial"]
-    assert len(step) == 53 and len(trivial) == 50
+    assert len(step) == steps + 50 and len(trivial) == 50
     assert len(set(step)) == 1 and len(set(trivial)) == 1  # a linear design: no branches
     by_icount = icount_instructions(build["target"][M4F])
     print(f"M4F instructions per aiofl_step: {step[0]} (trace), icount {by_icount} + {trivial[0]}")

@@ -11,11 +11,19 @@
    Output, one "name 0x<IEEE-754 bits>" line per value (hex: exact, no float formatting in
    the firmware): itae, isu, y_end, u samples; on the target also the SysTick counts of a
    timed run of N_COUNT controller steps and of the same loop around a trivial function
-   (instructions per step under qemu -icount shift=0, see tests/test_cortex_m.py). */
+   (instructions per step under qemu -icount shift=0, see tests/test_cortex_m.py).
+
+   -DRECORD: also print y at every sample ("y_<k> 0x..."); -DREPLAY: the plant is not
+   stepped, y(t_k) is read from "replay.h" (static const float Y_REC[N_STEPS], a recorded run):
+   the controller makes the same calls as in the closed loop, and an instruction trace of
+   the run holds little but the controller (benchmarks/bench_mcu.py). */
 #include <stdint.h>
 #include <string.h>
 
 #include "aiofl_controller.h"
+#ifdef REPLAY
+#include "replay.h"
+#endif
 
 /* --- adapter: the export's API (two generations, see /work/notes/deploy-api.md) -------- */
 #if defined(AIOFL_START_BUMPLESS) /* NAME_init/step with a const NAME_params * */
@@ -84,6 +92,7 @@ static float psin(float x)
                                    r2 * (-1.98412701e-4f + r2 * (2.75573188e-6f + r2 * -2.50521083e-8f)))));
 }
 
+#ifndef REPLAY
 static void rhs(const float *x, float u, float *dx)
 {
     const float damp = K_M * K_M * K_G * K_G / (R_M * J_H), b = K_M * K_G / (R_M * J_H);
@@ -106,6 +115,7 @@ static void rk4(float *x, float u, float h)
     rhs(t, u, k4);
     for (i = 0; i < 4; ++i) x[i] = x[i] + h / 6.0f * (k1[i] + 2.0f * k2[i] + 2.0f * k3[i] + k4[i]);
 }
+#endif
 
 /* r, r', ..., r^(rho) of REF_A sin(REF_W t) */
 static void reference(float t, sig_t *r)
@@ -134,6 +144,22 @@ static void put(const char *name, float value)
     line[n++] = '\n';
     line[n] = '\0';
     sh_write0(line);
+}
+
+/* put() with the name prefix followed by the decimal k */
+static void put_k(const char *prefix, int k, float value)
+{
+    char name[24];
+    int n = 0, d = 1000000;
+    while (prefix[n] != '\0' && n < 8) {
+        name[n] = prefix[n];
+        ++n;
+    }
+    for (; d > 1; d /= 10)
+        if (k >= d) break;
+    for (; d > 0; d /= 10) name[n++] = (char)('0' + (k / d) % 10);
+    name[n] = '\0';
+    put(name, value);
 }
 
 #ifndef HOST
@@ -188,23 +214,30 @@ int main(void)
     for (k = 0; k < N_STEPS; ++k) {
         const float t = (float)k * TS;
         float u, e;
+#ifdef REPLAY
+        y = Y_REC[k];
+#else
         y = x[0] + x[1];
+#endif
         reference(t, r);
         if (k == 0) CTRL_INIT(&s, (sig_t)y);
         u = (float)CTRL_STEP(&s, r, (sig_t)y);
         e = (float)r[0] - y;
         itae += t * (e < 0.0f ? -e : e) * TS;
         isu += u * u * TS;
+#ifdef RECORD
+        put_k("y_", k, y);
+#endif
         if (k == 0 || k == 1 || k == 2 || k == 10 || k == 100 || k == 1000 || k == N_STEPS - 1) {
-            char name[16] = "u_";
-            int n = 2, d = 1000000;
-            for (; d > 1; d /= 10)
-                if (k >= d) break;
-            for (; d > 0; d /= 10) name[n++] = (char)('0' + (k / d) % 10);
-            name[n] = '\0';
-            put(name, u);
+            put_k("u_", k, u);
         }
+#ifndef REPLAY
         for (i = 0; i < N_SUB; ++i) rk4(x, u, h);
+#else
+        (void)i;
+        (void)h;
+        (void)x;
+#endif
     }
     put("itae", itae);
     put("isu", isu);
