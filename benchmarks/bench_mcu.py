@@ -111,7 +111,7 @@ def main() -> None:
     for tool in ("arm-none-eabi-gcc", "qemu-system-arm"):
         first = subprocess.run([tool, "--version"], capture_output=True, text=True).stdout
         print(f"{tool}: {first.splitlines()[0]}")
-    rows, refused = [], []
+    rows, refused, notes = [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         for design in args.designs:
             d = Path(tmp) / design
@@ -122,7 +122,11 @@ def main() -> None:
                 continue
             row = [design]
             if not args.no_count:
-                write_replay(sources, d, args.steps)
+                k = write_replay(sources, d, args.steps)
+                if k is not None:
+                    notes.append(
+                        f"  {design}: the float closed loop's y is not finite from k = {k}"
+                    )
             for target in (M4F, M0P):
                 ctrl = compile_controller(sources, target, d / target.board)
                 step = next(v[0] for k, v in ctrl.stack.items() if k.endswith("_step"))
@@ -142,6 +146,9 @@ def main() -> None:
     if refused:
         print("\nnot exported:")
         print("\n".join(refused))
+    if notes:
+        print("\nfloat closed loop (SLFJM, scenario 1 plant, as loop.c) diverged:")
+        print("\n".join(notes))
 
 
 if __name__ == "__main__":

@@ -24,6 +24,7 @@ Instruction counts (qemu models no cycle timing of the M4 and no DWT cycle count
 
 from __future__ import annotations
 
+import math
 import os
 import re
 import shutil
@@ -191,18 +192,28 @@ def build_host(sources: list[Path], out: Path, defines: dict[str, str] | None = 
     return exe
 
 
-def write_replay(sources: list[Path], out: Path, steps: int) -> None:
+def _c_float(y: float) -> str:
+    if math.isnan(y):
+        return '__builtin_nanf("")'
+    if math.isinf(y):
+        return ("-" if y < 0 else "") + "__builtin_inff()"
+    return f"{y.hex()}f"
+
+
+def write_replay(sources: list[Path], out: Path, steps: int) -> int | None:
     """Record y(t_k), k < ``steps``, of the host's closed loop (-DRECORD; the same bits as
     on the targets, tests/test_cortex_m.py) as ``replay.h`` in the export's directory, for a
-    -DREPLAY firmware: the controller's calls of the closed loop without the plant."""
+    -DREPLAY firmware: the controller's calls of the closed loop without the plant.  The
+    first sample whose y is not finite (the float loop diverged), or None."""
     values = run_host(build_host(sources, out, {"RECORD": "1", "N_STEPS": str(steps)}))
     ys = [values[f"y_{k}"] for k in range(steps)]
-    body = ",\n".join(f"    {y.hex()}f" for y in ys)
+    body = ",\n".join(f"    {_c_float(y)}" for y in ys)
     text = (
         "/* y(t_k) of a recorded closed loop (loop.c -DRECORD) */\n"
         f"static const float Y_REC[{steps}] = {{\n{body}\n}};\n"
     )
     (sources[0].parent / "replay.h").write_text(text)
+    return next((k for k, y in enumerate(ys) if not math.isfinite(y)), None)
 
 
 def parse(text: str) -> dict[str, float]:
