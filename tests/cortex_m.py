@@ -109,23 +109,33 @@ class ControllerBuild:
     bss: int
     stack: dict[str, tuple[int, str]] = field(default_factory=dict)  # function: (bytes, kind)
     undefined: list[str] = field(default_factory=list)  # symbols the objects call
+    call_sites: dict[str, int] = field(default_factory=dict)  # calls of each in the code
 
     def double_calls(self) -> list[str]:
         """The double-precision run-time calls (``__aeabi_d*``, ``__aeabi_*2d``)."""
-        return [s for s in self.undefined if re.match(r"__aeabi_(d|\w+2d$)", s)]
+        return [s for s in self.undefined if re.match(r"__aeabi_(d\w+|\w+2d)$", s)]
 
     def float_calls(self) -> list[str]:
         """The soft-float single-precision calls (``__aeabi_f*``, ``__aeabi_*2f``)."""
-        return [s for s in self.undefined if re.match(r"__aeabi_(f|\w+2f$)", s)]
+        return [s for s in self.undefined if re.match(r"__aeabi_(f\w+|u?[il]2f)$", s)]
 
 
-def compile_controller(sources: list[Path], target: Target, out: Path) -> ControllerBuild:
+def signal_is_double(sources: list[Path]) -> bool:
+    """Whether the export takes y and r as double by default in its float build (the params
+    API's ``NAME_signal``; ``-DNAME_SIGNAL_IS_FLOAT`` makes them float)."""
+    return any("_SIGNAL_IS_FLOAT" in p.read_text() for p in sources[0].parent.glob("*.h"))
+
+
+def compile_controller(
+    sources: list[Path], target: Target, out: Path, defines: dict[str, str] | None = None
+) -> ControllerBuild:
     """Each source to an object, ``-Os -fstack-usage``, with the target's flags."""
     out.mkdir(parents=True, exist_ok=True)
     objs, stack = [], {}
+    defs = [f"-D{k}={v}" for k, v in (defines or {}).items()]
     for src in sources:
         obj = out / (src.stem + ".o")
-        flags = [*COMMON, "-Os", *target.cpu_flags, "-ffunction-sections", "-fdata-sections"]
+        flags = [*COMMON, "-Os", *target.cpu_flags, *defs, "-ffunction-sections", "-fdata-sections"]
         _run(
             [
                 "arm-none-eabi-gcc",
@@ -146,7 +156,11 @@ def compile_controller(sources: list[Path], target: Target, out: Path) -> Contro
     text, data, bss = (sum(int(row.split()[i]) for row in sizes) for i in range(3))
     nm = _run(["arm-none-eabi-nm", "-u", *map(str, objs)]).stdout
     undefined = sorted({ln.split()[-1] for ln in nm.splitlines() if ln.strip().startswith("U")})
-    return ControllerBuild(target, objs, text, data, bss, stack, undefined)
+    relocs = _run(["arm-none-eabi-objdump", "-dr", *map(str, objs)]).stdout
+    sites = {
+        name: len(re.findall(rf"R_ARM_\w+\s+{name}$", relocs, flags=re.M)) for name in undefined
+    }
+    return ControllerBuild(target, objs, text, data, bss, stack, undefined, sites)
 
 
 def link_firmware(
