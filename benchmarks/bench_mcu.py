@@ -44,6 +44,7 @@ from cortex_m import (  # type: ignore[import-not-found]
     export_float,
     link_firmware,
     missing_tools,
+    signal_is_double,
     traced_instructions,
     write_replay,
 )
@@ -80,16 +81,18 @@ def _table(title: str, header: list[str], rows: list[list[str]]) -> None:
 
 
 def _calls(ctrl) -> str:
-    """libm and double-precision calls by name, libgcc's soft-float ones counted."""
-    soft = ctrl.float_calls()
-    shown = [n for n in ctrl.undefined if n not in ("memset", "memcpy", *soft)]
+    """libm calls by name, double-precision ones with their call sites (``xN``), the
+    number of libgcc's soft-float single-precision routines."""
+    soft, double = ctrl.float_calls(), ctrl.double_calls()
+    shown = [n for n in ctrl.undefined if n not in ("memset", "memcpy", *soft, *double)]
+    shown += [f"{n.removeprefix('__aeabi_')}x{ctrl.call_sites.get(n, 0)}" for n in double]
     return " ".join([*shown, *([f"{len(soft)} __aeabi_f*"] if soft else [])]) or "-"
 
 
-def _count(ctrl, include: Path, out: Path, steps: int) -> str:
+def _count(ctrl, include: Path, out: Path, steps: int, extra: dict[str, str]) -> str:
     """Mean [min-max] instructions per aiofl_step over the first ``steps`` closed-loop calls
     (replayed: ``write_replay`` has recorded y in the export's directory)."""
-    defines = {"REPLAY": "1", "N_STEPS": str(steps), "N_COUNT": "1"}
+    defines = {"REPLAY": "1", "N_STEPS": str(steps), "N_COUNT": "1", **extra}
     elf = link_firmware(ctrl, include, out, defines, "replay")
     counts = traced_instructions(elf, ctrl.target.board, ("aiofl_step",), out)["aiofl_step"]
     counts = counts[:steps]
@@ -104,6 +107,11 @@ def main() -> None:
     ap.add_argument("--ts", type=float, default=1e-3)
     ap.add_argument("--steps", type=int, default=200, help="closed-loop steps traced")
     ap.add_argument("--no-count", action="store_true", help="sizes and stack only")
+    ap.add_argument(
+        "--float-signal",
+        action="store_true",
+        help="y and r as float at the API (-DAIOFL_SIGNAL_IS_FLOAT, the params API)",
+    )
     args = ap.parse_args()
     reason = missing_tools()
     if reason:
@@ -125,19 +133,25 @@ def main() -> None:
                 k = write_replay(sources, d, args.steps)
                 if k is not None:
                     notes.append(
-                        f"  {design}: the float closed loop's y is not finite from k = {k}"
+                        f"  {design}: diverged, y not finite from k = {k} (y is the float plant's)"
                     )
+            extra = {"AIOFL_SIGNAL_IS_FLOAT": "1"} if args.float_signal else {}
+            if extra and not signal_is_double(sources):
+                notes.append(f"  {design}: --float-signal: the export's signals are float")
             for target in (M4F, M0P):
-                ctrl = compile_controller(sources, target, d / target.board)
+                ctrl = compile_controller(sources, target, d / target.board, extra)
                 step = next(v[0] for k, v in ctrl.stack.items() if k.endswith("_step"))
                 row += [str(ctrl.text), str(step), _calls(ctrl)]
                 if not args.no_count:
-                    row.append(_count(ctrl, sources[0].parent, d / target.board, args.steps))
+                    include = sources[0].parent
+                    row.append(_count(ctrl, include, d / target.board, args.steps, extra))
             rows.append(row)
     per_target = ["text B", "stack B", "calls", *([] if args.no_count else ["insns/step"])]
     header = ["design"] + [f"{t} {h}" for t in ("M4F", "M0+") for h in per_target]
     _table(
-        f"float export at Ts = {args.ts:g} s, -Os; M4F: -mcpu=cortex-m4 -mfpu=fpv4-sp-d16 "
+        f"float export at Ts = {args.ts:g} s"
+        + (", float signals" if args.float_signal else "")
+        + "; -Os; M4F: -mcpu=cortex-m4 -mfpu=fpv4-sp-d16 "
         "-mfloat-abi=hard; M0+: -mcpu=cortex-m0plus (soft float); insns/step: qemu "
         f"instruction trace of the first {args.steps} closed-loop steps, callees included",
         header,
@@ -147,7 +161,10 @@ def main() -> None:
         print("\nnot exported:")
         print("\n".join(refused))
     if notes:
-        print("\nfloat closed loop (SLFJM, scenario 1 plant, as loop.c) diverged:")
+        print(
+            "\nnotes (closed loop: loop.c, the SLFJM stepped in float, scenario 1's reference;"
+            " y carries float's 2^-24 relative rounding):"
+        )
         print("\n".join(notes))
 
 

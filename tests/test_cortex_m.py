@@ -44,7 +44,7 @@ pytestmark = pytest.mark.skipif(REASON is not None, reason=f"Cortex-M tests: {RE
 
 PRESET = "frontier-s1-ladrc"
 TS = 1e-3
-N_COUNT = 2000  # controller steps of the SysTick-timed run
+N_COUNT = 500  # controller steps of the SysTick-timed run
 
 
 @pytest.fixture(scope="module")
@@ -127,10 +127,10 @@ def test_controller_size_stack_and_runtime_calls(build):
 def test_instructions_per_step_icount_equals_the_trace(build):
     """qemu has no cycle model of the M4 (and DWT CYCCNT is not modelled); it counts
     instructions.  Under -icount shift=0 (1 ns per instruction) the AN386's 25 MHz SysTick
-    ticks every 40 instructions: SysTick around 2000 steps and around the same loop with a
+    ticks every 40 instructions: SysTick around 500 steps and around the same loop with a
     trivial function gives the step's instructions beyond the trivial call; an instruction
     trace (-singlestep -d exec,nochain) of the same firmware counts each call exactly.  They
-    agree to the tick's resolution (40 / 2000 per step, twice).  The firmware replays the
+    agree to the tick's resolution (40 / 500 per step, twice).  The firmware replays the
     closed loop's first 200 samples (loop.c -DREPLAY, the recorded y, no plant): its
     commands are the closed loop's, bit for bit."""
     steps = 200
