@@ -124,7 +124,9 @@ def main() -> None:
         for design in args.designs:
             d = Path(tmp) / design
             try:
-                sources = export_float(design, args.ts, d / "export")
+                warned: list[str] = []
+                sources = export_float(design, args.ts, d / "export", warned)
+                notes += [f"  {design}: {w.removeprefix('aiofl: ')}" for w in warned]
             except RuntimeError as exc:
                 refused.append(f"  {design}: {str(exc).splitlines()[-1]}")
                 continue
@@ -133,7 +135,7 @@ def main() -> None:
                 k = write_replay(sources, d, args.steps)
                 if k is not None:
                     notes.append(
-                        f"  {design}: diverged, y not finite from k = {k} (y is the float plant's)"
+                        f"  {design}: loop.c's closed loop diverged (y not finite from k = {k})"
                     )
             extra = {"AIOFL_SIGNAL_IS_FLOAT": "1"} if args.float_signal else {}
             if extra and not signal_is_double(sources):
@@ -162,8 +164,8 @@ def main() -> None:
         print("\n".join(refused))
     if notes:
         print(
-            "\nnotes (closed loop: loop.c, the SLFJM stepped in float, scenario 1's reference;"
-            " y carries float's 2^-24 relative rounding):"
+            "\nnotes (aiofl export's warnings; loop.c: the SLFJM stepped in float with"
+            " scenario 1's reference):"
         )
         print("\n".join(notes))
 

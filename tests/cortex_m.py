@@ -83,9 +83,12 @@ def _run(cmd: list[str], timeout: float = 60.0, **kw) -> subprocess.CompletedPro
     return proc
 
 
-def export_float(preset: str, ts: float, out: Path) -> list[Path]:
+def export_float(
+    preset: str, ts: float, out: Path, warnings: list[str] | None = None
+) -> list[Path]:
     """``aiofl export PRESET --ts TS --precision float --out OUT`` (in-process); the C
-    sources it wrote (every ``*.c``: the controller, and a parameter instance if separate)."""
+    sources it wrote (every ``*.c``: the controller, and a parameter instance if separate).
+    Its warnings are appended to ``warnings``."""
     from typer.testing import CliRunner
 
     from aiofl.cli.app import app
@@ -95,6 +98,8 @@ def export_float(preset: str, ts: float, out: Path) -> list[Path]:
     )
     if res.exit_code != 0:
         raise RuntimeError(f"aiofl export {preset} failed ({res.exit_code}):\n{res.output}")
+    if warnings is not None:
+        warnings += [ln for ln in res.output.splitlines() if "warning" in ln]
     return sorted(p for p in out.glob("*.c") if p.name not in OWN_SOURCES)
 
 
