@@ -6,7 +6,8 @@
    SSE and on the Cortex-M4's FPv4 / libgcc's soft-float), -ffp-contract=off on both, and no
    libm in the plant or the reference: sin and cos are the polynomial psin() below (newlib's
    sinf and glibc's sinf are not guaranteed to round alike).  The controller itself calls
-   no transcendental function for linear (LADRC) designs.
+   no libm function for linear (LADRC) designs; a design whose export calls expf, logf,
+   tanhf, sinf... (LESO, INLESO, model-assisted) may part from the host's by their rounding.
 
    Output, one "name 0x<IEEE-754 bits>" line per value (hex: exact, no float formatting in
    the firmware): itae, isu, y_end, u samples; on the target also the SysTick counts of a
@@ -25,13 +26,13 @@
 #include "replay.h"
 #endif
 
-/* --- adapter: the export's API (two generations, see /work/notes/deploy-api.md) -------- */
+/* --- adapter: the export's API (the params API of issue 23, or the first export's) ----- */
 #if defined(AIOFL_START_BUMPLESS) /* NAME_init/step with a const NAME_params * */
-typedef aiofl_signal sig_t;
+typedef aiofl_signal ctrl_signal;
 #define CTRL_INIT(s, y0) aiofl_init((s), &aiofl_default_params, (y0))
 #define CTRL_STEP(s, r, y) aiofl_step((s), &aiofl_default_params, (r), (y))
 #else /* aiofl_init(&s, y0), aiofl_step(&s, r, y) */
-typedef aiofl_real sig_t;
+typedef aiofl_real ctrl_signal;
 #define CTRL_INIT(s, y0) aiofl_init((s), (y0))
 #define CTRL_STEP(s, r, y) aiofl_step((s), (r), (y))
 #endif
@@ -118,12 +119,12 @@ static void rk4(float *x, float u, float h)
 #endif
 
 /* r, r', ..., r^(rho) of REF_A sin(REF_W t) */
-static void reference(float t, sig_t *r)
+static void reference(float t, ctrl_signal *r)
 {
     float s = psin(REF_W * t), c = psin(REF_W * t + 1.57079637f), a = REF_A;
     int k;
     for (k = 0; k <= AIOFL_RHO; ++k) {
-        r[k] = (sig_t)((k % 4 == 0) ? a * s : (k % 4 == 1) ? a * c : (k % 4 == 2) ? -a * s : -a * c);
+        r[k] = (ctrl_signal)((k % 4 == 0) ? a * s : (k % 4 == 1) ? a * c : (k % 4 == 2) ? -a * s : -a * c);
         a *= REF_W;
     }
 }
@@ -170,14 +171,14 @@ static void put_k(const char *prefix, int k, float value)
 /* the timed loop's empty twin: the same call, arguments and accumulation */
 #if defined(AIOFL_START_BUMPLESS)
 __attribute__((noipa)) static aiofl_real trivial(aiofl_state *s, const aiofl_params *p,
-                                                 const sig_t *r, sig_t y)
+                                                 const ctrl_signal *r, ctrl_signal y)
 {
     __asm__ volatile("" ::"r"(s), "r"(p), "r"(r), "m"(y) : "memory");
     return (aiofl_real)0;
 }
 #define CTRL_TRIVIAL(s, r, y) trivial((s), &aiofl_default_params, (r), (y))
 #else
-__attribute__((noipa)) static aiofl_real trivial(aiofl_state *s, const sig_t *r, sig_t y)
+__attribute__((noipa)) static aiofl_real trivial(aiofl_state *s, const ctrl_signal *r, ctrl_signal y)
 {
     __asm__ volatile("" ::"r"(s), "r"(r), "m"(y) : "memory");
     return (aiofl_real)0;
@@ -187,7 +188,7 @@ __attribute__((noipa)) static aiofl_real trivial(aiofl_state *s, const sig_t *r,
 
 static void count(void)
 {
-    static sig_t rs[64][AIOFL_RHO + 1], ys[64];
+    static ctrl_signal rs[64][AIOFL_RHO + 1], ys[64];
     aiofl_state s;
     volatile aiofl_real sink;
     aiofl_real acc;
@@ -195,7 +196,7 @@ static void count(void)
     int j;
     for (j = 0; j < 64; ++j) {
         reference((float)j * TS, rs[j]);
-        ys[j] = (sig_t)(0.95f * (float)rs[j][0] + 1e-4f);
+        ys[j] = (ctrl_signal)(0.95f * (float)rs[j][0] + 1e-4f);
     }
     CTRL_INIT(&s, ys[0]);
     SYST_RVR = 0x00FFFFFFu;
@@ -218,7 +219,7 @@ static void count(void)
 int main(void)
 {
     aiofl_state s;
-    sig_t r[AIOFL_RHO + 1];
+    ctrl_signal r[AIOFL_RHO + 1];
     float x[4] = {0.0f, 0.0f, 0.0f, 0.0f}, itae = 0.0f, isu = 0.0f, y = 0.0f;
     const float h = TS / (float)N_SUB;
     int k, i;
@@ -231,8 +232,8 @@ int main(void)
         y = x[0] + x[1];
 #endif
         reference(t, r);
-        if (k == 0) CTRL_INIT(&s, (sig_t)y);
-        u = (float)CTRL_STEP(&s, r, (sig_t)y);
+        if (k == 0) CTRL_INIT(&s, (ctrl_signal)y);
+        u = (float)CTRL_STEP(&s, r, (ctrl_signal)y);
         e = (float)r[0] - y;
         itae += t * (e < 0.0f ? -e : e) * TS;
         isu += u * u * TS;
