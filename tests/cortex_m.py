@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 FIRMWARE = Path(__file__).resolve().parent / "firmware"
-OWN_SOURCES = ("loop.c", "startup.c")  # compiled by the harness, not part of an export
+OWN_SOURCES = ("loop.c", "startup.c", "mathf.c")  # compiled by the harness, not part of an export
 COMMON = ("-std=c99", "-ffp-contract=off", "-Wall", "-Wextra", "-Werror")
 SYSTICK_INSNS = 40  # instructions per SysTick tick: 1 ns each (-icount shift=0), 25 MHz clock
 STEP = "aiofl_step"  # the default prefix's step function
@@ -174,9 +174,11 @@ def link_firmware(
     out: Path,
     defines: dict[str, str] | None = None,
     name: str = "loop",
+    shared_math: bool = False,
 ) -> Path:
     """The closed-loop firmware (``loop.c``, ``startup.c`` and the controller's objects;
-    ``include``: the export's directory, for its header)."""
+    ``include``: the export's directory, for its header).  ``shared_math``: the libm
+    functions of ``mathf.c`` (as the host build's) instead of newlib's."""
     defs = [f"-D{k}={v}" for k, v in (defines or {}).items()]
     elf = out / f"{name}-{ctrl.target.board}.elf"
     cmd = [
@@ -194,6 +196,7 @@ def link_firmware(
         str(elf),
         str(FIRMWARE / "loop.c"),
         str(FIRMWARE / "startup.c"),
+        *([str(FIRMWARE / "mathf.c")] if shared_math else []),
         *map(str, ctrl.objects),
         "-lm",
     ]
@@ -201,13 +204,20 @@ def link_firmware(
     return elf
 
 
-def build_host(sources: list[Path], out: Path, defines: dict[str, str] | None = None) -> Path:
-    """The same closed loop for the host: ``cc -std=c99 -O2 -ffp-contract=off -DHOST``."""
-    exe = out / "loop-host"
+def build_host(
+    sources: list[Path],
+    out: Path,
+    defines: dict[str, str] | None = None,
+    shared_math: bool = False,
+) -> Path:
+    """The same closed loop for the host: ``cc -std=c99 -O2 -ffp-contract=off -DHOST``
+    (``shared_math``: with ``mathf.c``'s libm functions instead of glibc's)."""
+    exe = out / ("loop-host-shared-math" if shared_math else "loop-host")
     inc = sources[0].parent
     defs = [f"-D{k}={v}" for k, v in (defines or {}).items()]
     cmd = ["cc", *COMMON, "-O2", "-DHOST", *defs, f"-I{inc}", "-o", str(exe)]
-    _run([*cmd, str(FIRMWARE / "loop.c"), *map(str, sources), "-lm"])
+    own = [FIRMWARE / "loop.c", *([FIRMWARE / "mathf.c"] if shared_math else [])]
+    _run([*cmd, *map(str, own), *map(str, sources), "-lm"])
     return exe
 
 

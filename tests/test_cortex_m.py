@@ -9,7 +9,8 @@ soft-float double calls that costs are reported, and a build with
 ``-DAIOFL_SIGNAL_IS_FLOAT`` has none).  The closed loop of ``tests/firmware/loop.c`` (the
 controller and the SLFJM stepped by RK4 in float, 5 s at 1 ms) runs on qemu's MPS2 AN386
 (Cortex-M4 with FPU) and on its micro:bit (Cortex-M0, the M0+ build) with semihosting
-output, and gives the host float build's ITAE and commands bit for bit.  qemu counts
+output, and gives the host float build's ITAE and commands bit for bit (a design whose C
+calls libm, with one implementation of expf, logf... linked on both sides).  qemu counts
 instructions, not cycles: the step's count from SysTick under ``-icount shift=0`` equals the
 count from an instruction trace.  Helpers: ``tests/cortex_m.py``; figures:
 ``benchmarks/bench_mcu.py``.
@@ -87,6 +88,30 @@ def test_qemu_closed_loop_itae_equals_the_host_float_build(build):
         assert abs(got["itae"] - host["itae"]) <= 1e-6 * abs(host["itae"]), (target.name, got)
         for key in ("itae", "isu", "y_end", *u_keys):
             assert got[key] == host[key], (target.name, key, got[key], host[key])
+
+
+def test_a_design_calling_libm_equals_the_host_with_the_same_math(tmp_path):
+    """retuned-s1-leso's C calls expf, logf and sqrtf (fal): with newlib's on the target and
+    glibc's on the host the loops part by the libraries' last bits (reported); linked with
+    one implementation on both sides (tests/firmware/mathf.c) they are equal bit for bit."""
+    sources = export_float("retuned-s1-leso", TS, tmp_path / "export")
+    ctrl = compile_controller(sources, M4F, tmp_path / "m4f")
+    assert {"expf", "logf"} <= set(ctrl.undefined)
+    include = sources[0].parent
+    runs = {}
+    for shared in (False, True):
+        name = "shared" if shared else "own"
+        elf = link_firmware(ctrl, include, tmp_path, name=name, shared_math=shared)
+        host = run_host(build_host(sources, tmp_path, shared_math=shared))
+        runs[shared] = (host, run_qemu(elf, M4F.board))
+    host, target = runs[False]
+    print(
+        "retuned-s1-leso, newlib on the M4F vs glibc on the host: ITAE relative difference "
+        f"{abs(target['itae'] - host['itae']) / host['itae']:.2e}"
+    )
+    host, target = runs[True]
+    assert 0.0 < host["itae"] < 1.0
+    assert all(target[k] == v for k, v in host.items()), (host, target)
 
 
 def _report(ctrl) -> str:
