@@ -13,6 +13,10 @@ Cortex-M0+ (``-mcpu=cortex-m0plus -mthumb -Os``), and prints
   counted),
 * run-time calls the object makes (``arm-none-eabi-nm -u``): libm functions, and on the M0+
   libgcc's soft-float routines; any double-precision call (``__aeabi_d*``) is named,
+* ITAE qemu/host: the 5-s closed loop of ``tests/firmware/loop.c`` on qemu's M4F against the
+  same program built for the host (``=``: bit for bit; else the relative difference), with
+  one implementation of the libm functions on both sides (``tests/firmware/mathf.c``) and
+  with each side's own (newlib, glibc: they need not round alike),
 * instructions per step: the first ``--steps`` samples of the closed loop of
   ``tests/firmware/loop.c`` (the controller and the SLFJM in float), recorded on the host and
   replayed on qemu (M4F: ``mps2-an386``; M0+ build: ``microbit``, a Cortex-M0) with an
@@ -40,10 +44,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from cortex_m import (  # type: ignore[import-not-found]
     M0P,
     M4F,
+    build_host,
     compile_controller,
     export_float,
     link_firmware,
     missing_tools,
+    run_host,
+    run_qemu,
     signal_is_double,
     traced_instructions,
     write_replay,
@@ -101,6 +108,21 @@ def _count(ctrl, include: Path, out: Path, steps: int, extra: dict[str, str]) ->
     return f"{mean:.0f}" if lo == hi else f"{mean:.0f} [{lo}-{hi}]"
 
 
+def _itae_match(sources: list[Path], d: Path, extra: dict[str, str]) -> list[str]:
+    """ITAE of loop.c's 5-s closed loop on qemu's M4F against the host float build's: with
+    one libm on both sides (tests/firmware/mathf.c), and with each side's own (newlib,
+    glibc); "=" when bit for bit equal, else the relative difference."""
+    ctrl = compile_controller(sources, M4F, d / "itae", extra)
+    out = []
+    for shared in (True, False):
+        name = "shared" if shared else "own"
+        elf = link_firmware(ctrl, sources[0].parent, d / "itae", extra, name, shared)
+        host = run_host(build_host(sources, d / "itae", extra, shared))["itae"]
+        got = run_qemu(elf, M4F.board)["itae"]
+        out.append("=" if got == host else f"{abs(got - host) / abs(host):.1e}")
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--designs", nargs="*", default=list(DESIGNS))
@@ -130,14 +152,14 @@ def main() -> None:
             except RuntimeError as exc:
                 refused.append(f"  {design}: {str(exc).splitlines()[-1]}")
                 continue
-            row = [design]
+            extra = {"AIOFL_SIGNAL_IS_FLOAT": "1"} if args.float_signal else {}
+            row = [design, *_itae_match(sources, d, extra)]
             if not args.no_count:
                 k = write_replay(sources, d, args.steps)
                 if k is not None:
                     notes.append(
                         f"  {design}: loop.c's closed loop diverged (y not finite from k = {k})"
                     )
-            extra = {"AIOFL_SIGNAL_IS_FLOAT": "1"} if args.float_signal else {}
             if extra and not signal_is_double(sources):
                 notes.append(f"  {design}: --float-signal: the export's signals are float")
             for target in (M4F, M0P):
@@ -149,7 +171,8 @@ def main() -> None:
                     row.append(_count(ctrl, include, d / target.board, args.steps, extra))
             rows.append(row)
     per_target = ["text B", "stack B", "calls", *([] if args.no_count else ["insns/step"])]
-    header = ["design"] + [f"{t} {h}" for t in ("M4F", "M0+") for h in per_target]
+    header = ["design", "ITAE qemu/host", "(own libm)"]
+    header += [f"{t} {h}" for t in ("M4F", "M0+") for h in per_target]
     _table(
         f"float export at Ts = {args.ts:g} s"
         + (", float signals" if args.float_signal else "")
