@@ -60,11 +60,17 @@ TOOLS = ("arm-none-eabi-gcc", "arm-none-eabi-size", "arm-none-eabi-nm", "arm-non
 def missing_tools() -> str | None:
     """Why the Cortex-M tests cannot run here (a tool not on PATH), or None."""
     missing = [t for t in (*TOOLS, "qemu-system-arm", "cc") if shutil.which(t) is None]
+    install = (
+        "(Debian: apt-get install gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm; "
+        ".ci/run installs them)"
+    )
     if missing:
-        return (
-            f"not on PATH: {', '.join(missing)} (Debian: apt-get install gcc-arm-none-eabi "
-            "libnewlib-arm-none-eabi qemu-system-arm; .ci/run installs them)"
-        )
+        return f"not on PATH: {', '.join(missing)} {install}"
+    libc = subprocess.run(
+        ["arm-none-eabi-gcc", "-print-file-name=libc.a"], capture_output=True, text=True
+    ).stdout.strip()
+    if not os.path.isabs(libc):  # gcc echoes the bare name when it has no such file
+        return f"arm-none-eabi-gcc has no C library (newlib) {install}"
     return None
 
 
