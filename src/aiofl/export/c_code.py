@@ -165,9 +165,7 @@ def _params_values(
         out += [("td_r", c.value("td.R")), ("td_h0", row[DS.D_H0] if s.td == "fhan" else 0.0)]
     elif c.td == "improved":
         bc, gain = improved_td_constants(c.value("td.a"), c.value("td.b"), c.value("td.c"))
-        rest = gain / bc if bc != 0.0 else 1.0
         out += [("itd_rho", c.value("td.rho")), ("itd_b_over_c", bc), ("itd_gain", gain)]
-        out.append(("itd_rest", rest))
     elif c.td == "linear":
         w = c.value("td.omega")
         pf = DS.D_PF_PHI

@@ -124,11 +124,8 @@ void aiofl_start(aiofl_state *s, const aiofl_params *p, aiofl_signal y0, int mod
     s->y_prev = mode == AIOFL_START_ZERO ? 0 : y0; /* the ESO at (y0, 0, ..., 0) or 0 */
 #if AIOFL_TD != AIOFL_TD_EXACT
     for (i = 0; i < AIOFL_NTD; ++i) s->td[i] = AIOFL_K(0.0);
-    /* the differentiator at rest at y0 (bumpless) or at 0: r_1 = r_prev */
+    /* the differentiator at rest at y0 (bumpless) or at 0: r_1 = r_prev, r_2.. = 0 */
     s->r_prev = mode == AIOFL_START_BUMPLESS ? y0 : 0;
-#if AIOFL_TD == AIOFL_TD_IMPROVED /* the ITD rests at r_1 = gain/(b/c) r */
-    s->td[0] = (aiofl_real)(s->r_prev * (aiofl_signal)(p->itd_rest - AIOFL_K(1.0)));
-#endif
 #endif
 #if AIOFL_DELAY
     s->u_prev = AIOFL_K(0.0);

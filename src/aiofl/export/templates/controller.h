@@ -50,7 +50,6 @@ typedef struct {
     aiofl_real itd_rho;      /* td.rho */
     aiofl_real itd_b_over_c; /* b/c */
     aiofl_real itd_gain;     /* (1 - a)/c */
-    aiofl_real itd_rest;     /* r_1 at rest for r = 1: gain/(b/c) */
 #elif AIOFL_TD == AIOFL_TD_LINEAR
     aiofl_real pf_c[AIOFL_RHO];                /* coefficients of (s + omega)^rho */
     aiofl_real pf_dphi[AIOFL_RHO][AIOFL_RHO];  /* prefilter ZOH, PHI - I */

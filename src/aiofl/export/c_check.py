@@ -1,8 +1,10 @@
-"""Test helpers for the exported C: build it, load it with ctypes, drive it in closed loop.
+r"""The exported C run on the host: build it, load it with ctypes, drive it in closed loop.
 
-The plant runs in a compiled RK4 (:func:`advancer`, the plant's own numba functions), so a
-20-s loop at Ts = 1 ms takes a fraction of a second; the controller under test is any
-``step(r, y) -> u`` callable: the C (:class:`CController`) or the engine's
+Used by ``aiofl export --precision float`` to check that single precision holds for the
+design (:func:`float_holds`) and by the tests.  The plant runs in a compiled RK4
+(:func:`advancer`, the plant's own numba functions, :math:`\dot x = f + g u + b_d d`), so a
+20-s loop at Ts = 1 ms takes about a second; the controller is any ``step(r, y) -> u``
+callable: the C (:class:`CController`) or the engine's
 :class:`aiofl.engine.sampled.DiscreteController`.
 """
 
@@ -21,7 +23,7 @@ import numpy as np
 from aiofl import layout as L
 from aiofl.scenario import Reference
 
-CC = shutil.which("cc")
+CC = shutil.which("cc") or shutil.which("gcc")
 WARN = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 STRICT_FLOAT = ["-Wconversion", "-Wdouble-promotion"]
 START = {"bumpless": 0, "zero": 1, "output": 2}
@@ -38,7 +40,8 @@ def build(
     lib = folder / name
     cmd = [str(CC), *WARN, *extra, "-O2", "-shared", "-fPIC", "-o", str(lib), *sources, "-lm"]
     proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
-    assert proc.returncode == 0, proc.stderr
+    if proc.returncode != 0:
+        raise RuntimeError(f"the exported C did not compile: {proc.stderr[:2000]}")
     return lib
 
 
@@ -168,3 +171,52 @@ def itae_isu(t: np.ndarray, y: np.ndarray, u: np.ndarray, ref: Reference, ts: fl
     """ITAE = sum t|r - y| Ts and ISU = sum u^2 Ts over the samples."""
     e = ref.evaluate(t) - y
     return float(np.sum(t * np.abs(e)) * ts), float(np.sum(u * u) * ts)
+
+
+FLOAT_ITAE_TOL = 0.05
+FLOAT_ISU_TOL = 0.02
+
+
+def float_holds(cfg: Any, sampling: Any, files: dict[str, dict[str, str]]) -> str | None:
+    r"""Why the float build of ``cfg``'s controller does not hold, or None if it does.
+
+    Runs the config's scenario (plant with its scale and load step, sine or step reference)
+    in closed loop at ``sampling.ts`` with the double and the float C of ``files``
+    (``{"double": files, "float": files}``, prefix ``aiofl``), both fed the same exact
+    measurement, and compares :math:`\mathrm{ITAE} = \sum t_k|r_k - y_k|T_s` (within
+    :data:`FLOAT_ITAE_TOL`) and :math:`\mathrm{ISU} = \sum u_k^2 T_s` (within
+    :data:`FLOAT_ISU_TOL`).  Raises RuntimeError without a C compiler.
+    """
+    import tempfile
+
+    if CC is None:
+        raise RuntimeError("no C compiler (cc or gcc) on PATH")
+    c, sc = cfg.controller, cfg.scenario
+    out = {}
+    with tempfile.TemporaryDirectory(prefix="aiofl-float-check-") as tmp:
+        for prec, fs in files.items():
+            cc = CController(build(Path(tmp) / prec, fs), prec)
+            started: list[bool] = []
+
+            def step(r: list[float], y: float, cc: CController = cc, st: list[bool] = started) -> float:
+                if not st:
+                    cc.start(y, c.eso_init)
+                    st.append(True)
+                return cc.step(r, y)
+
+            t, y, u = loop(
+                step, cfg.plant, sc.reference, c.rho, sampling.ts, sc.t_final, x0=sc.x0,
+                scale=dict(sc.plant_scale), delay=sampling.delay,
+                disturbance=(sc.disturbance_amplitude, sc.disturbance_time),
+            )
+            if len(t) < round(sc.t_final / sampling.ts):
+                return f"the {prec} build diverges at {t[-1]:.3g} s"
+            out[prec] = itae_isu(t, y, u, sc.reference, sampling.ts)
+    (i_d, s_d), (i_f, s_f) = out["double"], out["float"]
+    di, ds = abs(i_f / i_d - 1.0), abs(s_f / s_d - 1.0)
+    if di <= FLOAT_ITAE_TOL and ds <= FLOAT_ISU_TOL:
+        return None
+    return (
+        f"in float its ITAE differs from double by {100 * di:.3g} % and its ISU by "
+        f"{100 * ds:.3g} % (allowed {100 * FLOAT_ITAE_TOL:g} %, {100 * FLOAT_ISU_TOL:g} %)"
+    )
