@@ -101,9 +101,10 @@ def export_command(
         sampling = _sampling(cfg, ts)
         opts: dict[str, Any] = {"precision": precision, "prefix": prefix}
         if params_only:
-            name = params_name or re.sub(r"[^A-Za-z0-9]+", "_", cfg.name).strip("_").lower()
-            if not re.match(r"[a-z]", name):
-                name = "params_" + name
+            name = params_name
+            if name is None:  # the config's name as an identifier
+                name = re.sub(r"[^A-Za-z0-9]+", "_", cfg.name).strip("_").lower()
+                name = name if re.match(r"[a-z]", name) else "params_" + name
             try:
                 opts["params_only"] = c_prefix(name)
             except ValueError:
