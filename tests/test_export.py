@@ -21,8 +21,8 @@ from aiofl.config import load_config
 from aiofl.controller import Controller
 from aiofl.engine.discrete import Sampling
 from aiofl.engine.sampled import DiscreteController
-from aiofl.export.c_check import CC, STRICT_FLOAT, WARN, CController, build, loop
 from aiofl.export import HEADER, PARAMS, SOURCE, ExportError, export_c
+from aiofl.export.c_check import CC, STRICT_FLOAT, WARN, CController, build, loop
 from aiofl.plants import get_plant
 from aiofl.plants.base import Plant
 from aiofl.scenario import Reference
@@ -181,7 +181,9 @@ def test_shipped_designs_export_and_agree(tmp_path, preset, ts, t_final):
         return cc.step(r, y)
 
     x0 = (cfg.scenario.reference.offset,) if cfg.plant.name == "tank" else ()
-    _, _, u_c = loop(step, cfg.plant, cfg.scenario.reference, cfg.controller.rho, ts, t_final, x0=x0)
+    _, _, u_c = loop(
+        step, cfg.plant, cfg.scenario.reference, cfg.controller.rho, ts, t_final, x0=x0
+    )
     assert np.max(np.abs(u_c - np.array(u_e))) < 1e-9 * np.max(np.abs(u_e))
 
 
@@ -272,7 +274,9 @@ def test_two_prefixed_exports_link_into_one_program(tmp_path, precision):
     for src in (s for s in srcs if not s.endswith("main.c")):
         obj = tmp_path / (Path(src).stem + ".o")
         subprocess.run([str(CC), *WARN, *extra, "-c", "-o", str(obj), src], check=True)
-        nm = subprocess.run(["nm", "-g", "--defined-only", str(obj)], capture_output=True, text=True)
+        nm = subprocess.run(
+            ["nm", "-g", "--defined-only", str(obj)], capture_output=True, text=True
+        )
         names = [ln.split()[-1] for ln in nm.stdout.splitlines() if ln.strip()]
         assert names and all(n.startswith(Path(src).stem[0] + "_") for n in names), names
     for prefix, ctrl in (("a", ca), ("b", cb)):  # the first command equals the engine's

@@ -41,7 +41,15 @@ def _run(args: list[str]):
 )
 def test_bad_options_exit_2_naming_the_option(tmp_path, args, needle):
     out = tmp_path / "x"
-    res = _run(["retuned-s1-leso", *(["--ts", "1e-3"] if args[:1] == ["--prefix"] else []), *args, "--out", str(out)])
+    res = _run(
+        [
+            "retuned-s1-leso",
+            *(["--ts", "1e-3"] if args[:1] == ["--prefix"] else []),
+            *args,
+            "--out",
+            str(out),
+        ]
+    )
     assert res.exit_code == 2, res.output
     assert needle in res.output
     assert not out.exists() and list(tmp_path.iterdir()) == []
@@ -105,7 +113,18 @@ def test_float_export_checks_that_float_holds(tmp_path, monkeypatch):
 
 def test_params_only_and_prefix_through_the_cli(tmp_path):
     out = tmp_path / "p"
-    res = _run(["retuned-s1-ladrc", "--ts", "1e-3", "--prefix", "joint2", "--params-only", "--out", str(out)])
+    res = _run(
+        [
+            "retuned-s1-ladrc",
+            "--ts",
+            "1e-3",
+            "--prefix",
+            "joint2",
+            "--params-only",
+            "--out",
+            str(out),
+        ]
+    )
     assert res.exit_code == 0, res.output
     names = sorted(p.name for p in out.iterdir() if not p.name.startswith("."))
     assert names == ["joint2_retuned_s1_ladrc.c", "joint2_retuned_s1_ladrc.h"]

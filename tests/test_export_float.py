@@ -19,7 +19,15 @@ from aiofl.config import load_config
 from aiofl.engine.discrete import Sampling
 from aiofl.engine.sampled import DiscreteController
 from aiofl.export import export_c
-from aiofl.export.c_check import CC, FLOAT_ISU_TOL, FLOAT_ITAE_TOL, CController, build, itae_isu, loop
+from aiofl.export.c_check import (
+    CC,
+    FLOAT_ISU_TOL,
+    FLOAT_ITAE_TOL,
+    CController,
+    build,
+    itae_isu,
+    loop,
+)
 
 PRESETS = Path(__file__).resolve().parents[1] / "src" / "aiofl" / "presets"
 SHIPPED = sorted(
@@ -46,14 +54,20 @@ def _run(name: str, tmp: Path) -> dict[str, tuple[float, float] | None]:
         "n_sub": 5,
     }
     eng = DiscreteController(c, samp, plant=model, x0=sc.x0)
-    files = export_c(c, samp, precision="float", plant=cfg.plant, x0=sc.x0,
-                     plant_source=str(cfg.raw.get("plant", cfg.plant.name)))
+    files = export_c(
+        c,
+        samp,
+        precision="float",
+        plant=cfg.plant,
+        x0=sc.x0,
+        plant_source=str(cfg.raw.get("plant", cfg.plant.name)),
+    )
     cc = CController(build(tmp / name, files), "float")
     out: dict[str, tuple[float, float] | None] = {}
     for key, ctl in (("engine", eng), ("float", cc)):
         started: list[bool] = []
 
-        def step(r: list[float], y: float, ctl=ctl, started=started) -> float:
+        def step(r: list[float], y: float, ctl=ctl, started=started, key=key) -> float:
             if not started:
                 ctl.start(y, c.eso_init) if key == "float" else ctl.init(y)
                 started.append(True)

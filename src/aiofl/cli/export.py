@@ -94,7 +94,7 @@ def export_command(
         if precision not in PRECISIONS:
             raise ValueError(f"--precision = {precision!r}; allowed: {', '.join(PRECISIONS)}")
         c_prefix(prefix)
-        if not 0 < tolerance:
+        if not tolerance > 0:
             raise ValueError(f"--tolerance = {tolerance}; allowed: > 0")
         _check_out(out)
         cfg = load_config(config)
@@ -152,7 +152,6 @@ def _sampling(cfg: Any, ts: float | None) -> Any:
 def _loop_checks(cfg: Any, sampling: Any, config: str, tolerance: float) -> list[str]:
     """Refuse (ValueError) a design that diverges in its own simulation; the warnings on the
     design sampled at the exported Ts."""
-    from dataclasses import replace
 
     from aiofl.engine.simulation import simulate_batch
     from aiofl.plants.base import PlantError
@@ -160,8 +159,13 @@ def _loop_checks(cfg: Any, sampling: Any, config: str, tolerance: float) -> list
     try:
         own = cfg.simulate(store=False)
         res = simulate_batch(
-            cfg.plant, [cfg.controller] * 2, cfg.scenario, dt=cfg.dt, method=cfg.method,
-            divergence_threshold=cfg.divergence_threshold, sampling=[None, sampling],
+            cfg.plant,
+            [cfg.controller] * 2,
+            cfg.scenario,
+            dt=cfg.dt,
+            method=cfg.method,
+            divergence_threshold=cfg.divergence_threshold,
+            sampling=[None, sampling],
         )
     except (PlantError, ValueError) as exc:
         return [f"{config}: could not simulate the design before export ({exc})"]
