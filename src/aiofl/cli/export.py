@@ -35,25 +35,30 @@ from aiofl.cli.errors import _check_out, bad_input_exits
 __all__ = ["FORMATS", "export_command"]
 
 
-def _c_files(cfg: Any, sampling: Any, config: str, opts: dict[str, Any]) -> dict[str, str]:
+def _c_files(cfg: Any, sampling: Any, config: str, opts: dict[str, Any]) -> dict[str, str | bytes]:
     from aiofl.export import export_c
 
-    return export_c(
-        cfg.controller,
-        sampling,
-        precision=opts.get("precision", "double"),
-        prefix=opts.get("prefix", "aiofl"),
-        title=cfg.name,
-        notes=[f"Config: {config}", *([cfg.description] if cfg.description else [])],
-        plant=cfg.plant,  # a model-assisted controller's nominal model
-        plant_source=str(cfg.raw.get("plant", cfg.plant.name)),
-        x0=cfg.scenario.x0,
-        params_only=opts.get("params_only"),
+    return dict(
+        export_c(
+            cfg.controller,
+            sampling,
+            precision=opts.get("precision", "double"),
+            prefix=opts.get("prefix", "aiofl"),
+            title=cfg.name,
+            notes=[f"Config: {config}", *([cfg.description] if cfg.description else [])],
+            plant=cfg.plant,  # a model-assisted controller's nominal model
+            plant_source=str(cfg.raw.get("plant", cfg.plant.name)),
+            x0=cfg.scenario.x0,
+            params_only=opts.get("params_only"),
+        )
     )
 
 
-FORMATS: dict[str, Callable[[Any, Any, str, dict[str, Any]], dict[str, str]]] = {"c": _c_files}
-"""``--format`` -> the function writing its files ``(cfg, sampling, config, options)``."""
+FORMATS: dict[str, Callable[[Any, Any, str, dict[str, Any]], dict[str, str | bytes]]] = {
+    "c": _c_files
+}
+"""``--format`` -> the function giving its files ``(cfg, sampling, config, options) ->
+{name: text or bytes}`` (options: precision, prefix, params_only)."""
 
 
 def export_command(
@@ -86,7 +91,7 @@ def export_command(
     from aiofl.config import load_config
     from aiofl.export import PRECISIONS, ExportError
     from aiofl.export.c_text import c_prefix
-    from aiofl.outputs import atomic_output_dir, atomic_write_text
+    from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 
     with bad_input_exits():
         if fmt not in FORMATS:
@@ -120,8 +125,11 @@ def export_command(
     if precision == "float" and not params_only:
         warnings += _float_check(cfg, sampling, config)
     with bad_input_exits(run=True), atomic_output_dir(out) as stage:
-        for name, text in files.items():
-            atomic_write_text(stage / name, text)
+        for name, data in files.items():
+            if isinstance(data, bytes):
+                atomic_write_bytes(stage / name, data)
+            else:
+                atomic_write_text(stage / name, data)
     typer.echo(f"wrote {out}/{', '.join(files)} (Ts = {sampling.ts:g} s, {precision})")
     for w in warnings:
         typer.echo(f"aiofl: warning: {w}", err=True)
