@@ -38,6 +38,8 @@ def _run(args: list[str]):
         (["--ts", "1e-3", "--precision", "half"], "--precision"),
         ([], "no sample time"),
         (["--ts", "1e-3", "--params-only", "--params-name", "2x"], "--params-name"),
+        (["--ts", "1e-3", "--params-only", "--params-name", "default_params"], "--params-name"),
+        (["--ts", "1e-3", "--params-only", "--params-name", "controller"], "--params-name"),
     ],
 )
 def test_bad_options_exit_2_naming_the_option(tmp_path, args, needle):

@@ -69,6 +69,11 @@ SOURCE = "aiofl_controller.c"
 PARAMS = "aiofl_params.c"
 MODEL = "aiofl_model.h"
 PRECISIONS = ("double", "float")
+# names a parameter instance may not take: NAME_<it> would clash with the controller's
+_API_NAMES = frozenset(
+    "controller params model default_params state real signal init start reset step "  # noqa: SIM905
+    "nominal_model sign abspow inleso fal inlsef_term fhan".split()
+)
 _TD = {"exact": 0, "han": 1, "improved": 2, "linear": 3}
 _SEF = {"linear": 0, "nonlinear": 1, "improved": 2}
 
@@ -380,6 +385,11 @@ def export_c(
             c_prefix(params_only)
     except ValueError as exc:
         raise ExportError(str(exc)) from None
+    if params_only is not None and params_only.lower() in _API_NAMES:
+        raise ExportError(
+            f"--params-name = {params_only!r} is a name of the controller's own files or API; "
+            f"allowed: any other identifier (not {', '.join(sorted(_API_NAMES))})"
+        )
     d = _Design(
         controller,
         sampling,
