@@ -92,6 +92,7 @@ def export_command(
     """Export the config's controller, sampled at Ts, as C99 (NAME_controller.h/.c in OUT)."""
     from aiofl.config import load_config
     from aiofl.export import PRECISIONS, ExportError
+    from aiofl.export.c_code import MAX_INSTANCE
     from aiofl.export.c_text import c_prefix
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 
@@ -111,14 +112,9 @@ def export_command(
             name = params_name
             if name is None:  # the config's name as an identifier
                 name = re.sub(r"[^A-Za-z0-9]+", "_", cfg.name).strip("_").lower()
-                name = name if re.match(r"[a-z]", name) else "params_" + name
-            try:
-                opts["params_only"] = c_prefix(name)
-            except ValueError:
-                raise ValueError(
-                    f"--params-name = {name!r} is not a C identifier; allowed: a letter, then "
-                    "letters, digits and single _"
-                ) from None
+                name = name if re.match(r"[a-z]", name) else "design_" + name
+                name = name[:MAX_INSTANCE].rstrip("_")
+            opts["params_only"] = name  # checked by export_c
         try:
             files = FORMATS[fmt](cfg, sampling, config, opts)
         except ExportError as exc:
