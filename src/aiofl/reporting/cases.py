@@ -564,9 +564,13 @@ def compute(
     t2 = time.perf_counter()
     trivial = {s: trivial_itae(next(c for c in cases if c.scenario == s).config) for s in SCENARIOS}
     stage("closed-loop analysis")
-    verdicts = {
-        r.case.preset: closed_loop_verdict(r.case.config, orbit=not r.result.diverged) for r in runs
-    }
+    verdicts = {r.case.preset: closed_loop_verdict(r.case.config, orbit=False) for r in runs}
+    # the orbit verdicts (Python-level variational integration) on every core
+    from aiofl.reporting.orbit_pool import orbit_verdicts
+
+    need = {r.case.preset: verdicts[r.case.preset] for r in runs if not r.result.diverged}
+    for name, orbit in orbit_verdicts(need, ts).items():
+        verdicts[name]["orbit"] = orbit
     t3 = time.perf_counter()
     stage("sampling limits (largest Ts per design, batched)")
     from aiofl.reporting.sampling_note import case_limits
