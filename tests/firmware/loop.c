@@ -26,16 +26,10 @@
 #include "replay.h"
 #endif
 
-/* --- adapter: the export's API (the params API of issue 23, or the first export's) ----- */
-#if defined(AIOFL_START_BUMPLESS) /* NAME_init/step with a const NAME_params * */
+/* the export's API (README, "Sampled controllers and C export"), default prefix and parameters */
 typedef aiofl_signal ctrl_signal;
 #define CTRL_INIT(s, y0) aiofl_init((s), &aiofl_default_params, (y0))
 #define CTRL_STEP(s, r, y) aiofl_step((s), &aiofl_default_params, (r), (y))
-#else /* aiofl_init(&s, y0), aiofl_step(&s, r, y) */
-typedef aiofl_real ctrl_signal;
-#define CTRL_INIT(s, y0) aiofl_init((s), (y0))
-#define CTRL_STEP(s, r, y) aiofl_step((s), (r), (y))
-#endif
 
 #ifdef HOST
 #include <stdio.h>
@@ -169,22 +163,12 @@ static void put_k(const char *prefix, int k, float value)
 #define SYST_CVR (*(volatile uint32_t *)0xE000E018u)
 
 /* the timed loop's empty twin: the same call, arguments and accumulation */
-#if defined(AIOFL_START_BUMPLESS)
 __attribute__((noipa)) static aiofl_real trivial(aiofl_state *s, const aiofl_params *p,
                                                  const ctrl_signal *r, ctrl_signal y)
 {
     __asm__ volatile("" ::"r"(s), "r"(p), "r"(r), "m"(y) : "memory");
     return (aiofl_real)0;
 }
-#define CTRL_TRIVIAL(s, r, y) trivial((s), &aiofl_default_params, (r), (y))
-#else
-__attribute__((noipa)) static aiofl_real trivial(aiofl_state *s, const ctrl_signal *r, ctrl_signal y)
-{
-    __asm__ volatile("" ::"r"(s), "r"(r), "m"(y) : "memory");
-    return (aiofl_real)0;
-}
-#define CTRL_TRIVIAL(s, r, y) trivial((s), (r), (y))
-#endif
 
 static void count(void)
 {
@@ -206,7 +190,7 @@ static void count(void)
     t0 = SYST_CVR;
     for (j = 0; j < N_COUNT; ++j) acc += CTRL_STEP(&s, rs[j & 63], ys[j & 63]);
     t1 = SYST_CVR;
-    for (j = 0; j < N_COUNT; ++j) acc += CTRL_TRIVIAL(&s, rs[j & 63], ys[j & 63]);
+    for (j = 0; j < N_COUNT; ++j) acc += trivial(&s, &aiofl_default_params, rs[j & 63], ys[j & 63]);
     t2 = SYST_CVR;
     sink = acc;
     (void)sink;
