@@ -7,8 +7,9 @@ choose) it runs ``aiofl export DESIGN --ts TS --precision float``, compiles the 
 a Cortex-M4F (``-mcpu=cortex-m4 -mthumb -mfpu=fpv4-sp-d16 -mfloat-abi=hard -Os``) and a
 Cortex-M0+ (``-mcpu=cortex-m0plus -mthumb -Os``), and prints
 
-* code size: ``text`` of the controller's object(s) (arm-none-eabi-size: code and constant
-  tables; data and bss are 0 for every design),
+* code size: ``text`` of the controller's object (arm-none-eabi-size: code and constant
+  tables) + that of the default parameter instance (``aiofl_params.c``, read-only data);
+  data and bss are 0 for every design,
 * stack: bytes per call of the step function (``-fstack-usage``; library callees not
   counted),
 * run-time calls the object makes (``arm-none-eabi-nm -u``): libm functions, and on the M0+
@@ -165,12 +166,16 @@ def main() -> None:
             for target in (M4F, M0P):
                 ctrl = compile_controller(sources, target, d / target.board, extra)
                 step = next(v[0] for k, v in ctrl.stack.items() if k.endswith("_step"))
-                row += [str(ctrl.text), str(step), _calls(ctrl)]
+                row += [
+                    f"{ctrl.text - ctrl.params_text}+{ctrl.params_text}",
+                    str(step),
+                    _calls(ctrl),
+                ]
                 if not args.no_count:
                     include = sources[0].parent
                     row.append(_count(ctrl, include, d / target.board, args.steps, extra))
             rows.append(row)
-    per_target = ["text B", "stack B", "calls", *([] if args.no_count else ["insns/step"])]
+    per_target = ["code+params B", "stack B", "calls", *([] if args.no_count else ["insns/step"])]
     header = ["design", "ITAE qemu/host", "(own libm)"]
     header += [f"{t} {h}" for t in ("M4F", "M0+") for h in per_target]
     _table(

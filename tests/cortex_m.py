@@ -115,12 +115,13 @@ class ControllerBuild:
 
     target: Target
     objects: list[Path]
-    text: int  # bytes of code and read-only data (arm-none-eabi-size: text)
+    text: int  # bytes of code and read-only data (arm-none-eabi-size: text), all objects
     data: int
     bss: int
     stack: dict[str, tuple[int, str]] = field(default_factory=dict)  # function: (bytes, kind)
     undefined: list[str] = field(default_factory=list)  # symbols the objects call
     call_sites: dict[str, int] = field(default_factory=dict)  # calls of each in the code
+    params_text: int = 0  # of ``text``: the parameter instance's object (``*_params.c``)
 
     def double_calls(self) -> list[str]:
         """The double-precision run-time calls (``__aeabi_d*``, ``__aeabi_*2d``)."""
@@ -165,13 +166,14 @@ def compile_controller(
             stack[where.rsplit(":", 1)[-1]] = (int(size), kind)
     sizes = _run(["arm-none-eabi-size", *map(str, objs)]).stdout.splitlines()[1:]
     text, data, bss = (sum(int(row.split()[i]) for row in sizes) for i in range(3))
+    params = sum(int(row.split()[0]) for row in sizes if row.split()[-1].endswith("_params.o"))
     nm = _run(["arm-none-eabi-nm", "-u", *map(str, objs)]).stdout
     undefined = sorted({ln.split()[-1] for ln in nm.splitlines() if ln.strip().startswith("U")})
     relocs = _run(["arm-none-eabi-objdump", "-dr", *map(str, objs)]).stdout
     sites = {
         name: len(re.findall(rf"R_ARM_\w+\s+{name}$", relocs, flags=re.M)) for name in undefined
     }
-    return ControllerBuild(target, objs, text, data, bss, stack, undefined, sites)
+    return ControllerBuild(target, objs, text, data, bss, stack, undefined, sites, params)
 
 
 def link_firmware(

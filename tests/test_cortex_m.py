@@ -117,7 +117,8 @@ def test_a_design_calling_libm_equals_the_host_with_the_same_math(tmp_path):
 def _report(ctrl) -> str:
     calls = {n: ctrl.call_sites.get(n, 0) for n in ctrl.undefined}
     return (
-        f"{PRESET} float, {ctrl.target.name}: text {ctrl.text} B, data {ctrl.data} B, "
+        f"{PRESET} float, {ctrl.target.name}: text {ctrl.text} B (parameter instance "
+        f"{ctrl.params_text} B), data {ctrl.data} B, "
         f"bss {ctrl.bss} B; stack {ctrl.stack}; calls (call sites) {calls}"
     )
 
