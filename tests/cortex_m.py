@@ -237,12 +237,15 @@ def _c_float(y: float) -> str:
     return f"{y.hex()}f"
 
 
-def write_replay(sources: list[Path], out: Path, steps: int) -> int | None:
+def write_replay(
+    sources: list[Path], out: Path, steps: int, defines: dict[str, str] | None = None
+) -> int | None:
     """Record y(t_k), k < ``steps``, of the host's closed loop (-DRECORD; the same bits as
     on the targets, tests/test_cortex_m.py) as ``replay.h`` in the export's directory, for a
     -DREPLAY firmware: the controller's calls of the closed loop without the plant.  The
     first sample whose y is not finite (the float loop diverged), or None."""
-    values = run_host(build_host(sources, out, {"RECORD": "1", "N_STEPS": str(steps)}))
+    record = {**(defines or {}), "RECORD": "1", "N_STEPS": str(steps)}
+    values = run_host(build_host(sources, out, record))
     ys = [values[f"y_{k}"] for k in range(steps)]
     body = ",\n".join(f"    {_c_float(y)}" for y in ys)
     text = (
