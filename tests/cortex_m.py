@@ -129,7 +129,12 @@ class ControllerBuild:
 
     def float_calls(self) -> list[str]:
         """The soft-float single-precision calls (``__aeabi_f*``, ``__aeabi_*2f``)."""
-        return [s for s in self.undefined if re.match(r"__aeabi_(f\w+|u?[il]2f)$", s)]
+        double = self.double_calls()  # __aeabi_f2d is one of those
+        return [
+            s
+            for s in self.undefined
+            if re.match(r"__aeabi_(f\w+|u?[il]2f)$", s) and s not in double
+        ]
 
 
 def signal_is_double(sources: list[Path]) -> bool:
