@@ -1,0 +1,637 @@
+r"""An FMI 2.0 co-simulation FMU of a sampled AIOFL controller (``aiofl export --format fmu``).
+
+:func:`export_fmu` packs the C export (:func:`aiofl.export.export_c`, the engine's discrete
+controller) into ``<modelIdentifier>.fmu``:
+
+- ``modelDescription.xml``, written with :mod:`xml.etree.ElementTree` (user text, the
+  config's name and description, is escaped by the XML library, never formatted into it);
+- ``sources/``: the controller's C files, the hand-written co-simulation wrapper
+  ``fmi2_wrapper.c`` (shipped in ``aiofl/export/templates``), the FMI 2.0 standard headers
+  (2-clause BSD, from FMPy) and ``fmu_adapter.h``, generated here: it maps the controller's
+  API and its tunable parameters onto the names the wrapper uses;
+- ``binaries/linux64/<modelIdentifier>.so``, built at export with the system C compiler
+  (``$CC``, default ``cc``); no compiler: :class:`ExportError`.
+
+Variables: inputs ``y`` and ``r`` (and ``r_1`` .. ``r_rho``, the reference's derivatives,
+when the controller takes them: ``td = "exact"``); output ``u``; the calculated parameters
+``Ts`` and the design values discretised into the coefficients (``eso.omega0``,
+``td.omega``); tunable parameters (settable any time, effective from the next sample) the
+design values the step uses directly: ``law.b0`` (the ESO's input column Γ scaled with it),
+``law.u_min``/``law.u_max`` when finite, the SEF's gains (``sef.omega_c`` of a linear SEF,
+``sef.k*``, ``sef.alpha*``, ... of a nonlinear one), the INLESO's ``eso.k_alpha`` ..., ``td.R``
+and ``td.rho``; the integer parameter ``start`` (0 bumpless, 1 zero, 2 output).
+The default experiment's step size is Ts; the wrapper's comment says how it samples (only at
+communication points that are multiples of Ts; a step passing a sample instant is an error).
+
+The adapter: until the parameter-struct C API (``NAME_init/start/reset/step`` with a
+``const NAME_params *``) is on this branch, ``fmu_adapter.h`` wraps today's
+``aiofl_init``/``aiofl_step``: it includes ``aiofl_controller.c``, whose tunable
+``static const`` parameters this module turns into file-scope variables with ``__dflt``
+defaults, loads the instance's parameters into them before each call, and starts as the
+config's ``eso.init`` says whatever ``start`` is (:data:`_LEGACY`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import math
+import os
+import platform
+import re
+import shutil
+import subprocess
+import tempfile
+import uuid
+import xml.etree.ElementTree as ET
+import zipfile
+from collections.abc import Sequence
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from aiofl.controller import Controller, controller_batch
+from aiofl.engine.discrete import Sampling, sampling_rows
+from aiofl.export import c_code
+from aiofl.export.c_text import c_identifier
+from aiofl.export.errors import ExportError
+from aiofl.plants.base import Plant
+
+__all__ = ["FmuParameter", "export_fmu", "fmu_parameters"]
+
+WRAPPER = "fmi2_wrapper.c"
+ADAPTER = "fmu_adapter.h"
+FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
+CFLAGS = ("-std=c99", "-O2", "-shared", "-fPIC", "-fvisibility=hidden", "-Wall", "-Wextra")
+_LEGACY = True  # the adapter targets today's aiofl_init/aiofl_step (see the module notes)
+
+
+@dataclass(frozen=True)
+class FmuParameter:
+    """One parameter the FMU shows.
+
+    Attributes
+    ----------
+    name
+        The FMI variable name (the config's column name, e.g. ``"law.b0"``, or ``"Ts"``).
+    value
+        The exported design's value.
+    description
+        One line for ``modelDescription.xml``.
+    tunable
+        ``causality="parameter" variability="tunable"`` (settable during the run) if True,
+        else ``causality="calculatedParameter"`` (fixed at export: it is discretised into
+        the coefficients).
+    minimum, nonzero
+        The range a tunable value must be in: ``>= minimum`` (None: any), and not 0.
+    setter
+        C statements writing the value ``v`` (a ``double``) into the parameter copy ``*p``
+        (the adapter's field names).
+    """
+
+    name: str
+    value: float
+    description: str
+    tunable: bool
+    minimum: float | None = None
+    nonzero: bool = False
+    setter: tuple[str, ...] = ()
+
+
+def _b0_scales_gamma(controller: Controller, sampling: Sampling) -> bool:
+    """Whether b0 enters the discrete coefficients only through Γ, proportionally (so the
+    FMU can retune it by scaling Γ): compares the rows at b0 and 2 b0."""
+    if controller.eso_model != "none":  # the model-assisted law and gain read the model
+        return False
+    b0 = controller.value("law.b0")
+    rows = [
+        sampling_rows(controller_batch(controller.with_values(**{"law.b0": b})), [sampling], sampling.ts)
+        for b in (b0, 2.0 * b0)
+    ]
+    a, b = rows[0][0], rows[1][0]
+    from aiofl.engine import discrete as DS
+
+    n = controller.rho + 1
+    gam = slice(DS.D_GAM, DS.D_GAM + n)
+    other = np.ones(a.size, dtype=bool)
+    other[gam] = False
+    return bool(np.array_equal(a[other], b[other])) and bool(
+        np.allclose(b[gam], 2.0 * a[gam], rtol=1e-12, atol=0.0)
+    )
+
+
+def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParameter]:
+    """The parameters the FMU of ``controller`` sampled by ``sampling`` shows, Ts first.
+
+    Parameters
+    ----------
+    controller
+        An exportable AIOFL controller.
+    sampling
+        Its sample time and discretisation.
+
+    Returns
+    -------
+    list of FmuParameter
+        The calculated parameters (Ts, the design values discretised into the observer and
+        prefilter coefficients), then the tunable ones, with their C setters.
+    """
+    c, rho, m = controller, controller.rho, controller.n_feedback
+    v = c.value
+    calc = [FmuParameter("Ts", sampling.ts, "sample time [s] (fixed at export)", False)]
+    if c.eso_gains != "kalman":
+        calc.append(FmuParameter("eso.omega0", v("eso.omega0"), "observer bandwidth", False))
+    if c.td == "linear":
+        calc.append(FmuParameter("td.omega", v("td.omega"), "prefilter bandwidth", False))
+
+    def tun(name: str, what: str, *setter: str, minimum: float | None = None, nz: bool = False):
+        return FmuParameter(name, v(name), what, True, minimum, nz, tuple(setter))
+
+    out: list[FmuParameter] = []
+    if _b0_scales_gamma(c, sampling):
+        out.append(
+            tun(
+                "law.b0",
+                "input gain estimate b0 (the observer's input column scales with it)",
+                "p->B0 = (aiofl_real)v;",
+                *(
+                    f"p->ESO_GAMMA[{j}] = (aiofl_real)((double)ESO_GAMMA__dflt[{j}] * "
+                    "(v / (double)B0__dflt));"
+                    for j in range(rho + 1)
+                ),
+                nz=True,
+            )
+        )
+    else:
+        calc.append(FmuParameter("law.b0", v("law.b0"), "input gain estimate b0", False))
+    for name, field in (("law.u_max", "U_MAX"), ("law.u_min", "U_MIN")):
+        if math.isfinite(v(name)):
+            out.append(tun(name, "actuator limit", f"p->{field} = (aiofl_real)v;"))
+    if c.eso == "improved":
+        for name in ("k_alpha", "k_beta", "g_alpha", "g_beta"):
+            out.append(
+                tun(f"eso.{name}", "INLESO injection", f"p->{name.upper()} = (aiofl_real)v;")
+            )
+    if c.td == "han":
+        out.append(tun("td.R", "TD speed factor R", "p->TD_R = (aiofl_real)v;", minimum=0.0))
+    elif c.td == "improved":
+        out.append(tun("td.rho", "ITD speed factor", "p->ITD_RHO = (aiofl_real)v;"))
+    if c.sef == "linear":
+        out.append(
+            tun(
+                "sef.omega_c",
+                "SEF bandwidth (gains binomial(rho, i-1) omega_c^(rho-i+1))",
+                *(f"p->SEF_GAIN[{i}] = (aiofl_real)fmu_binomial_power({i}, v);" for i in range(m)),
+                minimum=0.0,
+                nz=True,
+            )
+        )
+    elif c.sef == "nonlinear":
+        slope = "p->SEF_SLOPE[{i}] = (aiofl_real)pow((double)p->SEF_DELTA[{i}], "
+        slope += "(double)p->SEF_ALPHA[{i}] - 1.0);"
+        for i in range(m):
+            out.append(tun(f"sef.k{i + 1}", "SEF gain", f"p->SEF_K[{i}] = (aiofl_real)v;"))
+            out.append(
+                tun(
+                    f"sef.alpha{i + 1}",
+                    "fal exponent",
+                    f"p->SEF_ALPHA[{i}] = (aiofl_real)v;",
+                    slope.format(i=i),
+                    minimum=0.0,
+                )
+            )
+            out.append(
+                tun(
+                    f"sef.delta{i + 1}",
+                    "fal linear zone",
+                    f"p->SEF_DELTA[{i}] = (aiofl_real)v;",
+                    slope.format(i=i),
+                    minimum=0.0,
+                    nz=True,
+                )
+            )
+    else:  # improved
+        for i in range(m):
+            for vec, field, what in (
+                ("k", "SEF_K", "INLSEF gain"),
+                ("kb", "SEF_KB", "INLSEF error-dependent gain"),
+                ("mu", "SEF_MU", "INLSEF gain decay"),
+                ("alpha", "SEF_ALPHA", "INLSEF exponent"),
+            ):
+                name = f"sef.{vec}{i + 1}"
+                out.append(tun(name, what, f"p->{field}[{i}] = (aiofl_real)v;"))
+        out.append(
+            tun(
+                "sef.v_limit",
+                "INLSEF output limit",
+                "p->SEF_V_LIMIT = (aiofl_real)v;",
+                minimum=0.0,
+                nz=True,
+            )
+        )
+    return calc + out
+
+
+# ---------------------------------------------------------------------- the C adapter
+
+
+def _fields(setters: Sequence[str]) -> list[str]:
+    """The parameter fields (``p->NAME``) the setters write, in first-use order."""
+    seen: dict[str, None] = {}
+    for line in setters:
+        for name in re.findall(r"p->(\w+)", line):
+            seen.setdefault(name, None)
+    return list(seen)
+
+
+def _legacy_source(source: str, fields: Sequence[str]) -> str:
+    """Today's ``aiofl_controller.c`` with each tunable ``static const`` parameter ``X``
+    split into a variable ``X`` (the instance's value, loaded before each call) and its
+    default ``X__dflt``."""
+    for name in fields:
+        pat = re.compile(rf"static const aiofl_real {name}((?:\[\d+\])*) = ")
+        source, n = pat.subn(
+            lambda mt, name=name: (
+                f"static aiofl_real {name}{mt[1]};\nstatic const aiofl_real {name}__dflt{mt[1]} = "
+            ),
+            source,
+        )
+        if n != 1:
+            raise RuntimeError(f"aiofl bug: the C export has no parameter {name} to tune")
+    return source
+
+
+def _adapter(
+    controller: Controller,
+    params: Sequence[FmuParameter],
+    n_in: int,
+    guid: str,
+) -> str:
+    """``fmu_adapter.h``: the controller's API under the wrapper's names (today's API)."""
+    lit = lambda x: c_code._literal(x, "double")  # noqa: E731
+    calc = [p for p in params if not p.tunable]
+    tun = [p for p in params if p.tunable]
+    setters = [s for p in tun for s in p.setter]
+    fields = _fields(setters)
+    decl = dict(_declarations(fields, controller.n_feedback))
+    lines = [
+        f"/* {ADAPTER}: generated by aiofl export --format fmu (today's controller API) */",
+        "#ifndef FMU_ADAPTER_H",
+        "#define FMU_ADAPTER_H",
+        "#include <math.h>",
+        "#include <string.h>",
+        f'#include "{c_code.SOURCE}"',
+        "",
+        f'#define FMU_GUID "{guid}"',
+        "#define FMU_TS AIOFL_TS",
+        f"#define FMU_N_IN {n_in}",
+        f"#define FMU_N_CALC {len(calc)}",
+        f"#define FMU_N_TUN {len(tun)}",
+        "",
+        "typedef aiofl_state fmu_ctl_state;",
+        "typedef struct {",
+        *(f"    aiofl_real {f}{decl[f]};" for f in fields),
+        *(["    int unused;"] if not fields else []),
+        "} fmu_ctl_params;",
+        "",
+        f"static const double fmu_calc_values[{len(calc)}] = {{"
+        + ", ".join(lit(p.value) for p in calc)
+        + "};",
+        f"static const double fmu_tun_defaults[{max(len(tun), 1)}] = {{"
+        + (", ".join(lit(p.value) for p in tun) or "0.0")
+        + "};",
+        f"static const double fmu_tun_min[{max(len(tun), 1)}] = {{"
+        + (", ".join("-HUGE_VAL" if p.minimum is None else lit(p.minimum) for p in tun) or "0.0")
+        + "};",
+        f"static const int fmu_tun_nonzero[{max(len(tun), 1)}] = {{"
+        + (", ".join(str(int(p.nonzero)) for p in tun) or "0")
+        + "};",
+        "",
+        "static void fmu_ctl_defaults(fmu_ctl_params *p)",
+        "{",
+        *(f"    memcpy(&p->{f}, &{f}__dflt, sizeof p->{f});" for f in fields),
+        *(["    p->unused = 0;"] if not fields else []),
+        "}",
+        "",
+        "/* today's API reads its parameters from file-scope variables: load the instance's */",
+        "static void fmu_ctl_load(const fmu_ctl_params *p)",
+        "{",
+        *(f"    memcpy(&{f}, &p->{f}, sizeof {f});" for f in fields),
+        *(["    (void)p;"] if not fields else []),
+        "}",
+        "",
+        "/* start: today's API starts as the config's eso.init says (mode not used) */",
+        "static void fmu_ctl_start(fmu_ctl_state *s, const fmu_ctl_params *p, double y0, int mode)",
+        "{",
+        "    (void)mode;",
+        "    fmu_ctl_load(p);",
+        "    aiofl_init(s, (aiofl_real)y0);",
+        "}",
+        "",
+        "static double fmu_ctl_step(fmu_ctl_state *s, const fmu_ctl_params *p, const double *r,"
+        " double y)",
+        "{",
+        "    aiofl_real rr[AIOFL_RHO + 1];",
+        "    int i;",
+        "    for (i = 0; i <= AIOFL_RHO; ++i)",
+        "        rr[i] = (aiofl_real)(i < FMU_N_IN - 1 ? r[i] : 0.0);",
+        "    fmu_ctl_load(p);",
+        "    return (double)aiofl_step(s, rr, (aiofl_real)y);",
+        "}",
+        "",
+    ]
+    if controller.sef == "linear":  # aiofl.components.fastmath.binomial_power, in C
+        lines += [
+            "static double fmu_binomial_power(int j, double omega)",
+            "{",
+            "    double binom = 1.0;",
+            "    int i;",
+            "    for (i = 1; i <= j; ++i) binom = binom * (double)(AIOFL_RHO - i + 1) / (double)i;",
+            "    return binom * pow(omega, (double)(AIOFL_RHO - j));",
+            "}",
+            "",
+        ]
+    lines += ["static void fmu_ctl_set(fmu_ctl_params *p, int i, double v)", "{"]
+    lines += ["    switch (i) {"]
+    for k, p in enumerate(tun):
+        lines += [
+            f"    case {k}: /* {p.name} */",
+            *(f"        {s}" for s in p.setter),
+            "        break;",
+        ]
+    lines += [
+        "    default:",
+        "        (void)p;",
+        "        (void)v;",
+        "    }",
+        "}",
+        "",
+        "#endif",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _declarations(fields: Sequence[str], m: int) -> list[tuple[str, str]]:
+    """``(field, array suffix)``: a field's dimensions in today's C (``"[3]"`` or ``""``);
+    ``m`` = n_feedback, the length of the SEF's vectors."""
+    out = []
+    for f in fields:
+        if f == "ESO_GAMMA":
+            out.append((f, "[AIOFL_RHO + 1]"))
+        elif f.startswith("SEF_") and f != "SEF_V_LIMIT":
+            out.append((f, f"[{m}]"))
+        else:
+            out.append((f, ""))
+    return out
+
+
+# ---------------------------------------------------------------------- the FMU
+
+
+def _inputs(controller: Controller) -> list[tuple[str, str]]:
+    """The Real inputs, ``(name, description)``, in value-reference order."""
+    out = [("y", "measured plant output"), ("r", "reference")]
+    if controller.td == "exact":
+        out += [
+            (f"r_{i}", f"reference derivative d^{i}r/dt^{i}") for i in range(1, 1 + controller.rho)
+        ]
+    return out
+
+
+def _model_description(
+    *,
+    model_identifier: str,
+    title: str,
+    description: str,
+    guid: str,
+    inputs: Sequence[tuple[str, str]],
+    params: Sequence[FmuParameter],
+    sources: Sequence[str],
+    ts: float,
+    stop_time: float | None,
+) -> bytes:
+    """``modelDescription.xml`` (FMI 2.0 co-simulation), every attribute set through
+    :mod:`xml.etree.ElementTree`, which escapes it."""
+    from aiofl import __version__
+
+    fmt = lambda x: repr(float(x))  # noqa: E731
+    root = ET.Element(
+        "fmiModelDescription",
+        {
+            "fmiVersion": "2.0",
+            "modelName": title,
+            "guid": guid,
+            "description": description,
+            "generationTool": f"aiofl {__version__}",
+            "variableNamingConvention": "structured",
+            "numberOfEventIndicators": "0",
+        },
+    )
+    cs = ET.SubElement(
+        root,
+        "CoSimulation",
+        {
+            "modelIdentifier": model_identifier,
+            "canHandleVariableCommunicationStepSize": "true",
+            "canInterpolateInputs": "false",
+            "canBeInstantiatedOnlyOncePerProcess": "false",
+            "canNotUseMemoryManagementFunctions": "false",
+            "canGetAndSetFMUstate": "false",
+            "canSerializeFMUstate": "false",
+            "providesDirectionalDerivative": "false",
+        },
+    )
+    files = ET.SubElement(cs, "SourceFiles")
+    for name in sources:
+        ET.SubElement(files, "File", {"name": name})
+    exp = {"startTime": "0.0", "stepSize": fmt(ts)}
+    if stop_time is not None:
+        exp["stopTime"] = fmt(stop_time)
+    ET.SubElement(root, "DefaultExperiment", exp)
+    mv = ET.SubElement(root, "ModelVariables")
+
+    def var(name: str, vr: int, attrs: dict[str, str], desc: str, kind: str, t: dict[str, str]):
+        sv = ET.SubElement(mv, "ScalarVariable", {"name": name, "valueReference": str(vr), **attrs})
+        sv.set("description", desc)
+        ET.SubElement(sv, kind, t)
+
+    index = 0  # 1-based index of a ScalarVariable in ModelVariables
+    for vr, (name, desc) in enumerate(inputs):
+        var(name, vr, {"causality": "input", "variability": "continuous"}, desc, "Real",
+            {"start": "0.0"})  # fmt: skip
+        index += 1
+    input_indices = " ".join(str(i) for i in range(1, index + 1))
+    attrs = {"causality": "output", "variability": "discrete", "initial": "calculated"}
+    var("u", len(inputs), attrs, "control command (held between samples)", "Real", {})
+    u_index = index = index + 1
+    calc_indices = []
+    calc = [p for p in params if not p.tunable]
+    tun = [p for p in params if p.tunable]
+    for k, p in enumerate([*calc, *tun]):
+        vr = len(inputs) + 1 + k
+        index += 1
+        if p.tunable:
+            a = {"causality": "parameter", "variability": "tunable", "initial": "exact"}
+            t = {"start": fmt(p.value)}
+            if p.minimum is not None:
+                t["min"] = fmt(p.minimum)
+        else:
+            a = {
+                "causality": "calculatedParameter",
+                "variability": "fixed",
+                "initial": "calculated",
+            }
+            t = {}
+            calc_indices.append(index)
+        var(p.name, vr, a, p.description, "Real", t)
+    a = {"causality": "parameter", "variability": "fixed", "initial": "exact"}
+    var("start", 0, a, "start mode: 0 bumpless, 1 zero, 2 output", "Integer",
+        {"start": "0", "min": "0", "max": "2"})  # fmt: skip
+    ms = ET.SubElement(root, "ModelStructure")
+    outputs = ET.SubElement(ms, "Outputs")
+    ET.SubElement(outputs, "Unknown", {"index": str(u_index), "dependencies": input_indices})
+    init = ET.SubElement(ms, "InitialUnknowns")
+    for i in [u_index, *calc_indices]:
+        ET.SubElement(init, "Unknown", {"index": str(i)})
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
+
+
+def find_compiler() -> str:
+    """The C compiler the FMU's binary is built with: ``$CC`` or ``cc`` on the PATH.
+
+    Raises
+    ------
+    ExportError
+        If there is none.
+    """
+    name = os.environ.get("CC") or "cc"
+    path = shutil.which(name)
+    if path is None:
+        raise ExportError(
+            f"--format fmu: no C compiler ({name!r} not found on the PATH): the FMU's "
+            "binary is built at export; install one (e.g. gcc) or set CC, or export the C "
+            "sources with --format c"
+        )
+    return path
+
+
+def export_fmu(
+    controller: Controller,
+    sampling: Sampling | None,
+    *,
+    precision: str = "double",
+    model_identifier: str = "aiofl",
+    title: str = "aiofl controller",
+    description: str = "",
+    notes: Sequence[str] = (),
+    stop_time: float | None = None,
+    plant: Plant | None = None,
+    plant_source: str | None = None,
+    x0: Sequence[float] = (),
+) -> tuple[str, bytes]:
+    """The FMU of the sampled controller: ``(file name, zip archive bytes)``.
+
+    Parameters
+    ----------
+    controller, sampling, precision, notes, plant, plant_source, x0
+        As :func:`aiofl.export.export_c` (the C inside the FMU is that export's).
+    model_identifier
+        The FMU's model identifier: its file name (``<id>.fmu``) and binary (``<id>.so``);
+        a C identifier.
+    title, description
+        ``modelName`` and ``description`` of ``modelDescription.xml`` (any text: the XML
+        library escapes it).
+    stop_time
+        The default experiment's stop time (e.g. the config's scenario ``t_final``), or None.
+
+    Returns
+    -------
+    tuple of (str, bytes)
+        ``"<model_identifier>.fmu"`` and the archive.
+
+    Raises
+    ------
+    ExportError
+        What :func:`aiofl.export.export_c` refuses; a model identifier that is not a C
+        identifier; no C compiler (:func:`find_compiler`); a platform other than Linux
+        x86-64; a compiler that fails on the sources (its message included).
+    """
+    try:
+        c_identifier(model_identifier)
+    except ValueError as exc:
+        raise ExportError(f"--prefix: {exc}") from None
+    if platform.system() != "Linux" or platform.machine() not in ("x86_64", "AMD64"):
+        raise ExportError(
+            "--format fmu builds a linux64 binary: run the export on Linux x86-64 "
+            f"(this is {platform.system()} {platform.machine()})"
+        )
+    cc = find_compiler()
+    files = c_code.export_c(
+        controller,
+        sampling,
+        precision=precision,
+        title=title,
+        notes=notes,
+        plant=plant,
+        plant_source=plant_source,
+        x0=x0,
+    )
+    assert sampling is not None  # export_c refuses a missing sample time
+    params = fmu_parameters(controller, sampling)
+    inputs = _inputs(controller)
+    setters = [s for p in params if p.tunable for s in p.setter]
+    files[c_code.SOURCE] = _legacy_source(files[c_code.SOURCE], _fields(setters))
+    templates = resources.files("aiofl.export") / "templates"
+    wrapper = (templates / WRAPPER).read_text(encoding="utf-8")
+    headers = {h: (templates / "fmi2" / h).read_text(encoding="utf-8") for h in FMI_HEADERS}
+    digest = hashlib.sha256()
+    for text in [*files.values(), wrapper, *headers.values()]:
+        digest.update(text.encode())
+    digest.update(repr((model_identifier, [(p.name, p.value) for p in params])).encode())
+    guid = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, "aiofl:" + digest.hexdigest())) + "}"
+    adapter = _adapter(controller, params, len(inputs), guid)
+    sources = {**files, **headers, ADAPTER: adapter, WRAPPER: wrapper}
+    compiled = [WRAPPER]  # today's API: the adapter includes the controller's .c
+    xml = _model_description(
+        model_identifier=model_identifier,
+        title=title,
+        description=description,
+        guid=guid,
+        inputs=inputs,
+        params=params,
+        sources=compiled,
+        ts=sampling.ts,
+        stop_time=stop_time,
+    )
+    with tempfile.TemporaryDirectory(prefix="aiofl-fmu-") as tmp:
+        src = Path(tmp) / "sources"
+        src.mkdir()
+        for name, text in sources.items():
+            (src / name).write_text(text, encoding="utf-8")
+        so = Path(tmp) / f"{model_identifier}.so"
+        cmd = [cc, *CFLAGS, "-I", str(src), "-o", str(so), *(str(src / f) for f in compiled)]
+        proc = subprocess.run([*cmd, "-lm"], capture_output=True, text=True, check=False)
+        if proc.returncode != 0:
+            raise ExportError(
+                f"--format fmu: the C compiler {cc} failed on the FMU's sources:\n"
+                + proc.stderr.strip()[-2000:]
+            )
+        binary = so.read_bytes()
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w", zipfile.ZIP_DEFLATED) as z:
+
+        def add(name: str, data: bytes) -> None:
+            info = zipfile.ZipInfo(name, date_time=(2020, 1, 1, 0, 0, 0))
+            info.compress_type = zipfile.ZIP_DEFLATED
+            info.external_attr = 0o644 << 16
+            z.writestr(info, data)
+
+        add("modelDescription.xml", xml)
+        for name in sorted(sources):
+            add(f"sources/{name}", sources[name].encode())
+        add(f"binaries/linux64/{model_identifier}.so", binary)
+    return f"{model_identifier}.fmu", buf.getvalue()
