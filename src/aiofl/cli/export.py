@@ -38,11 +38,19 @@ def export_command(
         Literal["double", "float"],
         typer.Option("--precision", help="Arithmetic of the C code (C double or float)."),
     ] = "double",
+    fmt: Annotated[
+        Literal["c", "fmu"],
+        typer.Option(
+            "--format",
+            help="c: C99 sources; fmu: an FMI 2.0 co-simulation FMU, NAME.fmu, with the C "
+            "sources and a Linux x86-64 binary built by the system C compiler.",
+        ),
+    ] = "c",
 ) -> None:
     """Export the config's controller, sampled at Ts, as C99 (aiofl_controller.h/.c in OUT)."""
     from aiofl.config import load_config
     from aiofl.export import ExportError, export_c
-    from aiofl.outputs import atomic_output_dir, atomic_write_text
+    from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 
     with bad_input_exits():
         _check_out(out)
@@ -69,12 +77,21 @@ def export_command(
                 plant_source=str(cfg.raw.get("plant", cfg.plant.name)),
                 x0=cfg.scenario.x0,
             )
+            if fmt == "fmu":  # aiofl.export.fmu: that C, wrapped, compiled and zipped
+                from aiofl.export.fmu import export_fmu_for_config
+
+                files = dict(
+                    [export_fmu_for_config(cfg, sampling, precision=precision, config=config)]
+                )
         except ExportError as exc:
             raise ValueError(f"cannot export {cfg.name!r}: {exc}") from None
     warning = _divergence_warning(cfg, sampling, config)
     with bad_input_exits(run=True), atomic_output_dir(out) as stage:
         for name, text in files.items():
-            atomic_write_text(stage / name, text)
+            if isinstance(text, bytes):  # the FMU
+                atomic_write_bytes(stage / name, text)
+            else:
+                atomic_write_text(stage / name, text)
     typer.echo(f"wrote {out}/{', '.join(files)} (Ts = {sampling.ts:g} s, {precision})")
     if warning:
         typer.echo(f"aiofl: warning: {warning}", err=True)

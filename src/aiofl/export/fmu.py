@@ -49,6 +49,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -59,7 +60,10 @@ from aiofl.export.c_text import c_identifier
 from aiofl.export.errors import ExportError
 from aiofl.plants.base import Plant
 
-__all__ = ["FmuParameter", "export_fmu", "fmu_parameters"]
+if TYPE_CHECKING:
+    from aiofl.config.run_config import RunConfig
+
+__all__ = ["FmuParameter", "export_fmu", "export_fmu_for_config", "find_compiler", "fmu_parameters"]
 
 WRAPPER = "fmi2_wrapper.c"
 ADAPTER = "fmu_adapter.h"
@@ -107,7 +111,9 @@ def _b0_scales_gamma(controller: Controller, sampling: Sampling) -> bool:
         return False
     b0 = controller.value("law.b0")
     rows = [
-        sampling_rows(controller_batch(controller.with_values(**{"law.b0": b})), [sampling], sampling.ts)
+        sampling_rows(
+            controller_batch(controller.with_values(**{"law.b0": b})), [sampling], sampling.ts
+        )
         for b in (b0, 2.0 * b0)
     ]
     a, b = rows[0][0], rows[1][0]
@@ -635,3 +641,25 @@ def export_fmu(
             add(f"sources/{name}", sources[name].encode())
         add(f"binaries/linux64/{model_identifier}.so", binary)
     return f"{model_identifier}.fmu", buf.getvalue()
+
+
+def export_fmu_for_config(
+    cfg: RunConfig, sampling: Sampling | None, *, precision: str, config: str, prefix: str = "aiofl"
+) -> tuple[str, bytes]:
+    """:func:`export_fmu` of a loaded config's controller (``aiofl export --format fmu``):
+    its name, description and scenario length go into ``modelDescription.xml``, its plant
+    and initial state to a model-assisted observer; ``config`` (the path or preset name
+    given) into the C files' comment block."""
+    return export_fmu(
+        cfg.controller,
+        sampling,
+        precision=precision,
+        model_identifier=prefix,
+        title=cfg.name,
+        description=cfg.description or f"aiofl controller of {cfg.name}",
+        notes=[f"Config: {config}", *([cfg.description] if cfg.description else [])],
+        stop_time=cfg.scenario.t_final,
+        plant=cfg.plant,
+        plant_source=str(cfg.raw.get("plant", cfg.plant.name)),
+        x0=cfg.scenario.x0,
+    )
