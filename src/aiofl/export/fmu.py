@@ -69,6 +69,7 @@ WRAPPER = "fmi2_wrapper.c"
 ADAPTER = "fmu_adapter.h"
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 CFLAGS = ("-std=c99", "-O2", "-shared", "-fPIC", "-fvisibility=hidden", "-Wall", "-Wextra")
+START_MODES = {"bumpless": 0, "zero": 1, "output": 2}  # the FMU's start parameter
 _LEGACY = True  # the adapter targets today's aiofl_init/aiofl_step (see the module notes)
 
 
@@ -295,6 +296,8 @@ def _adapter(
         f"#define FMU_N_IN {n_in}",
         f"#define FMU_N_CALC {len(calc)}",
         f"#define FMU_N_TUN {len(tun)}",
+        f"#define FMU_START_DEFAULT {START_MODES[controller.eso_init]}",
+        f"#define FMU_START_ONLY {START_MODES[controller.eso_init]}  /* today's API */",
         "",
         "typedef aiofl_state fmu_ctl_state;",
         "typedef struct {",
@@ -418,6 +421,8 @@ def _model_description(
     sources: Sequence[str],
     ts: float,
     stop_time: float | None,
+    start: int,
+    only: bool,
 ) -> bytes:
     """``modelDescription.xml`` (FMI 2.0 co-simulation), every attribute set through
     :mod:`xml.etree.ElementTree`, which escapes it."""
@@ -494,8 +499,9 @@ def _model_description(
             calc_indices.append(index)
         var(p.name, vr, a, p.description, "Real", t)
     a = {"causality": "parameter", "variability": "fixed", "initial": "exact"}
-    var("start", 0, a, "start mode: 0 bumpless, 1 zero, 2 output", "Integer",
-        {"start": "0", "min": "0", "max": "2"})  # fmt: skip
+    lo, hi = (start, start) if only else (0, 2)
+    t = {"start": str(start), "min": str(lo), "max": str(hi)}
+    var("start", 0, a, "start mode: 0 bumpless, 1 zero, 2 output", "Integer", t)
     ms = ET.SubElement(root, "ModelStructure")
     outputs = ET.SubElement(ms, "Outputs")
     ET.SubElement(outputs, "Unknown", {"index": str(u_index), "dependencies": input_indices})
@@ -612,6 +618,8 @@ def export_fmu(
         sources=compiled,
         ts=sampling.ts,
         stop_time=stop_time,
+        start=START_MODES[controller.eso_init],
+        only=_LEGACY,
     )
     with tempfile.TemporaryDirectory(prefix="aiofl-fmu-") as tmp:
         src = Path(tmp) / "sources"
