@@ -206,14 +206,23 @@ def test_a_step_passing_a_sample_instant_is_an_error(fmus):
         s.freeInstance()
 
 
-def test_b0_set_through_fmi_gives_the_engines_commands_with_that_b0(fmus):
-    f = fmus["dcmotor-arm-ladrc"]
-    b0 = 1.25 * f.cfg.controller.value("law.b0")
-    y, r, u_engine = engine_loop(f.cfg, f.cfg.controller.with_values(**{"law.b0": b0}), 0.3)
-    u_fmu = f.run(y, r, reals={"law.b0": b0})
-    # the FMU scales the observer's input column by b0'/b0; the engine discretises b0' anew
-    assert rel(u_fmu, u_engine) <= 1e-10, rel(u_fmu, u_engine)
-    assert rel(f.run(y, r), u_engine) > 1e-3  # the default b0 is another controller
+@pytest.mark.parametrize(
+    ("config", "name", "factor"),
+    [
+        ("dcmotor-arm-ladrc", "law.b0", 1.25),
+        ("dcmotor-arm-ladrc", "sef.omega_c", 1.2),
+        ("retuned-s1-leso", "sef.delta1", 2.0),
+        ("retuned-s1-leso", "td.R", 0.5),
+    ],
+)
+def test_a_parameter_set_through_fmi_gives_the_engines_commands_with_it(fmus, config, name, factor):
+    f = fmus[config]
+    value = factor * f.cfg.controller.value(name)
+    y, r, u_engine = engine_loop(f.cfg, f.cfg.controller.with_values(**{name: value}), 0.3)
+    # b0: the FMU scales the observer's input column by b0'/b0, the engine discretises anew
+    u_fmu = f.run(y, r, reals={name: value})
+    assert rel(u_fmu, u_engine) <= 1e-12, rel(u_fmu, u_engine)
+    assert rel(f.run(y, r), u_engine) > 1e-6  # the default is another controller
 
 
 def test_simulate_fmu_reads_u_k_after_the_step_from_t_k(fmus, loops):
