@@ -8,6 +8,7 @@ bad input exits with status 2 and leaves nothing."""
 from __future__ import annotations
 
 import math
+import subprocess
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
@@ -296,3 +297,31 @@ def test_bad_input_exits_2_and_leaves_nothing(tmp_path, args, what):
     assert what in res.output
     assert out.read_text() == "keep"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_the_fmus_sources_compile_without_a_warning(fmus, tmp_path):
+    """The sources shipped in the FMU, built as a tool rebuilding them would (the files
+    modelDescription.xml lists), under -Wall -Wextra -Werror -pedantic."""
+    f = fmus["retuned-s1-leso"]
+    src = Path(f.unzipped) / "sources"
+    listed = f.md.buildConfigurations[0].sourceFileSets[0].sourceFiles
+    files = [src / s for s in listed]
+    cmd = [find_compiler(), "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O2"]
+    cmd += ["-shared", "-fPIC", "-I", str(src), "-o", str(tmp_path / "x.so"), *map(str, files)]
+    proc = subprocess.run([*cmd, "-lm"], capture_output=True, text=True, check=False)
+    assert proc.returncode == 0, proc.stderr
+
+
+def test_start_is_an_integer_parameter_fixed_before_initialisation(fmus, loops):
+    f = fmus["retuned-s1-leso"]
+    start = next(v for v in f.md.modelVariables if v.name == "start")
+    assert start.variability == "fixed" and int(start.start) == START[f.cfg.controller.eso_init]
+    s = f.slave()
+    with pytest.raises(FMICallException):
+        s.setInteger([f.vr["start"]], [7])
+    s.enterInitializationMode()
+    s.exitInitializationMode()
+    with pytest.raises(FMICallException):  # fixed: not after initialisation
+        s.setInteger([f.vr["start"]], [int(start.start)])
+    s.terminate()
+    s.freeInstance()
