@@ -31,7 +31,9 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("aiofl.export",),
     ("aiofl.tuning",),
     ("aiofl.reporting",),
-    ("aiofl.design",),  # the notebook API: plant + controller + scenario -> every command
+    # the notebook API (plant + controller + scenario -> every command) and the test-rig
+    # controller object built from a config
+    ("aiofl.design", "aiofl.discrete_controller"),
     ("aiofl.cli", "aiofl.__main__"),
 )
 """The layers, lowest first."""

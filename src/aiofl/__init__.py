@@ -19,6 +19,7 @@ __version__ = "0.1.0"
 _LAZY = {
     "Controller": "aiofl.controller",
     "Design": "aiofl.design",
+    "DiscreteController": "aiofl.discrete_controller",
     "controller_batch": "aiofl.controller",
     "Plant": "aiofl.plants",
     "PlantError": "aiofl.plants",

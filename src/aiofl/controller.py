@@ -193,7 +193,11 @@ class Controller:
         Label used in reports (``"LESO"``, ``"INLESO"``, ``"LADRC"``, ``"IOFL"``, ...).
     eso_init
         ``"zero"``: :math:`\hat\xi(0) = 0`; ``"output"``: :math:`\hat\xi_1(0) = y_m(0)`, the
-        first measurement, the other states 0 (no initial output-estimate error).
+        first measurement, the other states 0 (no initial output-estimate error);
+        ``"bumpless"``: ``"output"`` and the differentiator / prefilter at rest at
+        :math:`y_m(0)` (:math:`r_1(0) = y_m(0)`, its other states 0), so a plant at rest at
+        :math:`y_0 = r` starts with :math:`e = 0, \hat\xi_{\rho+1} = 0`, i.e. u(0) = 0
+        (the exported C's default start).
     eso_model
         What the observer is given besides ρ and b0 (:data:`aiofl.layout.ESO_MODEL_KINDS`):
         ``"none"`` (model-free, eq. 5: :math:`\hat\xi_{\rho+1}` estimates the whole total

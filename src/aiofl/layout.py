@@ -40,7 +40,12 @@ SEF_KINDS = MappingProxyType(
 
 ESO_INIT_ZERO = 0  #: ξ̂(0) = 0
 ESO_INIT_OUTPUT = 1  #: ξ̂_1(0) = y_meas(0), the first measurement; ξ̂_2..ξ̂_{ρ+1}(0) = 0
-ESO_INIT_KINDS = MappingProxyType({"zero": ESO_INIT_ZERO, "output": ESO_INIT_OUTPUT})
+#: ξ̂(0) = (y_meas(0), 0, ..., 0) and the differentiator / prefilter at rest at y_meas(0): a
+#: plant at rest at y0 = r sees no command step (a bumpless start, the exported C's default)
+ESO_INIT_BUMPLESS = 2
+ESO_INIT_KINDS = MappingProxyType(
+    {"zero": ESO_INIT_ZERO, "output": ESO_INIT_OUTPUT, "bumpless": ESO_INIT_BUMPLESS}
+)
 
 ESO_MODEL_NONE = 0  #: model-free: the ESO's ρ-th equation carries b0 u only, eq. (5)
 ESO_MODEL_NOMINAL = 1  #: model-assisted: it carries the nominal α(x̂) + β(x̂) u, x̂ = Φ⁻¹(ξ̂)

@@ -159,8 +159,9 @@ class ESOModel(_Model):
     k_beta: NonNegFloat = 0.0
     g_alpha: Annotated[float, Field(gt=0, le=2)] = 1.0
     g_beta: Annotated[float, Field(ge=0, le=2)] = 0.0
-    # "zero": xi_hat(0) = 0; "output": xi_hat_1(0) = y_meas(0), the first measurement
-    init: Literal["zero", "output"] = "zero"
+    # "zero": xi_hat(0) = 0; "output": xi_hat_1(0) = y_meas(0), the first measurement;
+    # "bumpless": "output" and the differentiator / prefilter at rest at y_meas(0)
+    init: Literal["zero", "output", "bumpless"] = "zero"
     # what the observer is given besides rho and b0: "none" (model-free, eq. 5) or
     # "nominal" (model-assisted: the plant's nominal alpha + beta u at x_hat = Phi^-1(xi_hat))
     model: Literal["none", "nominal"] = "none"

@@ -23,7 +23,8 @@ carries no branch of the other timing.  The integration method is data: a stage 
 one stage routine (``_BLK_STAGE``) for RK4 and forward Euler alike.
 
 **Semantics** (every instance).  The plant starts at the scenario's x0, the differentiator
-at 0, the ESO at 0 or (``eso.init = "output"``) with :math:`\hat\xi_1(0) = y_m(0)`.
+at 0, the ESO at 0 or (``eso.init = "output"``) with :math:`\hat\xi_1(0) = y_m(0)`
+(``"bumpless"``: and the differentiator's :math:`r_1(0) = y_m(0)`).
 Piecewise-constant inputs take their value at the start of a step for all its stages, so
 the integrator never straddles a jump: a switch on the time grid is exact, one between grid
 points acts from the next step (:data:`aiofl.engine.member.SWITCH_RTOL`).  A member whose
@@ -50,6 +51,7 @@ from aiofl.engine.member import (
     IQ_NTD,
     IQ_NZ,
     IQ_OESO,
+    IQ_OTD,
     IQ_RHO,
     IQ_TD,
     N_IQ,
@@ -188,7 +190,8 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
     nza = _N + L.N_METRIC if _SAMPLED else iq[IQ_NZ]
     nd = rho if iq[IQ_TD] == L.TD_EXACT else 0
     nd_stage = 0 if _SAMPLED else nd  # derivatives the right-hand side reads
-    init_output = iq[IQ_EINIT] == L.ESO_INIT_OUTPUT
+    init_output = iq[IQ_EINIT] != L.ESO_INIT_ZERO  # "output" or "bumpless"
+    init_td = iq[IQ_EINIT] == L.ESO_INIT_BUMPLESS and iq[IQ_NTD] > 0
     ref_kind = int(sc[L.S_REF_KIND, 0])  # uniform within a group
     hold_ref = ref_kind == L.REF_STEP  # a step reference is held over the step
     method = batch.method
@@ -215,11 +218,16 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
             if delayed:  # the plant's command u(t_k - τ_in) into s[S_U]
                 _DELAY_INPUT(k, sample, s, ring, dsteps)
         elif k == 0 and init_output:
-            # ξ̂_1(0) = y_meas(0) = h(x(0)) + n(0), the first measurement; ξ̂_2.. stay 0
+            # ξ̂_1(0) = y_meas(0) = h(x(0)) + n(0), the first measurement; ξ̂_2.. stay 0;
+            # bumpless: the differentiator's r_1(0) too (at rest at y_meas(0))
             o_eso = iq[IQ_OESO]
+            o_td = iq[IQ_OTD]
             for l in range(_W):
                 z[o_eso, l] = _PH(z[:, l], p[:, l]) + s[S_NOISE, l]
                 zt[o_eso, l] = z[o_eso, l]
+                if init_td:
+                    z[o_td, l] = z[o_eso, l]
+                    zt[o_td, l] = z[o_eso, l]
         for st in range(n_stages):
             c = STAGE_TIME[method, st]
             ri = int(2.0 * c)  # the reference slot of t_k + c dt: 0, 1 (mid-step), 2 (end)

@@ -33,7 +33,8 @@ The loop, with :math:`e_i = r_i - \hat\xi_i` and :math:`y_m = h(x) + n(t)`:
   :math:`u = (-\alpha(x) + v)/\beta(x)`, clipped to the actuator range
   :math:`[u_{min}, u_{max}]` (``law.u_min`` omitted: :math:`-u_{max}`);
 * initial state: the plant at the scenario's x0, the differentiator and the ESO at 0, or
-  with ``eso_init = "output"`` :math:`\hat\xi_1(0) = y_m(0) = h(x_0) + n(0)`;
+  with ``eso_init = "output"`` :math:`\hat\xi_1(0) = y_m(0) = h(x_0) + n(0)` (``"bumpless"``:
+  and the differentiator's :math:`r_1(0)` too);
 * metrics (22) as extra states: :math:`\int t|y-r|`, :math:`\int|y-r|`, :math:`\int(y-r)^2`,
   :math:`\int u^2`, :math:`\int|u|`.
 
@@ -433,10 +434,12 @@ def reference_simulate(
     z = np.zeros(s.size)
     if sc.x0:
         z[: s.n] = sc.x0
-    if controller.eso_init == "output":  # ξ̂_1(0) = the first measurement y(0) + n(0)
+    if controller.eso_init != "zero":  # ξ̂_1(0) = the first measurement y(0) + n(0)
         first = segment_inputs(0.0)
         y0 = plant.output(z[: s.n], first["plant_params"])  # type: ignore[arg-type]
         z[s.n + s.n_td] = y0 + float(first["noise"])  # type: ignore[arg-type]
+        if controller.eso_init == "bumpless" and s.n_td:  # the TD at rest at y_m(0)
+            z[s.n] = z[s.n + s.n_td]
     states: list[NDArray[np.float64]] = []
     times: list[NDArray[np.float64]] = []
     seg_inputs: list[dict[str, object]] = []

@@ -16,7 +16,8 @@ injection, Han's TD (18), the ITD, saturation), the same compiled SEF-and-law di
 and the discrete ones of :mod:`aiofl.components.discrete` (ESO correction and prediction,
 fhan, the prefilter's ZOH update), with the coefficients of the member's discrete row.  The
 ESO starts as the continuous loop's does (``eso.init``: "zero", the default, or "output",
-:math:`\hat\xi_1 = ` the first measurement; see :func:`_tpl_ctrl_init`).
+:math:`\hat\xi_1 = ` the first measurement, or "bumpless", that and the differentiator at
+rest at it; see :func:`_tpl_ctrl_init`).
 :class:`DiscreteController` compiles the same :func:`_tpl_ctrl_step` without a plant and
 steps it from Python: the engine's discrete controller, sample by sample (the C export is
 checked against it).
@@ -114,7 +115,8 @@ def _tpl_ctrl_init(iq, cs, y0):  # pragma: no cover - compiled
     r"""Controller state before the first sample, as the continuous loop starts its ESO
     (``eso.init``, :data:`aiofl.layout.ESO_INIT_KINDS`): the TD at rest at 0, the ESO's
     prediction :math:`p_0 = 0` (``"zero"``, the default) or :math:`p_0 = (y_0, 0, ..., 0)`
-    with ``y0`` the first measurement (``"output"``: the first innovation is 0).
+    with ``y0`` the first measurement (``"output"``: the first innovation is 0); with
+    ``"bumpless"`` that prediction and the TD at rest at ``y0`` (:math:`r_1 = y_0`).
 
     The first sample's correction then gives :math:`\hat\xi_0 = L\,\phi(y_0)` or
     :math:`(y_0, 0, ..., 0)`.  :math:`p_1` is kept as its change since the previous
@@ -123,9 +125,14 @@ def _tpl_ctrl_init(iq, cs, y0):  # pragma: no cover - compiled
     """
     for i in range(N_CS):
         cs[i] = 0.0
-    if iq[IQ_EINIT] == L.ESO_INIT_OUTPUT:
+    if iq[IQ_EINIT] != L.ESO_INIT_ZERO:  # "output" or "bumpless"
         cs[C_Y] = y0  # p_1 = y0: its change since the measurement, cs[C_P], is 0
         cs[C_X] = y0
+    if iq[IQ_EINIT] == L.ESO_INIT_BUMPLESS and iq[IQ_TD] != L.TD_EXACT:
+        if iq[IQ_TD] == L.TD_HAN:
+            cs[C_RPREV] = y0  # Han's TD keeps r_1 - r_prev = 0 with r_prev = y0
+        else:
+            cs[C_TD] = y0  # the ITD's / prefilter's r_1 at rest at y0
 
 
 def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri, pn):  # pragma: no cover - compiled
@@ -478,11 +485,23 @@ class DiscreteController:
         self._rr = np.zeros((1, L.RHO_MAX + 2))
 
     def init(self, y0: float) -> None:
-        r"""Reset the states for the first measurement ``y0``: the differentiator at rest
-        at 0 and the ESO as ``controller.eso_init`` says (``"zero"``, the default:
-        prediction 0, ``y0`` unused; ``"output"``: :math:`\hat\xi_1 = y_0`, the other
-        states 0), as the continuous loop starts it."""
+        r"""Reset the states for the first measurement ``y0`` as ``controller.eso_init``
+        says, as the continuous loop starts it: ``"zero"`` (the default: prediction 0, the
+        differentiator at 0, ``y0`` unused), ``"output"`` (:math:`\hat\xi_1 = y_0`, the
+        other states 0) or ``"bumpless"`` (that and the differentiator at rest at ``y0``;
+        :meth:`reset`)."""
         self._fn.init(self._iq, self._cs, float(y0))
+
+    def reset(self, y0: float) -> None:
+        r"""A bumpless (re)start at the measurement ``y0``, at any sample boundary: the ESO
+        at :math:`\hat\xi = (y_0, 0, ..., 0)` and the differentiator / prefilter at rest at
+        ``y0`` (``eso.init = "bumpless"``), whatever the config's start.  A plant at rest at
+        :math:`y_0 = r` then gets u = 0 at the next sample (:math:`e = 0`,
+        :math:`\hat\xi_{\rho+1} = 0`; with the model-assisted observer the nominal
+        :math:`-\hat\alpha/\hat\beta` at :math:`\Phi^{-1}(y_0, 0, ...)`)."""
+        iq = self._iq.copy()
+        iq[IQ_EINIT] = L.ESO_INIT_BUMPLESS
+        self._fn.init(iq, self._cs, float(y0))
 
     def step(self, r: float | Sequence[float] | NDArray[np.float64], y: float) -> float:
         """One sample: ``r`` = r (or r, ṙ, ..., r^(ρ)) at t_k, ``y`` the measurement; returns u."""
