@@ -1,15 +1,14 @@
 """The C export: compiled with the system C compiler, loaded with ctypes, driven in closed
 loop with a plant simulation, its commands equal the engine's discrete controller's
-(1e-9 relative in double, 1e-4 in float) for LESO, INLESO and LADRC designs at ρ = 1..4;
-float code compiles under -Wconversion -Wdouble-promotion; IOFL is refused."""
+(double: 1e-12 of the largest command on well-conditioned designs; float: 2e-5) for LESO,
+INLESO and LADRC designs at ρ = 1..4 and in every start mode; the API (prefix, parameter
+struct, bumpless start, parameter instances) works from C."""
 
 from __future__ import annotations
 
-import ctypes
 import dataclasses
 import math
 import re
-import shutil
 import subprocess
 from pathlib import Path
 
@@ -17,21 +16,18 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from aiofl import layout as L
 from aiofl.cli.app import app
 from aiofl.config import load_config
 from aiofl.controller import Controller
 from aiofl.engine.discrete import Sampling
 from aiofl.engine.sampled import DiscreteController
-from aiofl.export import HEADER, SOURCE, ExportError, export_c
+from aiofl.export.c_check import CC, STRICT_FLOAT, WARN, CController, build, loop
+from aiofl.export import HEADER, PARAMS, SOURCE, ExportError, export_c
 from aiofl.plants import get_plant
 from aiofl.plants.base import Plant
 from aiofl.scenario import Reference
 
-CC = shutil.which("cc")
 needs_cc = pytest.mark.skipif(CC is None, reason="no C compiler 'cc' on PATH")
-CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-O2", "-shared", "-fPIC"]
-STRICT_FLOAT = ["-Wconversion", "-Wdouble-promotion"]
 
 BETA_SLFJM = 1.61 * 0.00767 * 70.0 / (0.0059 * 0.0021 * 2.6)
 # relative degree -> (plant, its true input gain, a reference it can follow)
@@ -41,22 +37,17 @@ PLANTS = {
     3: ("dcmotor_arm", 500.0, Reference(amplitude=0.5, omega=1.0)),
     4: ("slfjm", BETA_SLFJM, Reference(amplitude=math.pi / 4, omega=2.0)),
 }
+TOL = {"double": 1e-12, "float": 2e-5}
 
 
 def design(structure: str, rho: int) -> Controller:
     """A working design of each structure for the plant of relative degree ρ: Han's TD / the
     ITD at ρ ≤ 2, exact derivatives at ρ = 3, 4 (n_feedback = ρ), and the shipped re-tuned
-    LESO at ρ = 4.  (The re-tuned INLESO's ITD is unstable under Euler at Ts = 1 ms, see
-    test_shipped_designs_export_and_agree.)"""
+    LESO at ρ = 4."""
     _, b, _ = PLANTS[rho]
     if rho == 4 and structure == "LESO":
         return load_config("retuned-s1-leso").controller
-    w0 = {1: 40.0, 2: 60.0, 3: 80.0, 4: 100.0}[rho]
-    if structure == "INLESO" and rho == 4:
-        # the Euler INLESO's local gain |e|^(g_alpha - 1) grows without bound as e -> 0: at
-        # w0 = 100 it chatters at a small amplitude, and two implementations part at the
-        # 1e-8 level (test_an_inleso_that_chatters_near_zero_error_parts_implementations)
-        w0 = 50.0
+    w0 = {1: 40.0, 2: 60.0, 3: 80.0, 4: 50.0}[rho]
     wc = {1: 5.0, 2: 7.5, 3: 10.0, 4: 12.5}[rho]
     extra = {"law.u_max": 10.0} if rho == 1 else {}  # the tank's pump saturates
     if structure == "LADRC":
@@ -88,86 +79,37 @@ def design(structure: str, rho: int) -> Controller:
     return ctrl.with_binomial_alphas()
 
 
-def compile_library(tmp: Path, files: dict[str, str], extra: list[str] | None = None) -> Path:
-    """Write the files and build a shared library with the system compiler (-Werror)."""
-    for name, text in files.items():
-        (tmp / name).write_text(text)
-    lib = tmp / "libaiofl.so"
-    cmd = [str(CC), *CFLAGS, *(extra or []), "-o", str(lib), str(tmp / SOURCE), "-lm"]
-    proc = subprocess.run(cmd, capture_output=True, text=True, check=False)
-    assert proc.returncode == 0, proc.stderr
-    return lib
-
-
-def _reference(ref: Reference, t: float, rho: int) -> list[float]:
-    """r, ṙ, ..., r^(ρ) of a sine reference at t."""
-    out = [
-        ref.amplitude * ref.omega**k * math.sin(ref.omega * t + ref.phase + k * math.pi / 2)
-        for k in range(rho + 1)
-    ]
-    out[0] += ref.offset
-    return out
-
-
-def closed_loop(
-    lib_path: Path,
+def versus_engine(
+    folder: Path,
+    files: dict[str, str],
     precision: str,
     plant: Plant,
     ref: Reference,
-    controller: Controller,
+    ctrl: Controller,
     sampling: Sampling,
     t_final: float,
-    n_sub: int = 5,
+    mode: str = "zero",
     x0: tuple[float, ...] = (),
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Drive the plant (RK4 at Ts/n_sub, the command held) with the C controller; step the
-    engine's discrete controller on the same inputs (the measurement and reference as the C
-    code received them: rounded to float in a float build; a model-assisted controller's
-    with the plant's nominal model, its gain placed at ``x0``).  Returns (u_C, u_engine, y)."""
-    lib = ctypes.CDLL(str(lib_path))
-    real = ctypes.c_double if precision == "double" else ctypes.c_float
-    lib.aiofl_init.argtypes = [ctypes.c_void_p, real]
-    lib.aiofl_init.restype = None
-    lib.aiofl_step.argtypes = [ctypes.c_void_p, ctypes.POINTER(real), real]
-    lib.aiofl_step.restype = real
-    state = (ctypes.c_double * 128)()  # larger than any aiofl_state, double-aligned
-    rbuf = (real * (L.RHO_MAX + 1))()
-    model = plant if controller.eso_model != "none" else None  # the nominal model's plant
-    engine = DiscreteController(controller, sampling, plant=model, x0=x0)
-    f, g, h = plant.compiled[:3]
-    p = plant.param_vector()
-    x = np.zeros(plant.n_states)
-    if plant.name == "tank":  # start at the reference's level, not empty (saturated pump)
-        x[0] = ref.offset
-    dt = sampling.ts / n_sub
+    """Drive the plant with the C controller started in ``mode``; step the engine's
+    discrete controller started the same way (``eso.init = mode``) on the same, unrounded
+    measurement and reference.  Returns (u_C, u_engine, y)."""
+    extra = STRICT_FLOAT if precision == "float" else []
+    cc = CController(build(folder, files, extra), precision)
+    model = plant if ctrl.eso_model != "none" else None
+    eng = DiscreteController(dataclasses.replace(ctrl, eso_init=mode), sampling, model, x0)
+    u_e: list[float] = []
 
-    def rhs(xv: np.ndarray, u: float) -> np.ndarray:
-        return np.asarray(f(xv, p)) + np.asarray(g(xv, p)) * u
+    def step(r: list[float], y: float) -> float:
+        if not u_e:
+            cc.start(y, mode)
+            eng.init(y)
+        u_e.append(eng.step(r, y))
+        return cc.step(r, y)
 
-    u_c, u_e, ys = [], [], []
-    applied = 0.0
-    for k in range(round(t_final / sampling.ts)):
-        y = float(h(x, p))
-        rv = _reference(ref, k * sampling.ts, controller.rho)
-        if k == 0:
-            lib.aiofl_init(state, y)
-            engine.init(y)
-        for i, v in enumerate(rv):
-            rbuf[i] = v
-        uc = float(lib.aiofl_step(state, rbuf, y))
-        # the engine gets the measurement and reference the C code got (a float build's
-        # inputs are floats: 24 bits of y, which a high-order ESO amplifies by ~1/Ts^rho)
-        u_e.append(engine.step([float(rbuf[i]) for i in range(len(rv))], float(real(y).value)))
-        applied = (u_c[-1] if u_c else 0.0) if sampling.delay else uc
-        u_c.append(uc)
-        ys.append(y)
-        for _ in range(n_sub):
-            k1 = rhs(x, applied)
-            k2 = rhs(x + 0.5 * dt * k1, applied)
-            k3 = rhs(x + 0.5 * dt * k2, applied)
-            k4 = rhs(x + dt * k3, applied)
-            x = x + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return np.array(u_c), np.array(u_e), np.array(ys)
+    start = (ref.offset,) if plant.name == "tank" else x0  # the tank: not empty
+    _, y, u_c = loop(step, plant, ref, ctrl.rho, sampling.ts, t_final, x0=start, n_sub=5)
+    return u_c, np.array(u_e), y
 
 
 CASES = [(s, rho) for rho in (1, 2, 3, 4) for s in ("LESO", "INLESO", "LADRC")]
@@ -178,15 +120,15 @@ CASES = [(s, rho) for rho in (1, 2, 3, 4) for s in ("LESO", "INLESO", "LADRC")]
 @pytest.mark.parametrize(("structure", "rho"), CASES, ids=[f"{s}-rho{r}" for s, r in CASES])
 def test_c_controller_equals_the_engines_in_closed_loop(tmp_path, structure, rho, precision):
     name, _, ref = PLANTS[rho]
-    plant = get_plant(name)
     ctrl = design(structure, rho)
     sampling = Sampling(1e-3)
-    lib = compile_library(tmp_path, export_c(ctrl, sampling, precision=precision))
-    u_c, u_e, y = closed_loop(lib, precision, plant, ref, ctrl, sampling, t_final=2.0)
+    files = export_c(ctrl, sampling, precision=precision)
+    u_c, u_e, y = versus_engine(
+        tmp_path, files, precision, get_plant(name), ref, ctrl, sampling, 2.0
+    )
     assert np.all(np.isfinite(u_e)) and np.max(np.abs(y)) < 1e3  # a working loop
-    scale = np.max(np.abs(u_e))
-    rel = np.max(np.abs(u_c - u_e)) / scale
-    assert rel < (1e-9 if precision == "double" else 1e-4), rel
+    rel = np.max(np.abs(u_c - u_e)) / np.max(np.abs(u_e))
+    assert rel < TOL[precision], rel
 
 
 @needs_cc
@@ -200,12 +142,17 @@ def test_c_controller_equals_the_engines_in_closed_loop(tmp_path, structure, rho
     ],
     ids=["delay", "euler-eso-euler-td", "fhan-h0", "inleso-delay"],
 )
-def test_c_controller_options_equal_the_engines(tmp_path, structure, rho, sampling):
+@pytest.mark.parametrize("mode", ["zero", "output", "bumpless"])
+def test_c_controller_options_and_starts_equal_the_engines(
+    tmp_path, structure, rho, sampling, mode
+):
     name, _, ref = PLANTS[rho]
     ctrl = design(structure, rho)
-    lib = compile_library(tmp_path, export_c(ctrl, sampling))
-    u_c, u_e, _ = closed_loop(lib, "double", get_plant(name), ref, ctrl, sampling, 1.0)
-    assert np.max(np.abs(u_c - u_e)) < 1e-9 * np.max(np.abs(u_e))
+    files = export_c(ctrl, sampling)
+    u_c, u_e, _ = versus_engine(
+        tmp_path, files, "double", get_plant(name), ref, ctrl, sampling, 1.0, mode
+    )
+    assert np.max(np.abs(u_c - u_e)) < TOL["double"] * np.max(np.abs(u_e))
 
 
 @needs_cc
@@ -214,145 +161,232 @@ def test_c_controller_options_equal_the_engines(tmp_path, structure, rho, sampli
     [("tank-ladrc", 1e-3, 2.0), ("dcmotor-arm-ladrc", 1e-3, 2.0), ("paper-s1-inleso", 1e-4, 0.5)],
 )
 def test_shipped_designs_export_and_agree(tmp_path, preset, ts, t_final):
-    """Shipped designs (exact reference derivatives, saturation, the paper's INLESO) through
-    the CLI.  The paper's ITD (ρ = 22.9, b/c = 107) is linearly unstable under Euler at 1 ms
-    (|1 + Ts λ| = 1.016) and oscillates; a controller whose discrete dynamics amplify
-    rounding cannot agree with another implementation beyond it, so it runs at 0.1 ms."""
+    """Shipped designs through the CLI (with --prefix).  The paper's ITD is linearly
+    unstable under Euler at 1 ms, so that design runs at 0.1 ms."""
     out = tmp_path / "c"
-    res = CliRunner().invoke(app, ["export", preset, "--ts", str(ts), "--out", str(out)])
+    args = ["export", preset, "--ts", str(ts), "--prefix", "ctl", "--out", str(out)]
+    res = CliRunner().invoke(app, args)
     assert res.exit_code == 0, res.output
     cfg = load_config(preset)
-    files = {n: (out / n).read_text() for n in (HEADER, SOURCE)}
-    lib = compile_library(tmp_path, files)
-    ref = cfg.scenario.reference
-    samp = Sampling(ts)
-    u_c, u_e, _ = closed_loop(lib, "double", cfg.plant, ref, cfg.controller, samp, t_final)
-    assert np.max(np.abs(u_c - u_e)) < 1e-9 * np.max(np.abs(u_e))
+    files = {p.name: p.read_text() for p in out.iterdir() if p.suffix in (".c", ".h")}
+    cc = CController(build(tmp_path / "b", files), "double", prefix="ctl")
+    eng = DiscreteController(cfg.controller, Sampling(ts))
+    u_e: list[float] = []
+
+    def step(r: list[float], y: float) -> float:
+        if not u_e:
+            cc.start(y, cfg.controller.eso_init)
+            eng.init(y)
+        u_e.append(eng.step(r, y))
+        return cc.step(r, y)
+
+    x0 = (cfg.scenario.reference.offset,) if cfg.plant.name == "tank" else ()
+    _, _, u_c = loop(step, cfg.plant, cfg.scenario.reference, cfg.controller.rho, ts, t_final, x0=x0)
+    assert np.max(np.abs(u_c - np.array(u_e))) < 1e-9 * np.max(np.abs(u_e))
 
 
 @needs_cc
 @pytest.mark.parametrize(("structure", "rho"), [("LESO", 2), ("INLESO", 2), ("LADRC", 4)])
 def test_float_code_has_no_double_arithmetic(tmp_path, structure, rho):
-    """-Wconversion -Wdouble-promotion -Werror: no silent double operation in float code."""
+    """-Wconversion -Wdouble-promotion -Werror: no silent double operation in float code
+    (the signals' differences are explicit casts); every parameter is a float literal."""
     files = export_c(design(structure, rho), Sampling(1e-3, delay=1), precision="float")
-    compile_library(tmp_path, files, STRICT_FLOAT)
-    assert "typedef float aiofl_real;" in files[HEADER]
-    # every numeric literal in the code (not in comments) is a float literal
-    code = re.sub(r"/\*.*?\*/", "", files[SOURCE], flags=re.S)
-    code = re.sub(r"#include.*", "", code)
+    build(tmp_path, files, STRICT_FLOAT)
+    assert "#define AIOFL_REAL_IS_FLOAT 1" in files[HEADER]
+    code = re.sub(r"/\*.*?\*/", "", files[PARAMS], flags=re.S).split("aiofl_params", 1)[1]
     literals = re.findall(r"(?<![\w.\[])(\d+\.\d*(?:e[-+]?\d+)?f?)(?![\w.])", code)
     assert literals and all(lit.endswith("f") for lit in literals)
 
 
 def test_generated_code_follows_the_api_and_rules():
     ctrl = load_config("retuned-s1-inleso").controller
-    files = export_c(ctrl, Sampling(1e-3), title="t")
-    h, c = files[HEADER], files[SOURCE]
-    assert "typedef double aiofl_real;" in h
-    assert re.search(r"#define AIOFL_RHO 4\b", h)
-    assert re.search(r"#define AIOFL_TS 0\.001\b", h)
-    assert "typedef struct {" in h and "} aiofl_state;" in h
-    assert "void aiofl_init(aiofl_state *s, aiofl_real y0);" in h
-    assert "aiofl_real aiofl_step(aiofl_state *s, const aiofl_real *r, aiofl_real y);" in h
-    assert re.findall(r"#include\s*(\S+)", c) == ["<math.h>", f'"{HEADER}"']
+    files = export_c(ctrl, Sampling(1e-3), title="t", prefix="motor")
+    assert set(files) == {"motor_controller.h", "motor_controller.c", "motor_params.c"}
+    h, c = files["motor_controller.h"], files["motor_controller.c"]
+    assert re.search(r"#define MOTOR_RHO 4\b", h) and re.search(r"#define MOTOR_TS 0\.001\b", h)
+    assert "#define MOTOR_U_MIN (-5.0)" in h and "#define MOTOR_U_MAX (5.0)" in h
+    for proto in (
+        "void motor_init(motor_state *s, const motor_params *p, motor_signal y0);",
+        "void motor_reset(motor_state *s, const motor_params *p, motor_signal y0);",
+        "void motor_start(motor_state *s, const motor_params *p, motor_signal y0, int mode);",
+        "motor_real motor_step(motor_state *s, const motor_params *p, const motor_signal *r, "
+        "motor_signal y);",
+        "extern const motor_params motor_default_params;",
+    ):
+        assert proto in h
+    assert "aiofl_" not in c and "AIOFL_" not in c  # the prefix replaced every name
+    assert re.findall(r"#include\s*(\S+)", c) == ["<math.h>", '"motor_controller.h"']
     assert not re.search(r"\b(malloc|calloc|realloc|free)\b", c)
-    # file-scope objects: only static const parameters
-    for line in c.splitlines():
-        if re.match(r"^[a-z].*=", line):
-            assert line.startswith("static const aiofl_real "), line
-    # every parameter value and the discretisation in the comment block
+    # the source is the shipped template, prefixed
+    from aiofl.export.c_code import apply_prefix, template
+
+    assert c == apply_prefix(template("controller.c"), "motor")
     for name in ("law.b0", "eso.omega0", "eso.k_alpha", "td.rho", "sef.mu2", "sef.v_limit"):
-        assert f"{name} = {ctrl.value(name)!r}" in h and f"{name} = " in c
+        assert f"{name} = {ctrl.value(name)!r}" in h
     assert "forward Euler" in h and "Ts = 0.001 s" in h
 
 
-def test_iofl_and_missing_sample_time_are_refused(tmp_path):
-    with pytest.raises(ExportError, match="IOFL law evaluates the plant model"):
-        export_c(load_config("iofl-s1").controller, Sampling(1e-3))
-    with pytest.raises(ExportError, match="no sample time"):
-        export_c(load_config("retuned-s1-leso").controller, None)
-    runner = CliRunner()
-    for args, needle in (
-        (["iofl-s1", "--ts", "1e-3"], "IOFL law evaluates the plant model"),
-        (["retuned-s1-leso"], "no sample time"),
-        (["retuned-s1-leso", "--ts", "1e-3", "--precision", "half"], "--precision"),
-        (["retuned-s1-inleso", "--ts", "-1"], "--ts"),
-    ):
-        out = tmp_path / "x"
-        res = runner.invoke(app, ["export", *args, "--out", str(out)])
-        assert res.exit_code == 2, res.output
-        assert needle in res.output
-        assert not out.exists()
+# ------------------------------------------------------------- firmware-ready C, from C
+MAIN = r"""
+#include <stdio.h>
+#include "a_controller.h"
+#include "b_controller.h"
+int main(void)
+{
+    a_state sa; b_state sb;
+    const a_signal ra[A_RHO + 1] = {0.1};
+    const b_signal rb[B_RHO + 1] = {0.1};
+    a_real ua; b_real ub;
+    a_init(&sa, &a_default_params, 0.0);
+    b_init(&sb, &b_default_params, 0.0);
+    ua = a_step(&sa, &a_default_params, ra, 0.0);
+    ub = b_step(&sb, &b_default_params, rb, 0.0);
+    printf("%d %d %.17g %.17g\n", A_RHO, B_RHO, (double)ua, (double)ub);
+    return 0;
+}
+"""
 
 
 @needs_cc
-def test_an_inleso_that_chatters_near_zero_error_parts_implementations(tmp_path):
-    """Why the ρ = 4 INLESO test design uses ω0 = 50: at ω0 = 100 the Euler INLESO with
-    g_alpha = 0.9 (local gain |e|^-0.1, unbounded at e = 0) chatters at a small amplitude;
-    the C code and the engine then agree only to ~1e-7, while with a linear injection
-    (g_alpha = 1) at the same ω0 they agree to rounding."""
-    name, _, ref = PLANTS[4]
-    base = design("INLESO", 4).with_values(**{"eso.omega0": 100.0})
-    rel = {}
-    for ga in (0.9, 1.0):
-        ctrl = base.with_values(**{"eso.g_alpha": ga})
-        (tmp_path / str(ga)).mkdir()  # a new path: dlopen returns a loaded library again
-        lib = compile_library(tmp_path / str(ga), export_c(ctrl, Sampling(1e-3)))
-        u_c, u_e, _ = closed_loop(lib, "double", get_plant(name), ref, ctrl, Sampling(1e-3), 2.0)
-        rel[ga] = np.max(np.abs(u_c - u_e)) / np.max(np.abs(u_e))
-    assert rel[1.0] < 1e-11 < 1e-9 < rel[0.9]
+@pytest.mark.parametrize("precision", ["double", "float"])
+def test_two_prefixed_exports_link_into_one_program(tmp_path, precision):
+    """Two designs of different ρ and structure, prefixes a and b, in one program under
+    -std=c99 -Wall -Wextra -Werror (float: -Wconversion -Wdouble-promotion): every
+    external symbol carries its prefix (nm), and each gives its own first command."""
+    ca, cb = design("LADRC", 2), design("LESO", 4)
+    files = export_c(ca, Sampling(1e-3), precision=precision, prefix="a")
+    files |= export_c(cb, Sampling(1e-3), precision=precision, prefix="b")
+    for n, t in files.items():
+        (tmp_path / n).write_text(t)
+    (tmp_path / "main.c").write_text(MAIN)
+    extra = STRICT_FLOAT if precision == "float" else []
+    srcs = sorted(str(p) for p in tmp_path.glob("*.c"))
+    exe = tmp_path / "prog"
+    proc = subprocess.run(
+        [str(CC), *WARN, *extra, "-o", str(exe), *srcs, "-lm"], capture_output=True, text=True
+    )
+    assert proc.returncode == 0, proc.stderr
+    out = subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout.split()
+    assert out[:2] == ["2", "4"]
+    for src in (s for s in srcs if not s.endswith("main.c")):
+        obj = tmp_path / (Path(src).stem + ".o")
+        subprocess.run([str(CC), *WARN, *extra, "-c", "-o", str(obj), src], check=True)
+        nm = subprocess.run(["nm", "-g", "--defined-only", str(obj)], capture_output=True, text=True)
+        names = [ln.split()[-1] for ln in nm.stdout.splitlines() if ln.strip()]
+        assert names and all(n.startswith(Path(src).stem[0] + "_") for n in names), names
+    for prefix, ctrl in (("a", ca), ("b", cb)):  # the first command equals the engine's
+        eng = DiscreteController(dataclasses.replace(ctrl, eso_init="bumpless"), Sampling(1e-3))
+        eng.init(0.0)
+        want = eng.step([0.1] + [0.0] * ctrl.rho, 0.0)
+        got = float(out[2 if prefix == "a" else 3])
+        assert abs(got - want) <= TOL[precision] * max(1.0, abs(want)), (prefix, got, want)
+
+
+@needs_cc
+def test_switching_parameter_instances_at_a_sample_boundary(tmp_path):
+    """--params-only writes a second instance (ω0, ω_c, b0 changed); the controller steps
+    with the default for 1 s, then with the second one: the commands equal the engine's
+    controller A for 1 s, then controller B carrying on from A's state."""
+    name, _, ref = PLANTS[2]
+    ca = design("LADRC", 2)
+    cb = ca.with_values(**{"eso.omega0": 90.0, "sef.omega_c": 9.0, "law.b0": 5.0})
+    s = Sampling(1e-3)
+    files = export_c(ca, s) | export_c(cb, s, params_only="fast")
+    assert set(files) == {HEADER, SOURCE, PARAMS, "aiofl_fast.c", "aiofl_fast.h"}
+    cc = CController(build(tmp_path, files), "double")
+    ea, eb = (DiscreteController(dataclasses.replace(c, eso_init="bumpless"), s) for c in (ca, cb))
+    u_e: list[float] = []
+
+    def step(r: list[float], y: float) -> float:
+        k = len(u_e)
+        if k == 0:
+            cc.start(y, "bumpless")
+            ea.init(y)
+        if k == 1000:  # the sample boundary
+            cc.use("aiofl_fast")
+            eb.state = ea.state
+        u_e.append((ea if k < 1000 else eb).step(r, y))
+        return cc.step(r, y)
+
+    _, _, u_c = loop(step, get_plant(name), ref, 2, 1e-3, 2.0)
+    u_e_arr = np.array(u_e)
+    assert np.max(np.abs(u_c - u_e_arr)) < 1e-12 * np.max(np.abs(u_e_arr))
+    # B differs from A: the switch changed the commands
+    u_a = [ea.step(r, 0.0) for r in ([0.5, 0.0, 0.0],) * 3]
+    u_b = [eb.step(r, 0.0) for r in ([0.5, 0.0, 0.0],) * 3]
+    assert abs(u_a[-1] - u_b[-1]) > 1e-3
 
 
 @needs_cc
 @pytest.mark.parametrize(
-    ("structure", "precision"),
-    [("LADRC", "double"), ("LADRC", "float"), ("INLESO", "double")],
+    "other",
+    [
+        {"prefix": "aiofl", "ts": 2e-3},
+        {"prefix": "aiofl", "rho": 1},
+        {"prefix": "aiofl", "precision": "float"},
+        {"prefix": "aiofl", "delay": 1},
+    ],
+    ids=["ts", "rho", "precision", "delay"],
 )
-def test_eso_init_zero_and_output_c_equals_the_engine(tmp_path, structure, precision):
-    """``eso.init`` reaches aiofl_init: "zero" (the default) starts the ESO at 0 and ignores
-    y0, "output" at (y0, 0, ...); for each, the C commands equal the engine's discrete
-    controller's.  On the tank, started at y0 = 1, the two starts give different commands
-    (zero: the first correction sees the whole y0)."""
-    name, _, ref = PLANTS[1]
-    base = design(structure, 1)
-    assert base.eso_init == "zero"
-    commands = {}
-    for init in ("zero", "output"):
-        ctrl = dataclasses.replace(base, eso_init=init)
-        files = export_c(ctrl, Sampling(1e-3), precision=precision)
-        init_code = files[SOURCE].split("void aiofl_init", 1)[1].split("\n}\n", 1)[0]
-        if init == "zero":
-            assert "(void)y0;" in init_code and "= y0" not in init_code
-            assert "(eso.init = zero:\n * the ESO starts at 0, y0 is not used)" in files[HEADER]
-        else:
-            assert "s->y_prev = y0;" in init_code and "s->xhat[0] = y0;" in init_code
-            assert "(eso.init = output:\n * the ESO starts at xhat = (y0, 0" in files[HEADER]
-        (tmp_path / init).mkdir()  # a new path: dlopen returns a loaded library again
-        lib = compile_library(tmp_path / init, files, STRICT_FLOAT if precision == "float" else [])
-        u_c, u_e, y = closed_loop(lib, precision, get_plant(name), ref, ctrl, Sampling(1e-3), 1.0)
-        assert y[0] == ref.offset and np.all(np.isfinite(u_e))
-        rel = np.max(np.abs(u_c - u_e)) / np.max(np.abs(u_e))
-        assert rel < (1e-9 if precision == "double" else 1e-4), (init, rel)
-        commands[init] = u_e
-    assert np.max(np.abs(commands["zero"] - commands["output"])) > 0.1
+def test_a_parameter_instance_of_another_layout_does_not_compile(tmp_path, other):
+    """The params-only file checks AIOFL_LAYOUT (prefix, precision, ρ, Ts, options) with
+    #error; the same design compiles."""
+    ctrl = design("LADRC", 2)
+    files = export_c(ctrl, Sampling(1e-3))
+    same = export_c(ctrl.with_values(**{"eso.omega0": 80.0}), Sampling(1e-3), params_only="b")
+    build(tmp_path / "same", files | same)
+    c2 = design("LADRC", other.get("rho", 2))
+    s2 = Sampling(other.get("ts", 1e-3), delay=other.get("delay", 0))
+    bad = export_c(c2, s2, params_only="b", precision=other.get("precision", "double"))
+    for n, t in (files | bad).items():
+        (tmp_path / n).write_text(t)
+    proc = subprocess.run(
+        [str(CC), *WARN, "-c", "-o", str(tmp_path / "b.o"), str(tmp_path / "aiofl_b.c")],
+        capture_output=True,
+        text=True,
+    )
+    assert proc.returncode != 0 and "these parameters are for another controller" in proc.stderr
 
 
 @needs_cc
-@pytest.mark.parametrize("structure", ["LESO", "INLESO", "LADRC"])
-def test_asymmetric_actuator_range_c_equals_the_engine(tmp_path, structure):
-    """An asymmetric range law.u_min = -0.5 law.u_max: the C code clamps to [U_MIN, U_MAX]
-    like the engine; on the tank (ρ = 1) both limits are reached, and the commands agree."""
-    name, _, ref = PLANTS[1]
-    u_max = 10.0
-    ctrl = design(structure, 1).with_values(**{"law.u_max": u_max, "law.u_min": -0.5 * u_max})
-    assert ctrl.u_range() == (-5.0, 10.0)
-    files = export_c(ctrl, Sampling(1e-3))
-    src = files[SOURCE]
-    assert "static const aiofl_real U_MIN = -5.0;" in src
-    assert "static const aiofl_real U_MAX = 10.0;" in src
-    assert "if (u < U_MIN) u = U_MIN;" in src and "if (u > U_MAX) u = U_MAX;" in src
-    lib = compile_library(tmp_path, files)
-    u_c, u_e, _ = closed_loop(lib, "double", get_plant(name), ref, ctrl, Sampling(1e-3), 2.0)
-    assert np.min(u_e) == -5.0 and np.max(u_e) == 10.0  # both clamps active
-    assert np.min(u_c) == -5.0 and np.max(u_c) == 10.0
-    assert np.max(np.abs(u_c - u_e)) < 1e-9 * u_max
+@pytest.mark.parametrize("structure", ["LADRC", "LESO", "INLESO"])
+def test_bumpless_start_holds_the_pendulum(tmp_path, structure):
+    """The pendulum at rest at y0 = r = 0.3: with the bumpless start the first command is
+    no larger than the input that holds it there (here 0: the extended state starts at 0),
+    and the output stays within 1e-3 of 0.3 for 1 s; the zero start kicks it (|u(t0)|
+    far above the holding input).  NAME_reset mid-run (after a run elsewhere) is the same."""
+    plant = get_plant("pendulum")
+    p = plant.param_vector()
+    x0 = np.array([0.3, 0.0])
+    g = np.asarray(plant.compiled[1](x0, p))
+    u_hold = abs(float(np.asarray(plant.compiled[0](x0, p))[1] / g[1]))
+    ref = Reference(amplitude=0.0, omega=1.0, offset=0.3)
+    ctrl = design(structure, 2)
+    cc = CController(build(tmp_path, export_c(ctrl, Sampling(1e-3))), "double")
+    first = {}
+    for mode in ("bumpless", "zero"):
+        us: list[float] = []
+
+        def step(r: list[float], y: float, mode: str = mode, us: list[float] = us) -> float:
+            if not us:
+                cc.start(y, mode)
+            us.append(cc.step(r, y))
+            return us[-1]
+
+        _, y, _ = loop(step, plant, ref, 2, 1e-3, 1.0, x0=x0)
+        first[mode] = (abs(us[0]), float(np.max(np.abs(y - 0.3))))
+    assert first["bumpless"][0] <= u_hold + 1e-12
+    assert first["bumpless"][1] < 1e-3 < first["zero"][1] or first["zero"][0] > 10 * u_hold
+    # reset mid-run: after a second of tracking another reference, at rest at 0.3 again
+    cc.start(0.0, "zero")
+    for k in range(500):
+        cc.step([0.5 * math.sin(k * 1e-3), 0.0, 0.0], 0.1)
+    cc.reset(0.3)
+    assert abs(cc.step([0.3, 0.0, 0.0], 0.3)) <= u_hold + 1e-12
+
+
+def test_iofl_and_missing_sample_time_are_refused():
+    with pytest.raises(ExportError, match="IOFL law evaluates the plant model"):
+        export_c(load_config("iofl-s1").controller, Sampling(1e-3))
+    with pytest.raises(ExportError, match="no sample time"):
+        export_c(load_config("retuned-s1-leso").controller, None)

@@ -325,3 +325,26 @@ def test_start_is_an_integer_parameter_fixed_before_initialisation(fmus, loops):
         s.setInteger([f.vr["start"]], [int(start.start)])
     s.terminate()
     s.freeInstance()
+
+
+@pytest.mark.parametrize("mode", list(START))
+def test_each_start_mode_gives_the_engines_commands_with_that_eso_init(fmus, mode):
+    import dataclasses
+
+    f = fmus["retuned-s1-leso"]  # Han's TD: bumpless and output start it differently
+    ctrl = dataclasses.replace(f.cfg.controller, eso_init=mode)
+    y, r, u_engine = engine_loop(f.cfg, ctrl, 0.3)
+    s = f.slave()
+    s.setInteger([f.vr["start"]], [START[mode]])
+    vin, vu = [f.vr[n] for n in f.inputs], f.vr["u"]
+    s.enterInitializationMode()
+    s.setReal(vin, [y[0], r[0, 0]])
+    s.exitInitializationMode()
+    u_fmu = []
+    for k in range(len(y)):
+        s.setReal(vin, [y[k], r[k, 0]])
+        u_fmu.append(s.getReal([vu])[0])
+        s.doStep(currentCommunicationPoint=k * TS, communicationStepSize=TS)
+    s.terminate()
+    s.freeInstance()
+    assert rel(np.array(u_fmu), u_engine) <= 1e-12

@@ -1,30 +1,74 @@
-"""``aiofl export CONFIG [--ts TS] [--precision double|float] --out DIR``: the controller as C99.
+"""``aiofl export CONFIG --ts TS [--precision P] [--prefix NAME] [--params-only] --out DIR``.
 
-Writes ``DIR/aiofl_controller.h`` and ``DIR/aiofl_controller.c`` (:mod:`aiofl.export`), the
-discrete controller the engine simulates with ``--ts`` / ``[controller.discrete]``.  A
-controller the C code cannot express (the IOFL law, which needs the plant model; a
-model-assisted controller of a plant without symbolic expressions, whose nominal model is
-generated as C from them), a missing sample time or a bad option exits with status 2 and the
-reason; nothing is written then.
+Writes the sampled controller as C99 (:mod:`aiofl.export`): ``NAME_controller.h``,
+``NAME_controller.c``, ``NAME_params.c`` (and ``NAME_model.h`` for a model-assisted
+controller); with ``--params-only`` only ``NAME_<params-name>.h/.c``, another parameter
+instance for a controller exported with the same prefix, precision, ρ, Ts and options.
 
-Before writing, the design is simulated as the config describes it (sampled at the exported
-Ts when that is a multiple of the config's dt): a design that diverges there is still
-exported (exit 0), with a warning on stderr naming the time, so firmware is never generated
-from a diverging loop without a word.
-The config's name, description and path go into the files' comment block only, made inert
-by :func:`aiofl.export.c_text.comment_text` inside :func:`aiofl.export.export_c`.
+Bad input exits with status 2 and one message naming the option, nothing written (the files
+are staged in a temporary folder and renamed into place): ``--prefix`` that is not a C
+identifier prefix (:func:`aiofl.export.c_text.c_prefix`), ``--ts`` ≤ 0 or not a multiple
+of the config's dt, an unknown ``--format`` (:data:`FORMATS`, the one place the formats are
+listed), an ``--out`` that is a file, a controller the C cannot express (the IOFL law; a
+model-assisted controller of a plant without symbolic expressions), and a design whose
+closed loop diverges in its own simulation (the config as it is).
+
+Warnings (stderr, exit 0): the design sampled at Ts diverges, its sampled loop linearised
+at the operating point is unstable (:class:`aiofl.analysis.sampled_loop.SampledLoop`), or
+its ITAE exceeds the continuous design's by more than ``--tolerance`` (the criterion of
+``aiofl analyze --sampling``); with ``--precision float``, float does not hold
+(:func:`aiofl.export.c_check.float_holds`, which needs a C compiler).
 """
 
 from __future__ import annotations
 
+import math
+import re
+from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any
 
 import typer
 
 from aiofl.cli.errors import _check_out, bad_input_exits
 
-__all__ = ["export_command"]
+__all__ = ["FORMATS", "export_command"]
+
+
+def _c_files(cfg: Any, sampling: Any, config: str, opts: dict[str, Any]) -> dict[str, str]:
+    from aiofl.export import export_c
+
+    return export_c(
+        cfg.controller,
+        sampling,
+        precision=opts.get("precision", "double"),
+        prefix=opts.get("prefix", "aiofl"),
+        title=cfg.name,
+        notes=[f"Config: {config}", *([cfg.description] if cfg.description else [])],
+        plant=cfg.plant,  # a model-assisted controller's nominal model
+        plant_source=str(cfg.raw.get("plant", cfg.plant.name)),
+        x0=cfg.scenario.x0,
+        params_only=opts.get("params_only"),
+    )
+
+
+def _fmu_files(cfg: Any, sampling: Any, config: str, opts: dict[str, Any]) -> dict[str, bytes]:
+    """``NAME.fmu``: the C above as an FMI 2.0 co-simulation FMU (:mod:`aiofl.export.fmu`)."""
+    from aiofl.export.fmu import export_fmu_for_config
+
+    if opts.get("params_only"):
+        raise ValueError("--params-only writes C parameter files; allowed with --format c")
+    precision, prefix = opts.get("precision", "double"), opts.get("prefix", "aiofl")
+    return dict(
+        [export_fmu_for_config(cfg, sampling, precision=precision, config=config, prefix=prefix)]
+    )
+
+
+FORMATS: dict[str, Callable[[Any, Any, str, dict[str, Any]], dict[str, Any]]] = {
+    "c": _c_files,
+    "fmu": _fmu_files,
+}
+"""``--format`` -> the function writing its files ``(cfg, sampling, config, options)``."""
 
 
 def export_command(
@@ -35,57 +79,62 @@ def export_command(
         typer.Option("--ts", help="Sample time [s] (default: the config's [controller.discrete])."),
     ] = None,
     precision: Annotated[
-        Literal["double", "float"],
-        typer.Option("--precision", help="Arithmetic of the C code (C double or float)."),
+        str, typer.Option("--precision", help="Arithmetic of the C code: double or float.")
     ] = "double",
+    prefix: Annotated[
+        str, typer.Option("--prefix", help="Start of every C name (NAME_step, NAME_UP_RHO).")
+    ] = "aiofl",
     fmt: Annotated[
-        Literal["c", "fmu"],
-        typer.Option(
-            "--format",
-            help="c: C99 sources; fmu: an FMI 2.0 co-simulation FMU, NAME.fmu, with the C "
-            "sources and a Linux x86-64 binary built by the system C compiler.",
-        ),
+        str, typer.Option("--format", help="c: C99 sources; fmu: an FMI 2.0 co-simulation FMU.")
     ] = "c",
+    params_only: Annotated[
+        bool,
+        typer.Option("--params-only", help="Write only another parameter instance (.h/.c)."),
+    ] = False,
+    params_name: Annotated[
+        str | None,
+        typer.Option("--params-name", help="Its name (default: the config's name)."),
+    ] = None,
+    tolerance: Annotated[
+        float, typer.Option(help="ITAE allowance of the sampled over the continuous design.")
+    ] = 0.1,
 ) -> None:
-    """Export the config's controller, sampled at Ts, as C99 (aiofl_controller.h/.c in OUT)."""
+    """Export the config's controller, sampled at Ts, as C99 (NAME_controller.h/.c in OUT)."""
     from aiofl.config import load_config
-    from aiofl.export import ExportError, export_c
+    from aiofl.export import PRECISIONS, ExportError
+    from aiofl.export.c_text import c_prefix
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 
     with bad_input_exits():
+        if fmt not in FORMATS:
+            raise ValueError(f"--format = {fmt!r}; allowed: {', '.join(FORMATS)}")
+        if precision not in PRECISIONS:
+            raise ValueError(f"--precision = {precision!r}; allowed: {', '.join(PRECISIONS)}")
+        c_prefix(prefix)
+        if not 0 < tolerance:
+            raise ValueError(f"--tolerance = {tolerance}; allowed: > 0")
         _check_out(out)
         cfg = load_config(config)
-        if ts is not None:
-            if not 0 < ts <= 1.0:  # the range of [controller.discrete] ts
-                raise ValueError(f"--ts = {ts}; allowed: 0 < ts <= 1 [s]")
-            from dataclasses import replace
-
-            from aiofl.engine.discrete import Sampling
-
-            base = cfg.sampling or Sampling(ts)
-            sampling = replace(base, ts=ts)
-        else:
-            sampling = cfg.sampling
+        sampling = _sampling(cfg, ts)
+        opts: dict[str, Any] = {"precision": precision, "prefix": prefix}
+        if params_only:
+            name = params_name or re.sub(r"[^A-Za-z0-9]+", "_", cfg.name).strip("_").lower()
+            if not re.match(r"[a-z]", name):
+                name = "params_" + name
+            try:
+                opts["params_only"] = c_prefix(name)
+            except ValueError:
+                raise ValueError(
+                    f"--params-name = {name!r} is not a C identifier; allowed: a letter, then "
+                    "letters, digits and single _"
+                ) from None
         try:
-            files = export_c(
-                cfg.controller,
-                sampling,
-                precision=precision,
-                title=cfg.name,
-                notes=[f"Config: {config}", *([cfg.description] if cfg.description else [])],
-                plant=cfg.plant,  # a model-assisted controller's nominal model
-                plant_source=str(cfg.raw.get("plant", cfg.plant.name)),
-                x0=cfg.scenario.x0,
-            )
-            if fmt == "fmu":  # aiofl.export.fmu: that C, wrapped, compiled and zipped
-                from aiofl.export.fmu import export_fmu_for_config
-
-                files = dict(
-                    [export_fmu_for_config(cfg, sampling, precision=precision, config=config)]
-                )
+            files = FORMATS[fmt](cfg, sampling, config, opts)
         except ExportError as exc:
             raise ValueError(f"cannot export {cfg.name!r}: {exc}") from None
-    warning = _divergence_warning(cfg, sampling, config)
+        warnings = _loop_checks(cfg, sampling, config, tolerance)
+    if precision == "float" and not params_only:
+        warnings += _float_check(cfg, sampling, config)
     with bad_input_exits(run=True), atomic_output_dir(out) as stage:
         for name, text in files.items():
             if isinstance(text, bytes):  # the FMU
@@ -93,31 +142,95 @@ def export_command(
             else:
                 atomic_write_text(stage / name, text)
     typer.echo(f"wrote {out}/{', '.join(files)} (Ts = {sampling.ts:g} s, {precision})")
-    if warning:
-        typer.echo(f"aiofl: warning: {warning}", err=True)
+    for w in warnings:
+        typer.echo(f"aiofl: warning: {w}", err=True)
 
 
-def _divergence_warning(cfg: Any, sampling: Any, config: str) -> str | None:
-    """Why the exported design should not go on a rig: it diverges in its own simulation
-    (sampled at the exported Ts when that is a multiple of dt); None when it does not."""
-    from aiofl.config import ConfigError
+def _sampling(cfg: Any, ts: float | None) -> Any:
+    """The export's sampling: the config's, at ``--ts`` when given (checked)."""
+    from dataclasses import replace
+
+    from aiofl.engine.discrete import Sampling
+
+    if ts is None:
+        if cfg.sampling is None:
+            raise ValueError(
+                "no sample time: give --ts or a [controller.discrete] table with ts in the config"
+            )
+        return cfg.sampling
+    if not (math.isfinite(ts) and 0 < ts <= 1.0):  # the range of [controller.discrete] ts
+        raise ValueError(f"--ts = {ts}; allowed: 0 < ts <= 1 [s]")
+    n = ts / cfg.dt
+    if abs(n - round(n)) > 1e-9 * max(1.0, n) or round(n) < 1:
+        raise ValueError(
+            f"--ts = {ts:g} is not an integer multiple of the config's dt = {cfg.dt:g} s"
+        )
+    return replace(cfg.sampling or Sampling(ts), ts=ts)
+
+
+def _loop_checks(cfg: Any, sampling: Any, config: str, tolerance: float) -> list[str]:
+    """Refuse (ValueError) a design that diverges in its own simulation; the warnings on the
+    design sampled at the exported Ts."""
+    from dataclasses import replace
+
+    from aiofl.engine.simulation import simulate_batch
     from aiofl.plants.base import PlantError
 
-    run_cfg = cfg
-    if cfg.sampling is None or cfg.sampling.ts != sampling.ts:
-        try:
-            run_cfg = cfg.with_sample_time(sampling.ts)
-        except ConfigError:  # Ts not a multiple of dt: the config's own loop
-            run_cfg = cfg
     try:
-        res = run_cfg.simulate(store=False)
+        own = cfg.simulate(store=False)
+        res = simulate_batch(
+            cfg.plant,
+            [cfg.controller] * 2,
+            cfg.scenario,
+            dt=cfg.dt,
+            method=cfg.method,
+            divergence_threshold=cfg.divergence_threshold,
+            sampling=[None, sampling],
+        )
     except (PlantError, ValueError) as exc:
-        return f"{config}: could not simulate the design before export ({exc})"
-    if not res.diverged:
-        return None
-    how = f"sampled at Ts = {run_cfg.sampling.ts:g} s" if run_cfg.sampling else "continuous"
-    return (
-        f"{config} diverges at {res.diverged_at:.2f} s in its own simulation ({how}, "
-        f"{run_cfg.scenario.t_final:g}-s scenario); the exported controller is that design: "
-        "check it with `aiofl simulate` before running it on hardware"
-    )
+        return [f"{config}: could not simulate the design before export ({exc})"]
+    if own.diverged:
+        how = f"sampled at Ts = {cfg.sampling.ts:g} s" if cfg.sampling else "continuous"
+        raise ValueError(
+            f"{config} diverges at {own.diverged_at:.3g} s in its own simulation ({how}, "
+            f"{cfg.scenario.t_final:g}-s scenario): a controller that diverges is not exported"
+        )
+    out = []
+    itae = res.metric("itae")
+    at = f"at Ts = {sampling.ts:g} s"
+    if res.diverged[1]:
+        out.append(
+            f"{config} sampled {at} diverges at {res.diverged_at[1]:.3g} s "
+            "(aiofl simulate --ts): choose a shorter Ts or re-tune"
+        )
+    elif not res.diverged[0] and itae[1] > (1.0 + tolerance) * itae[0]:
+        out.append(
+            f"{config} sampled {at} has ITAE {itae[1]:.4g} against {itae[0]:.4g} continuous, "
+            f"more than the {100 * tolerance:g} % allowance (aiofl analyze --sampling)"
+        )
+    try:
+        from aiofl.analysis.sampled_loop import SampledLoop
+
+        radius = SampledLoop(cfg).spectral_radius(sampling.ts) if not res.diverged[1] else None
+    except (ValueError, ArithmeticError, NotImplementedError):
+        radius = None
+    if radius is not None and radius > 1.0:
+        out.append(
+            f"{config} sampled {at}: the loop linearised at its operating point is unstable "
+            f"(spectral radius {radius:.4g} > 1)"
+        )
+    return out
+
+
+def _float_check(cfg: Any, sampling: Any, config: str) -> list[str]:
+    """A warning when the float build does not hold (or cannot be checked)."""
+    from aiofl.export.c_check import float_holds
+
+    try:
+        files = {p: _c_files(cfg, sampling, config, {"precision": p}) for p in ("double", "float")}
+        why = float_holds(cfg, sampling, files)
+    except RuntimeError as exc:
+        return [f"float precision not checked ({exc})"]
+    if why is None:
+        return []
+    return [f"float does not hold for {config} {why}: export with --precision double"]

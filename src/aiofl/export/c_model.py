@@ -6,14 +6,16 @@ nominal normal form in its own coordinates at the corrected estimate,
 .. math:: (\hat\alpha, \hat\beta) = (\alpha_0, \beta_0)\big(\Phi^{-1}(\hat\xi_{1..\rho})\big),
 
 (:attr:`aiofl.plants.normal_form.Analysis.alpha_beta_of_xi`).  :func:`model_code` writes it
-as ``static void aiofl_nominal_model(const aiofl_real *xi, aiofl_real *alpha, aiofl_real
-*beta)`` from the **same sympy expressions** the plant's Python function
+as ``static void aiofl_nominal_model(const aiofl_params *p, const aiofl_real *xi,
+aiofl_real *alpha, aiofl_real *beta)`` (the file ``aiofl_model.h`` the controller template
+includes under ``#if AIOFL_ESO_MODEL``) from the **same sympy expressions** the plant's Python function
 ``alpha_beta_of_xi`` is generated from (:func:`aiofl.plants.codegen.plant_sources`): the
 same substitution (:math:`\xi_i` as ``x[i-1]``, parameter k as ``p[k]``), the same common
 subexpressions (:func:`sympy.cse`, ``optimizations="basic"``), printed by a
 :class:`sympy.printing.c.C99CodePrinter` (single precision: its ``float`` aliases, so
 ``sinf``, ``sqrtf``, ...), so the C evaluates the operations the engine evaluates, in the
-same order.  The nominal parameters the expressions use are the array ``PLANT_P``.
+same order.  The nominal parameters the expressions use are the parameter struct's array
+``plant_p`` (``PLANT_P`` in the function), so a second parameter instance may retune them.
 
 Only aiofl's own names reach the code: the printer writes a symbol through a fixed map
 (``x[i]`` -> ``xi[i]``, ``p[k]`` -> ``PLANT_P[j]``, temporaries -> ``t0, t1, ...``) and
@@ -46,10 +48,7 @@ from aiofl.export.errors import ExportError
 from aiofl.plants.base import Plant
 
 __all__ = [
-    "INPUT_MODEL",
-    "LAW_MODEL",
     "MODEL_FUNCTION",
-    "STEP_MODEL",
     "ModelCode",
     "model_code",
     "nominal_model",
@@ -58,18 +57,6 @@ __all__ = [
 
 MODEL_FUNCTION = "aiofl_nominal_model"
 _PARAMS = "PLANT_P"
-
-# the step's lines of the model-assisted controller (aiofl.engine.sampled._tpl_ctrl_step):
-# the model at the corrected estimate, the law, and the prediction's input
-STEP_MODEL = [
-    "    /* the nominal model at the corrected estimate: (alpha, beta)(PHI^-1(xhat)) */",
-    f"    {MODEL_FUNCTION}(s->xhat, &a_hat, &b_hat);",
-]
-LAW_MODEL = [
-    "    /* model-assisted law: u = (b0 v - alpha - xhat_(rho+1))/beta */",
-    "    u = (B0 * v - a_hat - s->xhat[AIOFL_RHO]) / b_hat;",
-]
-INPUT_MODEL = ["    um = (a_hat + b_hat * um) / B0;  /* GAMMA holds B0: the model's input */"]
 
 # the <math.h> functions sympy's C99 printer may call, in both precisions
 _MATH_NAMES = frozenset(
@@ -87,9 +74,10 @@ _TOKEN = re.compile(
 
 @dataclass(frozen=True)
 class ModelCode:
-    """The C of the nominal model: file-scope constants, the function, comment lines."""
+    """The C of the nominal model: the nominal parameter values (the params struct's
+    ``plant_p``), the function (the file ``aiofl_model.h``), comment lines."""
 
-    params: list[str]
+    values: list[float]
     function: list[str]
     info: list[str]
 
@@ -268,15 +256,18 @@ def model_code(
     body = [f"    const aiofl_real {t} = {code(v)};" for t, (_, v) in zip(temps, reps, strict=True)]
     body += [f"    *alpha = {code(reduced[0])};", f"    *beta = {code(reduced[1])};"]
     pnames = [comment_text(str(symbolic.param_symbols[k]), limit=40) for k in used]
-    params = []
-    if used:
-        vals = ", ".join(lit(p_sym[k]) for k in used)
-        params.append(f"static const aiofl_real {_PARAMS}[{len(used)}] = {{{vals}}};")
     function = [
         "/* the nominal normal form in its own coordinates, (alpha, beta)(PHI^-1(xi)), from",
-        "   the plant's symbolic model (generated, common subexpressions t_j) */",
-        f"static void {MODEL_FUNCTION}(const aiofl_real *xi, aiofl_real *alpha, aiofl_real *beta)",
+        "   the plant's symbolic model (generated, common subexpressions t_j); the nominal",
+        "   parameters are the params struct's plant_p */",
+        f"static void {MODEL_FUNCTION}(const aiofl_params *p, const aiofl_real *xi,",
+        "                              aiofl_real *alpha, aiofl_real *beta)",
         "{",
+        *(
+            [f"    const aiofl_real *{_PARAMS} = p->plant_p;"]
+            if any(_PARAMS in line for line in body)
+            else ["    (void)p;"]
+        ),
         *([] if any("xi[" in line for line in body) else ["    (void)xi;"]),
         *body,
         "}",
@@ -291,7 +282,7 @@ def model_code(
             for j, (k, n) in enumerate(zip(used, pnames, strict=True))
         ),
     ]
-    return ModelCode(params=params, function=function, info=info)
+    return ModelCode(values=[float(p_sym[k]) for k in used], function=function, info=info)
 
 
 def nominal_model(

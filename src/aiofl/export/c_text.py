@@ -36,6 +36,7 @@ __all__ = [
     "COMMENT_CHARS",
     "MAX_COMMENT_TEXT",
     "c_identifier",
+    "c_prefix",
     "check_comment_line",
     "check_inert",
     "comment_text",
@@ -114,6 +115,46 @@ def c_identifier(name: str) -> str:
             "ASCII letter, then letters, digits and _ (at most 63), not a C keyword"
         )
     return name
+
+
+# names C99 (7.26) and POSIX reserve for future library use: a prefix starting so would
+# give reserved names (E + digit/upper: <errno.h> macros, is/to + lower: <ctype.h>, ...)
+_RESERVED_PREFIX = re.compile(
+    r"(E[0-9A-Z]|is[a-z]|to[a-z]|str[a-z]|mem[a-z]|wcs[a-z]|LC_[A-Z]|SIG[A-Z_]|PRI[a-zX]"
+    r"|SCN[a-zX]|int[0-9a-z]|uint[0-9a-z]|INT[0-9]|UINT[0-9]|cr[a-z])"
+)
+MAX_PREFIX = 31
+"""Longest ``--prefix``: its names (``PREFIX_START_BUMPLESS``, ...) stay within 63."""
+
+
+def c_prefix(prefix: str) -> str:
+    """``prefix`` if every name ``prefix_...`` / ``PREFIX_...`` of an export is a C99
+    identifier that is not reserved, else ValueError naming ``--prefix``.
+
+    Allowed: an ASCII letter, then letters and digits, single ``_`` between them (no
+    ``__``, no trailing ``_``), at most :data:`MAX_PREFIX` characters, not a C keyword and
+    not starting like a reserved name (``E`` + digit or capital in upper case, ``is``,
+    ``to``, ``str``, ``mem``, ``wcs`` + lower case, ...).
+    """
+    ok = (
+        isinstance(prefix, str)
+        and re.fullmatch(r"[A-Za-z][A-Za-z0-9]*(?:_[A-Za-z0-9]+)*", prefix) is not None
+        and len(prefix) <= MAX_PREFIX
+        and prefix not in _C_KEYWORDS
+        and prefix.lower() not in _C_KEYWORDS
+    )
+    if not ok:
+        raise ValueError(
+            f"--prefix = {str(prefix)[:80]!r} is not a C identifier prefix; allowed: an ASCII "
+            f"letter, then letters, digits and single _ (at most {MAX_PREFIX}), not a C keyword"
+        )
+    for name in (prefix + "_", prefix.upper() + "_"):
+        if _RESERVED_PREFIX.match(name):
+            raise ValueError(
+                f"--prefix = {prefix!r} gives names C reserves for the library ({name}...): "
+                "choose another prefix"
+            )
+    return prefix
 
 
 def _internal_error(what: str, pos: int, rule: str) -> RuntimeError:

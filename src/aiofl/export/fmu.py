@@ -23,12 +23,9 @@ and ``td.rho``; the integer parameter ``start`` (0 bumpless, 1 zero, 2 output).
 The default experiment's step size is Ts; the wrapper's comment says how it samples (only at
 communication points that are multiples of Ts; a step passing a sample instant is an error).
 
-The adapter: until the parameter-struct C API (``NAME_init/start/reset/step`` with a
-``const NAME_params *``) is on this branch, ``fmu_adapter.h`` wraps today's
-``aiofl_init``/``aiofl_step``: it includes ``aiofl_controller.c``, whose tunable
-``static const`` parameters this module turns into file-scope variables with ``__dflt``
-defaults, loads the instance's parameters into them before each call, and starts as the
-config's ``eso.init`` says whatever ``start`` is (:data:`_LEGACY`).
+The adapter maps the exported API onto the wrapper's names: each FMU instance holds its own
+copy of ``NAME_params`` (from ``NAME_default_params``), which the tunable parameters write
+into, and calls ``NAME_start(&s, &p, y0, start)`` and ``NAME_step(&s, &p, r, y)``.
 """
 
 from __future__ import annotations
@@ -38,7 +35,6 @@ import io
 import math
 import os
 import platform
-import re
 import shutil
 import subprocess
 import tempfile
@@ -56,7 +52,7 @@ import numpy as np
 from aiofl.controller import Controller, controller_batch
 from aiofl.engine.discrete import Sampling, sampling_rows
 from aiofl.export import c_code
-from aiofl.export.c_text import c_identifier
+from aiofl.export.c_text import c_prefix
 from aiofl.export.errors import ExportError
 from aiofl.plants.base import Plant
 
@@ -70,7 +66,6 @@ ADAPTER = "fmu_adapter.h"
 FMI_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
 CFLAGS = ("-std=c99", "-O2", "-shared", "-fPIC", "-fvisibility=hidden", "-Wall", "-Wextra")
 START_MODES = {"bumpless": 0, "zero": 1, "output": 2}  # the FMU's start parameter
-_LEGACY = True  # the adapter targets today's aiofl_init/aiofl_step (see the module notes)
 
 
 @dataclass(frozen=True)
@@ -162,10 +157,10 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
             tun(
                 "law.b0",
                 "input gain estimate b0 (the observer's input column scales with it)",
-                "p->B0 = (aiofl_real)v;",
+                "p->b0 = (aiofl_real)v;",
                 *(
-                    f"p->ESO_GAMMA[{j}] = (aiofl_real)((double)ESO_GAMMA__dflt[{j}] * "
-                    "(v / (double)B0__dflt));"
+                    f"p->eso_gamma[{j}] = (aiofl_real)((double)aiofl_default_params.eso_gamma"
+                    f"[{j}] * (v / (double)aiofl_default_params.b0));"
                     for j in range(rho + 1)
                 ),
                 nz=True,
@@ -173,38 +168,36 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
         )
     else:
         calc.append(FmuParameter("law.b0", v("law.b0"), "input gain estimate b0", False))
-    for name, field in (("law.u_max", "U_MAX"), ("law.u_min", "U_MIN")):
+    for name, field in (("law.u_max", "u_max"), ("law.u_min", "u_min")):
         if math.isfinite(v(name)):
             out.append(tun(name, "actuator limit", f"p->{field} = (aiofl_real)v;"))
     if c.eso == "improved":
         for name in ("k_alpha", "k_beta", "g_alpha", "g_beta"):
-            out.append(
-                tun(f"eso.{name}", "INLESO injection", f"p->{name.upper()} = (aiofl_real)v;")
-            )
+            out.append(tun(f"eso.{name}", "INLESO injection", f"p->{name} = (aiofl_real)v;"))
     if c.td == "han":
-        out.append(tun("td.R", "TD speed factor R", "p->TD_R = (aiofl_real)v;", minimum=0.0))
+        out.append(tun("td.R", "TD speed factor R", "p->td_r = (aiofl_real)v;", minimum=0.0))
     elif c.td == "improved":
-        out.append(tun("td.rho", "ITD speed factor", "p->ITD_RHO = (aiofl_real)v;"))
+        out.append(tun("td.rho", "ITD speed factor", "p->itd_rho = (aiofl_real)v;"))
     if c.sef == "linear":
         out.append(
             tun(
                 "sef.omega_c",
                 "SEF bandwidth (gains binomial(rho, i-1) omega_c^(rho-i+1))",
-                *(f"p->SEF_GAIN[{i}] = (aiofl_real)fmu_binomial_power({i}, v);" for i in range(m)),
+                *(f"p->sef_gain[{i}] = (aiofl_real)fmu_binomial_power({i}, v);" for i in range(m)),
                 minimum=0.0,
                 nz=True,
             )
         )
     elif c.sef == "nonlinear":
-        slope = "p->SEF_SLOPE[{i}] = (aiofl_real)pow((double)p->SEF_DELTA[{i}], "
-        slope += "(double)p->SEF_ALPHA[{i}] - 1.0);"
+        slope = "p->sef_slope[{i}] = (aiofl_real)pow((double)p->sef_delta[{i}], "
+        slope += "(double)p->sef_alpha[{i}] - 1.0);"
         for i in range(m):
-            out.append(tun(f"sef.k{i + 1}", "SEF gain", f"p->SEF_K[{i}] = (aiofl_real)v;"))
+            out.append(tun(f"sef.k{i + 1}", "SEF gain", f"p->sef_k[{i}] = (aiofl_real)v;"))
             out.append(
                 tun(
                     f"sef.alpha{i + 1}",
                     "fal exponent",
-                    f"p->SEF_ALPHA[{i}] = (aiofl_real)v;",
+                    f"p->sef_alpha[{i}] = (aiofl_real)v;",
                     slope.format(i=i),
                     minimum=0.0,
                 )
@@ -213,7 +206,7 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
                 tun(
                     f"sef.delta{i + 1}",
                     "fal linear zone",
-                    f"p->SEF_DELTA[{i}] = (aiofl_real)v;",
+                    f"p->sef_delta[{i}] = (aiofl_real)v;",
                     slope.format(i=i),
                     minimum=0.0,
                     nz=True,
@@ -222,10 +215,10 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
     else:  # improved
         for i in range(m):
             for vec, field, what in (
-                ("k", "SEF_K", "INLSEF gain"),
-                ("kb", "SEF_KB", "INLSEF error-dependent gain"),
-                ("mu", "SEF_MU", "INLSEF gain decay"),
-                ("alpha", "SEF_ALPHA", "INLSEF exponent"),
+                ("k", "sef_k", "INLSEF gain"),
+                ("kb", "sef_kb", "INLSEF error-dependent gain"),
+                ("mu", "sef_mu", "INLSEF gain decay"),
+                ("alpha", "sef_alpha", "INLSEF exponent"),
             ):
                 name = f"sef.{vec}{i + 1}"
                 out.append(tun(name, what, f"p->{field}[{i}] = (aiofl_real)v;"))
@@ -233,7 +226,7 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
             tun(
                 "sef.v_limit",
                 "INLSEF output limit",
-                "p->SEF_V_LIMIT = (aiofl_real)v;",
+                "p->sef_v_limit = (aiofl_real)v;",
                 minimum=0.0,
                 nz=True,
             )
@@ -244,110 +237,68 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
 # ---------------------------------------------------------------------- the C adapter
 
 
-def _fields(setters: Sequence[str]) -> list[str]:
-    """The parameter fields (``p->NAME``) the setters write, in first-use order."""
-    seen: dict[str, None] = {}
-    for line in setters:
-        for name in re.findall(r"p->(\w+)", line):
-            seen.setdefault(name, None)
-    return list(seen)
-
-
-def _legacy_source(source: str, fields: Sequence[str]) -> str:
-    """Today's ``aiofl_controller.c`` with each tunable ``static const`` parameter ``X``
-    split into a variable ``X`` (the instance's value, loaded before each call) and its
-    default ``X__dflt``."""
-    for name in fields:
-        pat = re.compile(rf"static const aiofl_real {name}((?:\[\d+\])*) = ")
-        source, n = pat.subn(
-            lambda mt, name=name: (
-                f"static aiofl_real {name}{mt[1]};\nstatic const aiofl_real {name}__dflt{mt[1]} = "
-            ),
-            source,
-        )
-        if n != 1:
-            raise RuntimeError(f"aiofl bug: the C export has no parameter {name} to tune")
-    return source
-
-
 def _adapter(
     controller: Controller,
     params: Sequence[FmuParameter],
     n_in: int,
     guid: str,
+    header: str,
 ) -> str:
-    """``fmu_adapter.h``: the controller's API under the wrapper's names (today's API)."""
+    """``fmu_adapter.h``: the controller's API (``aiofl_start``, ``aiofl_step`` with a
+    ``const aiofl_params *``; prefixed by the caller) under the wrapper's names."""
     lit = lambda x: c_code._literal(x, "double")  # noqa: E731
     calc = [p for p in params if not p.tunable]
     tun = [p for p in params if p.tunable]
-    setters = [s for p in tun for s in p.setter]
-    fields = _fields(setters)
-    decl = dict(_declarations(fields, controller.n_feedback))
+    n = max(len(tun), 1)  # no zero-length arrays
     lines = [
-        f"/* {ADAPTER}: generated by aiofl export --format fmu (today's controller API) */",
+        f"/* {ADAPTER}: generated by aiofl export --format fmu */",
         "#ifndef FMU_ADAPTER_H",
         "#define FMU_ADAPTER_H",
         "#include <math.h>",
-        "#include <string.h>",
-        f'#include "{c_code.SOURCE}"',
+        "",
+        f'#include "{header}"',
         "",
         f'#define FMU_GUID "{guid}"',
         "#define FMU_TS AIOFL_TS",
+        "#define FMU_RHO AIOFL_RHO",
         f"#define FMU_N_IN {n_in}",
         f"#define FMU_N_CALC {len(calc)}",
         f"#define FMU_N_TUN {len(tun)}",
         f"#define FMU_START_DEFAULT {START_MODES[controller.eso_init]}",
-        f"#define FMU_START_ONLY {START_MODES[controller.eso_init]}  /* today's API */",
+        "#define FMU_START_ONLY (-1) /* every start mode */",
         "",
         "typedef aiofl_state fmu_ctl_state;",
-        "typedef struct {",
-        *(f"    aiofl_real {f}{decl[f]};" for f in fields),
-        *(["    int unused;"] if not fields else []),
-        "} fmu_ctl_params;",
+        "typedef aiofl_params fmu_ctl_params;",
         "",
         f"static const double fmu_calc_values[{len(calc)}] = {{"
         + ", ".join(lit(p.value) for p in calc)
         + "};",
-        f"static const double fmu_tun_defaults[{max(len(tun), 1)}] = {{"
+        f"static const double fmu_tun_defaults[{n}] = {{"
         + (", ".join(lit(p.value) for p in tun) or "0.0")
         + "};",
-        f"static const double fmu_tun_min[{max(len(tun), 1)}] = {{"
+        f"static const double fmu_tun_min[{n}] = {{"
         + (", ".join("-HUGE_VAL" if p.minimum is None else lit(p.minimum) for p in tun) or "0.0")
         + "};",
-        f"static const int fmu_tun_nonzero[{max(len(tun), 1)}] = {{"
+        f"static const int fmu_tun_nonzero[{n}] = {{"
         + (", ".join(str(int(p.nonzero)) for p in tun) or "0")
         + "};",
         "",
-        "static void fmu_ctl_defaults(fmu_ctl_params *p)",
-        "{",
-        *(f"    memcpy(&p->{f}, &{f}__dflt, sizeof p->{f});" for f in fields),
-        *(["    p->unused = 0;"] if not fields else []),
-        "}",
+        "static void fmu_ctl_defaults(fmu_ctl_params *p) { *p = aiofl_default_params; }",
         "",
-        "/* today's API reads its parameters from file-scope variables: load the instance's */",
-        "static void fmu_ctl_load(const fmu_ctl_params *p)",
-        "{",
-        *(f"    memcpy(&{f}, &p->{f}, sizeof {f});" for f in fields),
-        *(["    (void)p;"] if not fields else []),
-        "}",
-        "",
-        "/* start: today's API starts as the config's eso.init says (mode not used) */",
         "static void fmu_ctl_start(fmu_ctl_state *s, const fmu_ctl_params *p, double y0, int mode)",
         "{",
-        "    (void)mode;",
-        "    fmu_ctl_load(p);",
-        "    aiofl_init(s, (aiofl_real)y0);",
+        "    aiofl_start(s, p, (aiofl_signal)y0, mode);",
         "}",
         "",
+        "/* r: r, r_1, ..., r_rho (FMU_N_IN - 1 values; only r with a differentiator) */",
         "static double fmu_ctl_step(fmu_ctl_state *s, const fmu_ctl_params *p, const double *r,"
         " double y)",
         "{",
-        "    aiofl_real rr[AIOFL_RHO + 1];",
+        "    aiofl_signal rr[AIOFL_RHO + 1];",
         "    int i;",
         "    for (i = 0; i <= AIOFL_RHO; ++i)",
-        "        rr[i] = (aiofl_real)(i < FMU_N_IN - 1 ? r[i] : 0.0);",
-        "    fmu_ctl_load(p);",
-        "    return (double)aiofl_step(s, rr, (aiofl_real)y);",
+        "        rr[i] = (aiofl_signal)(i < FMU_N_IN - 1 ? r[i] : 0.0);",
+        "    return (double)aiofl_step(s, p, rr, (aiofl_signal)y);",
         "}",
         "",
     ]
@@ -362,6 +313,7 @@ def _adapter(
             "}",
             "",
         ]
+    lines += ["/* a tunable parameter into the instance's copy of the parameters */"]
     lines += ["static void fmu_ctl_set(fmu_ctl_params *p, int i, double v)", "{"]
     lines += ["    switch (i) {"]
     for k, p in enumerate(tun):
@@ -381,20 +333,6 @@ def _adapter(
         "",
     ]
     return "\n".join(lines)
-
-
-def _declarations(fields: Sequence[str], m: int) -> list[tuple[str, str]]:
-    """``(field, array suffix)``: a field's dimensions in today's C (``"[3]"`` or ``""``);
-    ``m`` = n_feedback, the length of the SEF's vectors."""
-    out = []
-    for f in fields:
-        if f == "ESO_GAMMA":
-            out.append((f, "[AIOFL_RHO + 1]"))
-        elif f.startswith("SEF_") and f != "SEF_V_LIMIT":
-            out.append((f, f"[{m}]"))
-        else:
-            out.append((f, ""))
-    return out
 
 
 # ---------------------------------------------------------------------- the FMU
@@ -422,7 +360,6 @@ def _model_description(
     ts: float,
     stop_time: float | None,
     start: int,
-    only: bool,
 ) -> bytes:
     """``modelDescription.xml`` (FMI 2.0 co-simulation), every attribute set through
     :mod:`xml.etree.ElementTree`, which escapes it."""
@@ -499,8 +436,7 @@ def _model_description(
             calc_indices.append(index)
         var(p.name, vr, a, p.description, "Real", t)
     a = {"causality": "parameter", "variability": "fixed", "initial": "exact"}
-    lo, hi = (start, start) if only else (0, 2)
-    t = {"start": str(start), "min": str(lo), "max": str(hi)}
+    t = {"start": str(start), "min": "0", "max": "2"}
     var("start", 0, a, "start mode: 0 bumpless, 1 zero, 2 output", "Integer", t)
     ms = ET.SubElement(root, "ModelStructure")
     outputs = ET.SubElement(ms, "Outputs")
@@ -573,7 +509,7 @@ def export_fmu(
         x86-64; a compiler that fails on the sources (its message included).
     """
     try:
-        c_identifier(model_identifier)
+        c_prefix(model_identifier)
     except ValueError as exc:
         raise ExportError(f"--prefix: {exc}") from None
     if platform.system() != "Linux" or platform.machine() not in ("x86_64", "AMD64"):
@@ -586,6 +522,7 @@ def export_fmu(
         controller,
         sampling,
         precision=precision,
+        prefix=model_identifier,
         title=title,
         notes=notes,
         plant=plant,
@@ -595,8 +532,6 @@ def export_fmu(
     assert sampling is not None  # export_c refuses a missing sample time
     params = fmu_parameters(controller, sampling)
     inputs = _inputs(controller)
-    setters = [s for p in params if p.tunable for s in p.setter]
-    files[c_code.SOURCE] = _legacy_source(files[c_code.SOURCE], _fields(setters))
     templates = resources.files("aiofl.export") / "templates"
     wrapper = (templates / WRAPPER).read_text(encoding="utf-8")
     headers = {h: (templates / "fmi2" / h).read_text(encoding="utf-8") for h in FMI_HEADERS}
@@ -605,9 +540,13 @@ def export_fmu(
         digest.update(text.encode())
     digest.update(repr((model_identifier, [(p.name, p.value) for p in params])).encode())
     guid = "{" + str(uuid.uuid5(uuid.NAMESPACE_URL, "aiofl:" + digest.hexdigest())) + "}"
-    adapter = _adapter(controller, params, len(inputs), guid)
+    header = c_code.file_names(model_identifier)["h"]
+    adapter = c_code.apply_prefix(
+        _adapter(controller, params, len(inputs), guid, c_code.HEADER), model_identifier
+    )
     sources = {**files, **headers, ADAPTER: adapter, WRAPPER: wrapper}
-    compiled = [WRAPPER]  # today's API: the adapter includes the controller's .c
+    assert header in files
+    compiled = [*sorted(f for f in files if f.endswith(".c")), WRAPPER]
     xml = _model_description(
         model_identifier=model_identifier,
         title=title,
@@ -619,7 +558,6 @@ def export_fmu(
         ts=sampling.ts,
         stop_time=stop_time,
         start=START_MODES[controller.eso_init],
-        only=_LEGACY,
     )
     with tempfile.TemporaryDirectory(prefix="aiofl-fmu-") as tmp:
         src = Path(tmp) / "sources"

@@ -1,0 +1,90 @@
+/* ---- the exported API (hand-written part of the header, src/aiofl/export/templates) ---- */
+
+/* AIOFL_REAL_IS_FLOAT: the controller's arithmetic.  The measurement and the reference
+   enter as aiofl_signal, double even in a float build (they are subtracted from the
+   previous sample's in that type, so the controller only sees small differences); define
+   AIOFL_SIGNAL_IS_FLOAT to take them as float (cheaper without a double FPU, but then y is
+   quantised to 24 bits before the observer sees it). */
+#if AIOFL_REAL_IS_FLOAT
+typedef float aiofl_real;
+#else
+typedef double aiofl_real;
+#endif
+#if defined(AIOFL_SIGNAL_IS_FLOAT) && AIOFL_REAL_IS_FLOAT
+typedef float aiofl_signal;
+#else
+typedef double aiofl_signal;
+#endif
+
+#define AIOFL_TD_EXACT 0
+#define AIOFL_TD_HAN 1
+#define AIOFL_TD_IMPROVED 2
+#define AIOFL_TD_LINEAR 3
+#define AIOFL_SEF_LINEAR 0
+#define AIOFL_SEF_NONLINEAR 1
+#define AIOFL_SEF_IMPROVED 2
+
+/* start modes of aiofl_start */
+#define AIOFL_START_BUMPLESS 0 /* ESO at (y0, 0, ..., 0), differentiator at rest at y0 */
+#define AIOFL_START_ZERO 1     /* everything at 0, y0 unused (eso.init = zero) */
+#define AIOFL_START_OUTPUT 2   /* ESO at (y0, 0, ..., 0), differentiator at rest at 0 */
+
+/* Every design parameter the step reads.  aiofl_default_params is the exported design;
+   aiofl export --params-only writes other instances of this struct (same AIOFL_LAYOUT). */
+typedef struct {
+    aiofl_real b0;    /* law.b0 */
+    aiofl_real u_min; /* actuator range [u_min, u_max] (+-HUGE_VAL when open) */
+    aiofl_real u_max;
+    /* ESO, delta form: xhat = p + L phi(e);  p+ = xhat + (DPHI xhat + GAMMA u + K phi) */
+    aiofl_real eso_dphi[AIOFL_RHO + 1][AIOFL_RHO + 1]; /* PHI - I, upper triangular */
+    aiofl_real eso_gamma[AIOFL_RHO + 1];
+    aiofl_real eso_k[AIOFL_RHO + 1];
+    aiofl_real eso_l[AIOFL_RHO + 1];
+#if AIOFL_ESO_IMPROVED
+    aiofl_real k_alpha, k_beta, g_alpha, g_beta; /* INLESO injection, eq. (19) */
+#endif
+#if AIOFL_TD == AIOFL_TD_HAN
+    aiofl_real td_r;  /* td.R */
+    aiofl_real td_h0; /* fhan's filter factor h0 [s] (AIOFL_TD_FHAN) */
+#elif AIOFL_TD == AIOFL_TD_IMPROVED
+    aiofl_real itd_rho;      /* td.rho */
+    aiofl_real itd_b_over_c; /* b/c */
+    aiofl_real itd_gain;     /* (1 - a)/c */
+#elif AIOFL_TD == AIOFL_TD_LINEAR
+    aiofl_real pf_c[AIOFL_RHO];                /* coefficients of (s + omega)^rho */
+    aiofl_real pf_dphi[AIOFL_RHO][AIOFL_RHO];  /* prefilter ZOH, PHI - I */
+#endif
+#if AIOFL_SEF == AIOFL_SEF_NONLINEAR
+    aiofl_real sef_k[AIOFL_NFB], sef_alpha[AIOFL_NFB], sef_delta[AIOFL_NFB];
+    aiofl_real sef_slope[AIOFL_NFB]; /* delta^(alpha - 1) */
+#elif AIOFL_SEF == AIOFL_SEF_IMPROVED
+    aiofl_real sef_k[AIOFL_NFB], sef_kb[AIOFL_NFB], sef_mu[AIOFL_NFB], sef_alpha[AIOFL_NFB];
+    aiofl_real sef_v_limit;
+#else
+    aiofl_real sef_gain[AIOFL_NFB]; /* binomial(rho, i-1) omega_c^(rho-i+1) */
+#endif
+#if AIOFL_ESO_MODEL
+    aiofl_real plant_p[AIOFL_N_PLANT_P]; /* the nominal model's parameters */
+#endif
+} aiofl_params;
+
+/* The controller's memory, in offset coordinates (see aiofl_controller.c). */
+typedef struct {
+    aiofl_signal y_prev;            /* the previous measurement */
+    aiofl_real p[AIOFL_RHO + 1];    /* ESO prediction; p[0] holds p_1 - y_prev */
+    aiofl_real xhat[AIOFL_RHO + 1]; /* ESO estimate at the last sample; xhat[0] holds xhat_1 - y */
+#if AIOFL_TD != AIOFL_TD_EXACT
+    aiofl_signal r_prev;            /* the previous reference */
+    aiofl_real td[AIOFL_NTD];       /* differentiator, next sample; td[0] holds r_1 - r_prev */
+#endif
+#if AIOFL_DELAY
+    aiofl_real u_prev; /* the command applied over the current interval */
+#endif
+} aiofl_state;
+
+extern const aiofl_params aiofl_default_params;
+
+void aiofl_start(aiofl_state *s, const aiofl_params *p, aiofl_signal y0, int mode);
+void aiofl_init(aiofl_state *s, const aiofl_params *p, aiofl_signal y0);
+void aiofl_reset(aiofl_state *s, const aiofl_params *p, aiofl_signal y0);
+aiofl_real aiofl_step(aiofl_state *s, const aiofl_params *p, const aiofl_signal *r, aiofl_signal y);
