@@ -100,9 +100,10 @@ class Fmu:
         return np.array(out)
 
 
-def engine_loop(cfg, controller: Controller, t_final: float = T_FINAL, n_sub: int = 5):
+def engine_loop(cfg, controller: Controller, t_final: float = T_FINAL, n_sub: int = 5, y0=None):
     """The engine's discrete controller in closed loop with the config's plant (RK4 at
-    Ts/n_sub, u held): the samples y_k, r_k (r, r', ..., r^(rho) of the sine) and u_k."""
+    Ts/n_sub, u held; from the scenario's x0, or the first state at ``y0``): the samples
+    y_k, r_k (r, r', ..., r^(rho) of the sine) and u_k."""
     plant, ref, rho = cfg.plant, cfg.scenario.reference, controller.rho
     model = plant if controller.eso_model != "none" else None
     eng = DiscreteController(controller, Sampling(TS), plant=model, x0=cfg.scenario.x0)
@@ -110,6 +111,8 @@ def engine_loop(cfg, controller: Controller, t_final: float = T_FINAL, n_sub: in
     p = plant.param_vector()
     x = np.zeros(plant.n_states)
     x[: len(cfg.scenario.x0)] = cfg.scenario.x0
+    if y0 is not None:
+        x[0] = y0
     dt = TS / n_sub
 
     def rhs(xv, u):
@@ -333,7 +336,10 @@ def test_each_start_mode_gives_the_engines_commands_with_that_eso_init(fmus, mod
 
     f = fmus["retuned-s1-leso"]  # Han's TD: bumpless and output start it differently
     ctrl = dataclasses.replace(f.cfg.controller, eso_init=mode)
-    y, r, u_engine = engine_loop(f.cfg, ctrl, 0.3)
+    y, r, u_engine = engine_loop(f.cfg, ctrl, 0.3, y0=0.2)  # away from r(0) = 0
+    others = [engine_loop(f.cfg, dataclasses.replace(ctrl, eso_init=m), 0.3, y0=0.2)[2]
+              for m in START if m != mode]  # fmt: skip
+    assert all(rel(u, u_engine) > 1e-3 for u in others)  # three different starts
     s = f.slave()
     s.setInteger([f.vr["start"]], [START[mode]])
     vin, vu = [f.vr[n] for n in f.inputs], f.vr["u"]
