@@ -50,6 +50,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from aiofl.controller import Controller, controller_batch
+from aiofl.engine import discrete as DS
 from aiofl.engine.discrete import Sampling, sampling_rows
 from aiofl.export import c_code
 from aiofl.export.c_text import c_prefix
@@ -87,8 +88,9 @@ class FmuParameter:
     minimum, nonzero
         The range a tunable value must be in: ``>= minimum`` (None: any), and not 0.
     setter
-        C statements writing the value ``v`` (a ``double``) into the parameter copy ``*p``
-        (the adapter's field names).
+        C statements writing the value ``v`` (a ``double``) into the instance's parameter
+        struct ``*p`` (``aiofl_params``, its fields as the template names them; the prefix is
+        applied with the rest of ``fmu_adapter.h``).
     """
 
     name: str
@@ -113,8 +115,6 @@ def _b0_scales_gamma(controller: Controller, sampling: Sampling) -> bool:
         for b in (b0, 2.0 * b0)
     ]
     a, b = rows[0][0], rows[1][0]
-    from aiofl.engine import discrete as DS
-
     n = controller.rho + 1
     gam = slice(DS.D_GAM, DS.D_GAM + n)
     other = np.ones(a.size, dtype=bool)
@@ -362,7 +362,8 @@ def _model_description(
     start: int,
 ) -> bytes:
     """``modelDescription.xml`` (FMI 2.0 co-simulation), every attribute set through
-    :mod:`xml.etree.ElementTree`, which escapes it."""
+    :mod:`xml.etree.ElementTree`, which escapes it; ``start``: the default of the start-mode
+    parameter (:data:`START_MODES`)."""
     from aiofl import __version__
 
     fmt = lambda x: repr(float(x))  # noqa: E731
