@@ -229,6 +229,29 @@ def test_a_parameter_set_through_fmi_gives_the_engines_commands_with_it(fmus, co
     assert rel(f.run(y, r), u_engine) > 1e-6  # the default is another controller
 
 
+def test_two_instances_keep_their_own_state_and_parameters(fmus, loops):
+    f = fmus["dcmotor-arm-ladrc"]
+    y, r, _ = (a[:200] for a in loops["dcmotor-arm-ladrc"])
+    b0 = {"law.b0": 0.8 * f.cfg.controller.value("law.b0")}
+    alone = [f.run(y, r), f.run(y, r, reals=b0)]
+    slaves = [f.slave(), f.slave(reals=b0)]
+    vin, vu = [f.vr[n] for n in f.inputs], f.vr["u"]
+    for s in slaves:
+        s.enterInitializationMode()
+        s.setReal(vin, [y[0], *r[0]])
+        s.exitInitializationMode()
+    both = [[], []]
+    for k in range(len(y)):  # interleaved, one process
+        for s, out in zip(slaves, both, strict=True):
+            s.setReal(vin, [y[k], *r[k]])
+            s.doStep(currentCommunicationPoint=k * TS, communicationStepSize=TS)
+            out.append(s.getReal([vu])[0])
+    for s in slaves:
+        s.terminate()
+        s.freeInstance()
+    assert np.array_equal(both[0], alone[0]) and np.array_equal(both[1], alone[1])
+
+
 def test_simulate_fmu_reads_u_k_after_the_step_from_t_k(fmus, loops):
     """FMPy's simulate_fmu sets the inputs at t_k, steps, then records: u_k at t_(k+1)."""
     config = "retuned-s1-leso"
