@@ -9,10 +9,13 @@ precomputed measurement/reference sequence, timed with ``clock_gettime(CLOCK_MON
 inside C (no Python in the loop).  The driver sums the commands into a volatile, so the
 calls cannot be optimised away.
 
+The third column is the float build with float signals (``-DAIOFL_SIGNAL_IS_FLOAT``): the
+cost of the offset coordinates' double subtractions is the difference to the second.
+
 With ``--agreement`` it also drives each exported controller in closed loop on the SLFJM
-(as ``tests/test_export.py`` does) for ``--agreement-time`` seconds and prints the largest
-difference between its commands and the engine's discrete controller's, relative to the
-largest command.
+(:mod:`aiofl.export.c_check`, as ``tests/test_export.py`` does) for ``--agreement-time``
+seconds and prints the largest difference between its commands and the engine's discrete
+controller's, relative to the largest command.
 
 Timings depend on the machine and its load (printed with the results); no assertion is
 made on any figure.
@@ -25,9 +28,10 @@ import os
 import platform
 import shutil
 import subprocess
-import sys
 import tempfile
 from pathlib import Path
+
+import numpy as np
 
 DRIVER = r"""
 #define _POSIX_C_SOURCE 199309L
@@ -41,24 +45,25 @@ int main(int argc, char **argv)
 {
     long n = argc > 1 ? atol(argv[1]) : 1000000L;
     int repeat = argc > 2 ? atoi(argv[2]) : 5;
-    static aiofl_real ys[4096], rs[4096][AIOFL_RHO + 1];
+    static aiofl_signal ys[4096], rs[4096][AIOFL_RHO + 1];
     volatile double sink = 0.0;
     double best = 1e300;
     aiofl_state s;
     int i, k, rep;
     for (i = 0; i < 4096; ++i) {
         double t = i * AIOFL_TS, w = 2.0, a = 0.785398;
-        ys[i] = (aiofl_real)(0.95 * a * sin(w * t - 0.05) + 1e-4 * cos(37.0 * t));
+        ys[i] = (aiofl_signal)(0.95 * a * sin(w * t - 0.05) + 1e-4 * cos(37.0 * t));
         for (k = 0; k <= AIOFL_RHO; ++k)
-            rs[i][k] = (aiofl_real)(a * pow(w, k) * sin(w * t + k * 1.5707963267948966));
+            rs[i][k] = (aiofl_signal)(a * pow(w, k) * sin(w * t + k * 1.5707963267948966));
     }
     for (rep = 0; rep < repeat; ++rep) {
         struct timespec t0, t1;
         long j;
         double acc = 0.0;
-        aiofl_init(&s, ys[0]);
+        aiofl_init(&s, &aiofl_default_params, ys[0]);
         clock_gettime(CLOCK_MONOTONIC, &t0);
-        for (j = 0; j < n; ++j) acc += aiofl_step(&s, rs[j & 4095], ys[j & 4095]);
+        for (j = 0; j < n; ++j)
+            acc += aiofl_step(&s, &aiofl_default_params, rs[j & 4095], ys[j & 4095]);
         clock_gettime(CLOCK_MONOTONIC, &t1);
         sink += acc;
         double ns = ((t1.tv_sec - t0.tv_sec) * 1e9 + (t1.tv_nsec - t0.tv_nsec)) / (double)n;
@@ -69,7 +74,10 @@ int main(int argc, char **argv)
 }
 """
 
-DESIGNS = ("retuned-s1-leso", "retuned-s1-inleso", "retuned-s1-ladrc")
+DESIGNS = ("retuned-s1-leso", "retuned-s1-inleso", "retuned-s1-ladrc", "frontier-s1-ladrc")
+# columns: (precision, extra cc flags); float with float signals is the build without the
+# offset coordinates' double subtractions (y quantised to 24 bits: float does not hold)
+COLUMNS = (("double", []), ("float", []), ("float", ["-DAIOFL_SIGNAL_IS_FLOAT"]))
 
 
 def _table(title: str, header: list[str], rows: list[list[str]]) -> None:
@@ -81,10 +89,12 @@ def _table(title: str, header: list[str], rows: list[list[str]]) -> None:
         print("  " + "  ".join(str(c).ljust(w) for c, w in zip(row, widths, strict=True)))
 
 
-def ns_per_step(preset: str, ts: float, precision: str, args: argparse.Namespace) -> float:
+def ns_per_step(
+    preset: str, ts: float, precision: str, extra: list[str], args: argparse.Namespace
+) -> float:
     from aiofl.config import load_config
     from aiofl.engine.discrete import Sampling
-    from aiofl.export import SOURCE, export_c
+    from aiofl.export import export_c
 
     cfg = load_config(preset)
     files = export_c(cfg.controller, Sampling(ts), precision=precision)
@@ -94,8 +104,9 @@ def ns_per_step(preset: str, ts: float, precision: str, args: argparse.Namespace
             (d / name).write_text(text)
         (d / "driver.c").write_text(DRIVER)
         exe = d / "bench"
-        flags = ["-std=c99", "-O2", *([f"-march={args.march}"] if args.march else [])]
-        cmd = [args.cc, *flags, "-o", str(exe), str(d / "driver.c"), str(d / SOURCE), "-lm"]
+        flags = ["-std=c99", "-O2", *extra, *([f"-march={args.march}"] if args.march else [])]
+        srcs = sorted(str(p) for p in d.glob("*.c"))
+        cmd = [args.cc, *flags, "-o", str(exe), *srcs, "-lm"]
         subprocess.run(cmd, check=True)
         out = subprocess.run(
             [str(exe), str(args.steps), str(args.repeat)],
@@ -107,20 +118,28 @@ def ns_per_step(preset: str, ts: float, precision: str, args: argparse.Namespace
 
 
 def agreement(preset: str, ts: float, precision: str, t_final: float) -> float:
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     from aiofl.config import load_config
     from aiofl.engine.discrete import Sampling
+    from aiofl.engine.sampled import DiscreteController
     from aiofl.export import export_c
-    from test_export import closed_loop, compile_library  # type: ignore[import-not-found]
+    from aiofl.export.c_check import CController, build, loop
 
     cfg = load_config(preset)
-    samp = Sampling(ts)
+    samp, c = Sampling(ts), cfg.controller
+    eng = DiscreteController(c, samp)
+    u_e: list[float] = []
     with tempfile.TemporaryDirectory() as tmp:
-        lib = compile_library(Path(tmp), export_c(cfg.controller, samp, precision=precision))
-        u_c, u_e, _ = closed_loop(
-            lib, precision, cfg.plant, cfg.scenario.reference, cfg.controller, samp, t_final
-        )
-    return float(abs(u_c - u_e).max() / abs(u_e).max())
+        cc = CController(build(Path(tmp), export_c(c, samp, precision=precision)), precision)
+
+        def step(r: list[float], y: float) -> float:
+            if not u_e:
+                cc.start(y, c.eso_init)
+                eng.init(y)
+            u_e.append(eng.step(r, y))
+            return cc.step(r, y)
+
+        _, _, u_c = loop(step, cfg.plant, cfg.scenario.reference, c.rho, ts, t_final)
+    return float(abs(u_c - u_e).max() / abs(np.array(u_e)).max())
 
 
 def main() -> None:
@@ -139,12 +158,12 @@ def main() -> None:
     rows = []
     for preset in DESIGNS:
         row = [preset]
-        for precision in ("double", "float"):
-            row.append(f"{ns_per_step(preset, args.ts, precision, args):.1f}")
+        for precision, extra in COLUMNS:
+            row.append(f"{ns_per_step(preset, args.ts, precision, extra, args):.1f}")
         rows.append(row)
     _table(
         f"ns per aiofl_step (rho = 4, Ts = {args.ts:g} s, best of {args.repeat} x {args.steps})",
-        ["design", "double", "float"],
+        ["design", "double", "float", "float, float y (no offsets)"],
         rows,
     )
     if args.agreement:

@@ -21,8 +21,8 @@ from aiofl.config import load_config
 from aiofl.controller import Controller
 from aiofl.engine.discrete import Sampling
 from aiofl.engine.sampled import DiscreteController
-from aiofl.export.c_check import CC, STRICT_FLOAT, WARN, CController, build, loop
 from aiofl.export import HEADER, PARAMS, SOURCE, ExportError, export_c
+from aiofl.export.c_check import CC, STRICT_FLOAT, WARN, CController, build, loop
 from aiofl.plants import get_plant
 from aiofl.plants.base import Plant
 from aiofl.scenario import Reference
@@ -181,7 +181,9 @@ def test_shipped_designs_export_and_agree(tmp_path, preset, ts, t_final):
         return cc.step(r, y)
 
     x0 = (cfg.scenario.reference.offset,) if cfg.plant.name == "tank" else ()
-    _, _, u_c = loop(step, cfg.plant, cfg.scenario.reference, cfg.controller.rho, ts, t_final, x0=x0)
+    _, _, u_c = loop(
+        step, cfg.plant, cfg.scenario.reference, cfg.controller.rho, ts, t_final, x0=x0
+    )
     assert np.max(np.abs(u_c - np.array(u_e))) < 1e-9 * np.max(np.abs(u_e))
 
 
@@ -204,7 +206,7 @@ def test_generated_code_follows_the_api_and_rules():
     assert set(files) == {"motor_controller.h", "motor_controller.c", "motor_params.c"}
     h, c = files["motor_controller.h"], files["motor_controller.c"]
     assert re.search(r"#define MOTOR_RHO 4\b", h) and re.search(r"#define MOTOR_TS 0\.001\b", h)
-    assert "#define MOTOR_U_MIN (-5.0)" in h and "#define MOTOR_U_MAX (5.0)" in h
+    assert "#define MOTOR_U_MIN (-HUGE_VAL)" in h and "#define MOTOR_U_MAX (HUGE_VAL)" in h  # open
     for proto in (
         "void motor_init(motor_state *s, const motor_params *p, motor_signal y0);",
         "void motor_reset(motor_state *s, const motor_params *p, motor_signal y0);",
@@ -215,7 +217,8 @@ def test_generated_code_follows_the_api_and_rules():
     ):
         assert proto in h
     assert "aiofl_" not in c and "AIOFL_" not in c  # the prefix replaced every name
-    assert re.findall(r"#include\s*(\S+)", c) == ["<math.h>", '"motor_controller.h"']
+    includes = ["<math.h>", '"motor_controller.h"', '"motor_model.h"']  # the last: #if model
+    assert re.findall(r"#include\s*(\S+)", c) == includes
     assert not re.search(r"\b(malloc|calloc|realloc|free)\b", c)
     # the source is the shipped template, prefixed
     from aiofl.export.c_code import apply_prefix, template
@@ -271,7 +274,9 @@ def test_two_prefixed_exports_link_into_one_program(tmp_path, precision):
     for src in (s for s in srcs if not s.endswith("main.c")):
         obj = tmp_path / (Path(src).stem + ".o")
         subprocess.run([str(CC), *WARN, *extra, "-c", "-o", str(obj), src], check=True)
-        nm = subprocess.run(["nm", "-g", "--defined-only", str(obj)], capture_output=True, text=True)
+        nm = subprocess.run(
+            ["nm", "-g", "--defined-only", str(obj)], capture_output=True, text=True
+        )
         names = [ln.split()[-1] for ln in nm.stdout.splitlines() if ln.strip()]
         assert names and all(n.startswith(Path(src).stem[0] + "_") for n in names), names
     for prefix, ctrl in (("a", ca), ("b", cb)):  # the first command equals the engine's
@@ -351,10 +356,11 @@ def test_a_parameter_instance_of_another_layout_does_not_compile(tmp_path, other
 @needs_cc
 @pytest.mark.parametrize("structure", ["LADRC", "LESO", "INLESO"])
 def test_bumpless_start_holds_the_pendulum(tmp_path, structure):
-    """The pendulum at rest at y0 = r = 0.3: with the bumpless start the first command is
-    no larger than the input that holds it there (here 0: the extended state starts at 0),
-    and the output stays within 1e-3 of 0.3 for 1 s; the zero start kicks it (|u(t0)|
-    far above the holding input).  NAME_reset mid-run (after a run elsewhere) is the same."""
+    """The pendulum at rest at y0 = r = 0.3 (holding it needs |u| = 1.45): with the
+    bumpless start the first command is no larger (here 0: the extended state starts at 0
+    and learns the gravity load), |u| stays below 1.5x the holding input and y within
+    0.02 of 0.3 for 1 s; the zero and output starts kick it (|u| up to 9-118, y strays
+    0.09-0.34).  NAME_reset mid-run (after a run elsewhere) gives the same first command."""
     plant = get_plant("pendulum")
     p = plant.param_vector()
     x0 = np.array([0.3, 0.0])
@@ -363,8 +369,8 @@ def test_bumpless_start_holds_the_pendulum(tmp_path, structure):
     ref = Reference(amplitude=0.0, omega=1.0, offset=0.3)
     ctrl = design(structure, 2)
     cc = CController(build(tmp_path, export_c(ctrl, Sampling(1e-3))), "double")
-    first = {}
-    for mode in ("bumpless", "zero"):
+    seen = {}
+    for mode in ("bumpless", "zero", "output"):
         us: list[float] = []
 
         def step(r: list[float], y: float, mode: str = mode, us: list[float] = us) -> float:
@@ -373,16 +379,34 @@ def test_bumpless_start_holds_the_pendulum(tmp_path, structure):
             us.append(cc.step(r, y))
             return us[-1]
 
-        _, y, _ = loop(step, plant, ref, 2, 1e-3, 1.0, x0=x0)
-        first[mode] = (abs(us[0]), float(np.max(np.abs(y - 0.3))))
-    assert first["bumpless"][0] <= u_hold + 1e-12
-    assert first["bumpless"][1] < 1e-3 < first["zero"][1] or first["zero"][0] > 10 * u_hold
+        _, y, u = loop(step, plant, ref, 2, 1e-3, 1.0, x0=x0)
+        seen[mode] = (abs(u[0]), float(np.max(np.abs(u))), float(np.max(np.abs(y - 0.3))))
+    u0, umax, dev = seen["bumpless"]
+    assert u0 <= u_hold and umax < 1.5 * u_hold and dev < 0.02
+    for mode in ("zero", "output"):
+        assert seen[mode][1] > 4 * u_hold and seen[mode][2] > 4 * dev, (mode, seen)
     # reset mid-run: after a second of tracking another reference, at rest at 0.3 again
     cc.start(0.0, "zero")
     for k in range(500):
         cc.step([0.5 * math.sin(k * 1e-3), 0.0, 0.0], 0.1)
     cc.reset(0.3)
     assert abs(cc.step([0.3, 0.0, 0.0], 0.3)) <= u_hold + 1e-12
+
+
+@needs_cc
+@pytest.mark.parametrize("structure", ["LESO", "INLESO", "LADRC"])
+def test_asymmetric_actuator_range_c_equals_the_engine(tmp_path, structure):
+    """law.u_min = -0.5 law.u_max: U_MIN / U_MAX in the header and the params, the C clamps
+    like the engine; on the tank both limits are reached and the commands agree."""
+    name, _, ref = PLANTS[1]
+    ctrl = design(structure, 1).with_values(**{"law.u_max": 10.0, "law.u_min": -5.0})
+    files = export_c(ctrl, Sampling(1e-3))
+    assert "#define AIOFL_U_MIN (-5.0)" in files[HEADER]
+    assert ".u_min = -5.0," in files[PARAMS] and ".u_max = 10.0," in files[PARAMS]
+    plant = get_plant(name)
+    u_c, u_e, _ = versus_engine(tmp_path, files, "double", plant, ref, ctrl, Sampling(1e-3), 2.0)
+    assert np.min(u_e) == np.min(u_c) == -5.0 and np.max(u_e) == np.max(u_c) == 10.0
+    assert np.max(np.abs(u_c - u_e)) < TOL["double"] * 10.0
 
 
 def test_iofl_and_missing_sample_time_are_refused():

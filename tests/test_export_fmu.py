@@ -310,19 +310,26 @@ def test_no_compiler_exits_2_and_writes_nothing(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize(
     ("args", "what"),
-    [(["--format", "fmu"], "--out"), (["--format", "exe"], "--format")],
-    ids=["out-is-a-file", "unknown-format"],
+    [
+        (["--format", "fmu"], "--out"),
+        (["--format", "exe"], "--format"),
+        (["--format", "fmu", "--prefix", "2x"], "--prefix"),
+        (["--format", "fmu", "--params-only"], "--params-only"),
+    ],
+    ids=["out-is-a-file", "unknown-format", "bad-prefix", "params-only"],
 )
 def test_bad_input_exits_2_and_leaves_nothing(tmp_path, args, what):
     out = tmp_path / "out"
-    out.write_text("keep")
+    if what == "--out":
+        out.write_text("keep")
     res = CliRunner().invoke(
         app, ["export", "tank-ladrc", "--ts", "0.001", *args, "--out", str(out)]
     )
     assert res.exit_code == 2
     assert what in res.output
-    assert out.read_text() == "keep"
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+    if what == "--out":
+        assert out.read_text() == "keep"
+    assert sorted(p.name for p in tmp_path.iterdir()) == (["out"] if what == "--out" else [])
 
 
 def test_the_fmus_sources_compile_without_a_warning(fmus, tmp_path):

@@ -7,8 +7,9 @@ that reaches the generated files: the design's ``title`` and ``notes`` and the c
 (``aiofl export``).  For each: the code outside comments is the code of a benign export,
 character for character (Python), and with gcc (``-std=c99 -Wall -Wextra -Werror
 -pedantic``, with and without ``-trigraphs``) the file compiles, its preprocessed token
-stream equals the benign export's and the object defines exactly ``aiofl_init`` and
-``aiofl_step`` (``nm``), never ``AIOFL_INJECTED``.  Before the fix a config's ``name`` could
+stream equals the benign export's and the objects define exactly the API
+(``aiofl_init/start/reset/step``, ``aiofl_default_params``; ``nm``), never
+``AIOFL_INJECTED``.  Before the fix a config's ``name`` could
 ``#define aiofl_step`` away, add an ``#include`` or a definition, and a ``/*``, a trigraph
 or a U+202E broke ``-Werror``.
 """
@@ -31,7 +32,7 @@ from typer.testing import CliRunner
 from aiofl.cli.app import app
 from aiofl.controller import Controller
 from aiofl.engine.discrete import Sampling
-from aiofl.export import HEADER, SOURCE, export_c
+from aiofl.export import HEADER, export_c
 
 GCC = shutil.which("gcc")
 NM = shutil.which("nm")
@@ -131,21 +132,27 @@ def _gcc(args: list[str], cwd: Path) -> subprocess.CompletedProcess[str]:
 
 
 def _build(files: dict[str, str], where: Path, flags: list[str]) -> tuple[str, str]:
-    """Write and compile the files: (whitespace-normalised preprocessed source, nm output)."""
+    """Write and compile the files (every ``.c``): (whitespace-normalised preprocessed
+    sources, nm output of the objects)."""
     where.mkdir(parents=True, exist_ok=True)
     for name, text in files.items():
         (where / name).write_text(text, encoding="utf-8")
-    pre = _gcc([*flags, "-E", "-P", SOURCE], where)
-    assert pre.returncode == 0, pre.stderr
-    obj = _gcc([*flags, "-c", "-o", "c.o", SOURCE], where)
-    assert obj.returncode == 0, obj.stderr
-    nm = subprocess.run([str(NM), "c.o"], cwd=where, capture_output=True, text=True, check=True)
-    return " ".join(pre.stdout.split()), nm.stdout
+    pres, nms = [], []
+    for src in sorted(n for n in files if n.endswith(".c")):
+        pre = _gcc([*flags, "-E", "-P", src], where)
+        assert pre.returncode == 0, pre.stderr
+        obj = _gcc([*flags, "-c", "-o", src + ".o", src], where)
+        assert obj.returncode == 0, obj.stderr
+        nm = subprocess.run([str(NM), src + ".o"], cwd=where, capture_output=True, text=True)
+        pres.append(" ".join(pre.stdout.split()))
+        nms.append(nm.stdout)
+    return "\n".join(pres), "".join(nms)
 
 
 def _assert_clean_object(nm: str, pre: str) -> None:
     defined = {ln.split()[-1] for ln in nm.splitlines() if re.match(r"^\S+ [A-Z] ", ln)}
-    assert defined == {"aiofl_init", "aiofl_step"}, nm  # global definitions only
+    api = {"aiofl_init", "aiofl_start", "aiofl_reset", "aiofl_step", "aiofl_default_params"}
+    assert defined == api, nm  # global definitions only
     assert TOKEN not in nm and TOKEN not in pre
 
 
@@ -212,7 +219,9 @@ def _cli_export(path: Path, name: str, description: str, out: Path) -> dict[str,
     path.write_text(text, encoding="utf-8")
     res = CliRunner().invoke(app, ["export", str(path), "--out", str(out)])
     assert res.exit_code == 0, res.output
-    return {n: (out / n).read_text(encoding="utf-8") for n in (HEADER, SOURCE)}
+    return {
+        p.name: p.read_text(encoding="utf-8") for p in out.iterdir() if p.suffix in (".c", ".h")
+    }
 
 
 @needs_gcc

@@ -25,11 +25,12 @@ from aiofl.config import load_config
 from aiofl.controller import Controller, controller_batch
 from aiofl.engine.discrete import D_L, Sampling, sampling_rows
 from aiofl.engine.observer_gains import model_jacobians
-from aiofl.export import HEADER, SOURCE, ExportError, export_c
+from aiofl.export import HEADER, PARAMS, SOURCE, ExportError, export_c
+from aiofl.export.c_code import MODEL
 from aiofl.plants import get_plant, registry
 from aiofl.plants.base import Plant
 from aiofl.scenario import Reference
-from test_export import STRICT_FLOAT, closed_loop, compile_library, needs_cc
+from test_export import needs_cc, versus_engine
 
 SAMPLING = Sampling(1e-3)
 REF = Reference(amplitude=math.pi / 4, omega=2.0)
@@ -61,25 +62,28 @@ def test_model_assisted_c_equals_the_discrete_controller(tmp_path, slfjm, precis
     command (seen: 8e-7; the model-free float tests allow 1e-4)."""
     ctrl = assisted(slfjm)
     files = export_c(ctrl, SAMPLING, precision=precision, plant=slfjm)
-    src = files[SOURCE]
-    assert "static void aiofl_nominal_model(const aiofl_real *xi" in src
-    assert "aiofl_nominal_model(s->xhat, &a_hat, &b_hat);" in src
-    assert "u = (B0 * v - a_hat - s->xhat[AIOFL_RHO]) / b_hat;" in src
-    assert "um = (a_hat + b_hat * um) / B0;" in src
+    src, model = files[SOURCE], files[MODEL]
+    assert "static void aiofl_nominal_model(const aiofl_params *p, const aiofl_real *xi," in model
+    assert "aiofl_nominal_model(p, xi, &a_hat, &b_hat);" in src
+    assert "u = (p->b0 * v - a_hat - s->xhat[AIOFL_RHO]) / b_hat;" in src
+    assert "um = (a_hat + b_hat * um) / p->b0;" in src
+    assert "#define AIOFL_ESO_MODEL 1" in files[HEADER]
     assert "Nominal model (eso.model = nominal) of plant slfjm" in files[HEADER]
-    lib = compile_library(tmp_path, files, STRICT_FLOAT if precision == "float" else [])
-    u_c, u_e, y = closed_loop(lib, precision, slfjm, REF, ctrl, SAMPLING, t_final=2.0)
-    assert np.all(np.isfinite(u_e)) and np.max(np.abs(y)) < 10.0  # a working loop
-    late = slice(len(y) // 2, None)
-    t = np.arange(len(y)) * SAMPLING.ts
-    assert np.max(np.abs(y[late] - REF.amplitude * np.sin(REF.omega * t[late]))) < 0.05
-    rel = np.max(np.abs(u_c - u_e)) / np.max(np.abs(u_e))
-    assert rel < (1e-12 if precision == "double" else 1e-5), rel
-    if precision == "float":  # every literal of the code, the model's too, is a float one
-        code = re.sub(r"/\*.*?\*/", "", src, flags=re.S)
+    for mode in ("zero", "bumpless"):
+        u_c, u_e, y = versus_engine(
+            tmp_path / mode, files, precision, slfjm, REF, ctrl, SAMPLING, 2.0, mode
+        )
+        assert np.all(np.isfinite(u_e)) and np.max(np.abs(y)) < 10.0  # a working loop
+        late = slice(len(y) // 2, None)
+        t = np.arange(len(y)) * SAMPLING.ts
+        assert np.max(np.abs(y[late] - REF.amplitude * np.sin(REF.omega * t[late]))) < 0.05
+        rel = np.max(np.abs(u_c - u_e)) / np.max(np.abs(u_e))
+        assert rel < (1e-12 if precision == "double" else 2e-5), (mode, rel)
+    if precision == "float":  # every literal of the model and the params is a float one
+        code = re.sub(r"/\*.*?\*/", "", model + files[PARAMS], flags=re.S)
         literals = re.findall(r"(?<![\w.\[])(\d+\.\d*(?:e[-+]?\d+)?f?)(?![\w.])", code)
         assert literals and all(lit.endswith("f") for lit in literals)
-        assert "sinf(xi[0])" in src and "cosf(xi[0])" in src
+        assert "sinf(xi[0])" in model and "cosf(xi[0])" in model
 
 
 def test_the_observer_gain_is_placed_for_the_model(slfjm):
@@ -91,8 +95,8 @@ def test_the_observer_gain_is_placed_for_the_model(slfjm):
     placed = sampling_rows(batch, [SAMPLING], SAMPLING.ts, jac)[0][D_L : D_L + 5]
     chain = sampling_rows(batch, [SAMPLING], SAMPLING.ts)[0][D_L : D_L + 5]
     assert not np.allclose(placed, chain)
-    src = export_c(ctrl, SAMPLING, plant=slfjm)[SOURCE]
-    line = re.search(r"ESO_L\[5\] = \{([^}]*)\}", src)
+    src = export_c(ctrl, SAMPLING, plant=slfjm)[PARAMS]
+    line = re.search(r"\.eso_l = \{([^}]*)\}", src)
     assert line is not None
     np.testing.assert_array_equal([float(v) for v in line.group(1).split(",")], placed)
 
@@ -104,7 +108,8 @@ def test_never_exported_without_the_model(slfjm):
     # a model-free controller's export ignores the plant, and has no model
     free = dataclasses.replace(ctrl, eso_model="none")
     assert export_c(free, SAMPLING) == export_c(free, SAMPLING, plant=slfjm)
-    assert "aiofl_nominal_model" not in export_c(free, SAMPLING)[SOURCE]
+    assert MODEL not in export_c(free, SAMPLING)
+    assert "#define AIOFL_ESO_MODEL 0" in export_c(free, SAMPLING)[HEADER]
 
 
 def test_plants_without_the_expressions_are_refused(slfjm):
@@ -184,12 +189,20 @@ def test_cli_exports_a_plant_files_model(tmp_path):
     assert res.exit_code == 0, res.output
     cfg = load_config(str(cfg_path))
     assert cfg.controller.eso_model == "nominal" and cfg.scenario.x0 == (0.2, 0.0)
-    files = {n: (out / n).read_text() for n in (HEADER, SOURCE)}
-    assert "PLANT_P[" in files[SOURCE] and "sin(xi[0])" in files[SOURCE]
-    lib = compile_library(tmp_path, files)
+    files = {p.name: p.read_text() for p in out.iterdir() if p.suffix in (".c", ".h")}
+    assert "PLANT_P[" in files[MODEL] and "sin(xi[0])" in files[MODEL]
     ref = Reference(amplitude=0.5, omega=1.0)
-    u_c, u_e, _ = closed_loop(
-        lib, "double", cfg.plant, ref, cfg.controller, cfg.sampling, 1.0, x0=cfg.scenario.x0
+    u_c, u_e, _ = versus_engine(
+        tmp_path / "b",
+        files,
+        "double",
+        cfg.plant,
+        ref,
+        cfg.controller,
+        cfg.sampling,
+        1.0,
+        cfg.controller.eso_init,
+        x0=cfg.scenario.x0,
     )
     assert np.max(np.abs(u_c - u_e)) < 1e-12 * np.max(np.abs(u_e))
 

@@ -35,40 +35,46 @@ from aiofl.cli.errors import _check_out, bad_input_exits
 __all__ = ["FORMATS", "export_command"]
 
 
-def _c_files(cfg: Any, sampling: Any, config: str, opts: dict[str, Any]) -> dict[str, str]:
+def _c_files(cfg: Any, sampling: Any, config: str, opts: dict[str, Any]) -> dict[str, str | bytes]:
     from aiofl.export import export_c
 
-    return export_c(
-        cfg.controller,
-        sampling,
-        precision=opts.get("precision", "double"),
-        prefix=opts.get("prefix", "aiofl"),
-        title=cfg.name,
-        notes=[f"Config: {config}", *([cfg.description] if cfg.description else [])],
-        plant=cfg.plant,  # a model-assisted controller's nominal model
-        plant_source=str(cfg.raw.get("plant", cfg.plant.name)),
-        x0=cfg.scenario.x0,
-        params_only=opts.get("params_only"),
+    return dict(
+        export_c(
+            cfg.controller,
+            sampling,
+            precision=opts.get("precision", "double"),
+            prefix=opts.get("prefix", "aiofl"),
+            title=cfg.name,
+            notes=[f"Config: {config}", *([cfg.description] if cfg.description else [])],
+            plant=cfg.plant,  # a model-assisted controller's nominal model
+            plant_source=str(cfg.raw.get("plant", cfg.plant.name)),
+            x0=cfg.scenario.x0,
+            params_only=opts.get("params_only"),
+        )
     )
 
 
-def _fmu_files(cfg: Any, sampling: Any, config: str, opts: dict[str, Any]) -> dict[str, bytes]:
+def _fmu_files(
+    cfg: Any, sampling: Any, config: str, opts: dict[str, Any]
+) -> dict[str, str | bytes]:
     """``NAME.fmu``: the C above as an FMI 2.0 co-simulation FMU (:mod:`aiofl.export.fmu`)."""
     from aiofl.export.fmu import export_fmu_for_config
 
     if opts.get("params_only"):
-        raise ValueError("--params-only writes C parameter files; allowed with --format c")
+        raise ValueError("--params-only: writes C parameter files; allowed with --format c")
     precision, prefix = opts.get("precision", "double"), opts.get("prefix", "aiofl")
-    return dict(
-        [export_fmu_for_config(cfg, sampling, precision=precision, config=config, prefix=prefix)]
+    name, data = export_fmu_for_config(
+        cfg, sampling, precision=precision, config=config, prefix=prefix
     )
+    return {name: data}
 
 
-FORMATS: dict[str, Callable[[Any, Any, str, dict[str, Any]], dict[str, Any]]] = {
+FORMATS: dict[str, Callable[[Any, Any, str, dict[str, Any]], dict[str, str | bytes]]] = {
     "c": _c_files,
     "fmu": _fmu_files,
 }
-"""``--format`` -> the function writing its files ``(cfg, sampling, config, options)``."""
+"""``--format`` -> the function giving its files ``(cfg, sampling, config, options) ->
+{name: text or bytes}`` (options: precision, prefix, params_only)."""
 
 
 def export_command(
@@ -111,16 +117,17 @@ def export_command(
         if precision not in PRECISIONS:
             raise ValueError(f"--precision = {precision!r}; allowed: {', '.join(PRECISIONS)}")
         c_prefix(prefix)
-        if not 0 < tolerance:
+        if not tolerance > 0:
             raise ValueError(f"--tolerance = {tolerance}; allowed: > 0")
         _check_out(out)
         cfg = load_config(config)
         sampling = _sampling(cfg, ts)
         opts: dict[str, Any] = {"precision": precision, "prefix": prefix}
         if params_only:
-            name = params_name or re.sub(r"[^A-Za-z0-9]+", "_", cfg.name).strip("_").lower()
-            if not re.match(r"[a-z]", name):
-                name = "params_" + name
+            name = params_name
+            if name is None:  # the config's name as an identifier
+                name = re.sub(r"[^A-Za-z0-9]+", "_", cfg.name).strip("_").lower()
+                name = name if re.match(r"[a-z]", name) else "params_" + name
             try:
                 opts["params_only"] = c_prefix(name)
             except ValueError:
@@ -136,11 +143,11 @@ def export_command(
     if precision == "float" and not params_only:
         warnings += _float_check(cfg, sampling, config)
     with bad_input_exits(run=True), atomic_output_dir(out) as stage:
-        for name, text in files.items():
-            if isinstance(text, bytes):  # the FMU
-                atomic_write_bytes(stage / name, text)
+        for name, data in files.items():
+            if isinstance(data, bytes):
+                atomic_write_bytes(stage / name, data)
             else:
-                atomic_write_text(stage / name, text)
+                atomic_write_text(stage / name, data)
     typer.echo(f"wrote {out}/{', '.join(files)} (Ts = {sampling.ts:g} s, {precision})")
     for w in warnings:
         typer.echo(f"aiofl: warning: {w}", err=True)
@@ -171,7 +178,6 @@ def _sampling(cfg: Any, ts: float | None) -> Any:
 def _loop_checks(cfg: Any, sampling: Any, config: str, tolerance: float) -> list[str]:
     """Refuse (ValueError) a design that diverges in its own simulation; the warnings on the
     design sampled at the exported Ts."""
-    from dataclasses import replace
 
     from aiofl.engine.simulation import simulate_batch
     from aiofl.plants.base import PlantError

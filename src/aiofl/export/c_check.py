@@ -198,15 +198,24 @@ def float_holds(cfg: Any, sampling: Any, files: dict[str, dict[str, str]]) -> st
             cc = CController(build(Path(tmp) / prec, fs), prec)
             started: list[bool] = []
 
-            def step(r: list[float], y: float, cc: CController = cc, st: list[bool] = started) -> float:
+            def step(
+                r: list[float], y: float, cc: CController = cc, st: list[bool] = started
+            ) -> float:
                 if not st:
                     cc.start(y, c.eso_init)
                     st.append(True)
                 return cc.step(r, y)
 
             t, y, u = loop(
-                step, cfg.plant, sc.reference, c.rho, sampling.ts, sc.t_final, x0=sc.x0,
-                scale=dict(sc.plant_scale), delay=sampling.delay,
+                step,
+                cfg.plant,
+                sc.reference,
+                c.rho,
+                sampling.ts,
+                sc.t_final,
+                x0=sc.x0,
+                scale=dict(sc.plant_scale),
+                delay=sampling.delay,
                 disturbance=(sc.disturbance_amplitude, sc.disturbance_time),
             )
             if len(t) < round(sc.t_final / sampling.ts):

@@ -171,7 +171,10 @@ def _params_values(
         pf = DS.D_PF_PHI
         out.append(("pf_c", [linear_prefilter_coefficient(rho, i + 1, w) for i in range(rho)]))
         out.append(
-            ("pf_dphi", [row[pf + i * DS.PF_STRIDE : pf + i * DS.PF_STRIDE + rho] for i in range(rho)])
+            (
+                "pf_dphi",
+                [row[pf + i * DS.PF_STRIDE : pf + i * DS.PF_STRIDE + rho] for i in range(rho)],
+            )
         )
     vec = lambda name: [c.value(f"sef.{name}{i}") for i in range(1, m + 1)]  # noqa: E731
     if c.sef == "nonlinear":
@@ -242,7 +245,9 @@ class _Design:
             "DELAY": int(bool(s.delay)),
         }
         self.options = opts
-        sig = repr((sorted(opts.items()), repr(s.ts), s.eso, s.td, self.model and self.model.function))
+        sig = repr(
+            (sorted(opts.items()), repr(s.ts), s.eso, s.td, self.model and self.model.function)
+        )
         self.layout = "0x" + hashlib.sha256(sig.encode()).hexdigest()[:8] + "UL"
 
     def info(self) -> list[str]:
@@ -264,9 +269,7 @@ class _Design:
         ]
 
     def params_c(self, var: str, header: str, what: str) -> str:
-        body = ",\n".join(
-            f"    .{k} = {_initializer(v, self.precision)}" for k, v in self.fields
-        )
+        body = ",\n".join(f"    .{k} = {_initializer(v, self.precision)}" for k, v in self.fields)
         return "\n".join(
             [
                 _comment([what, "", *self.info()]),
@@ -275,7 +278,8 @@ class _Design:
                 f'#include "{header}"',
                 "",
                 f"#if !defined(AIOFL_LAYOUT) || AIOFL_LAYOUT != {self.layout}",
-                "#error these parameters are for another controller (prefix, precision, rho, Ts or options)",
+                "#error these parameters are for another controller (prefix, precision, rho, Ts,"
+                " options)",
                 "#endif",
                 "",
                 f"const aiofl_params {var} = {{",
@@ -317,7 +321,7 @@ class _Design:
                 f"#define AIOFL_TS {_literal(s.ts, 'double')} /* sample time [s] */",
                 f"#define AIOFL_U_MIN ({u_min}) /* law.u_min of the default parameters */",
                 f"#define AIOFL_U_MAX ({u_max}) /* law.u_max */",
-                f"#define AIOFL_LAYOUT {self.layout} /* hash of prefix, precision, rho, Ts, options */",
+                f"#define AIOFL_LAYOUT {self.layout} /* prefix, precision, rho, Ts, options */",
                 "",
                 template("controller.h").rstrip("\n"),
                 "",
@@ -377,8 +381,14 @@ def export_c(
     except ValueError as exc:
         raise ExportError(str(exc)) from None
     d = _Design(
-        controller, sampling, precision=precision, title=title, notes=notes, plant=plant,
-        plant_source=plant_source, x0=x0,
+        controller,
+        sampling,
+        precision=precision,
+        title=title,
+        notes=notes,
+        plant=plant,
+        plant_source=plant_source,
+        x0=x0,
     )
     if params_only is not None:
         h, c = f"aiofl_{params_only}.h", f"aiofl_{params_only}.c"

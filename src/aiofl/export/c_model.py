@@ -7,10 +7,11 @@ nominal normal form in its own coordinates at the corrected estimate,
 
 (:attr:`aiofl.plants.normal_form.Analysis.alpha_beta_of_xi`).  :func:`model_code` writes it
 as ``static void aiofl_nominal_model(const aiofl_params *p, const aiofl_real *xi,
-aiofl_real *alpha, aiofl_real *beta)`` (the file ``aiofl_model.h`` the controller template
-includes under ``#if AIOFL_ESO_MODEL``) from the **same sympy expressions** the plant's Python function
-``alpha_beta_of_xi`` is generated from (:func:`aiofl.plants.codegen.plant_sources`): the
-same substitution (:math:`\xi_i` as ``x[i-1]``, parameter k as ``p[k]``), the same common
+aiofl_real *alpha, aiofl_real *beta)`` (the file ``aiofl_model.h`` the controller
+template includes under ``#if AIOFL_ESO_MODEL``) from the **same sympy expressions** the
+plant's Python function ``alpha_beta_of_xi`` is generated from
+(:func:`aiofl.plants.codegen.plant_sources`): the same substitution (:math:`\xi_i` as
+``x[i-1]``, parameter k as ``p[k]``), the same common
 subexpressions (:func:`sympy.cse`, ``optimizations="basic"``), printed by a
 :class:`sympy.printing.c.C99CodePrinter` (single precision: its ``float`` aliases, so
 ``sinf``, ``sqrtf``, ...), so the C evaluates the operations the engine evaluates, in the
