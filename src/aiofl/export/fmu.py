@@ -426,7 +426,7 @@ def _model_description(
 ) -> bytes:
     """``modelDescription.xml`` (FMI 2.0 co-simulation), every attribute set through
     :mod:`xml.etree.ElementTree`, which escapes it."""
-    from aiofl import __version__
+    from importlib.metadata import version
 
     fmt = lambda x: repr(float(x))  # noqa: E731
     root = ET.Element(
@@ -436,7 +436,7 @@ def _model_description(
             "modelName": title,
             "guid": guid,
             "description": description,
-            "generationTool": f"aiofl {__version__}",
+            "generationTool": f"aiofl {version('aiofl')}",
             "variableNamingConvention": "structured",
             "numberOfEventIndicators": "0",
         },
