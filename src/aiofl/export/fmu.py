@@ -364,7 +364,7 @@ def _model_description(
     """``modelDescription.xml`` (FMI 2.0 co-simulation), every attribute set through
     :mod:`xml.etree.ElementTree`, which escapes it; ``start``: the default of the start-mode
     parameter (:data:`START_MODES`)."""
-    from aiofl import __version__
+    from importlib.metadata import version
 
     fmt = lambda x: repr(float(x))  # noqa: E731
     root = ET.Element(
@@ -374,7 +374,7 @@ def _model_description(
             "modelName": title,
             "guid": guid,
             "description": description,
-            "generationTool": f"aiofl {__version__}",
+            "generationTool": f"aiofl {version('aiofl')}",
             "variableNamingConvention": "structured",
             "numberOfEventIndicators": "0",
         },
