@@ -152,6 +152,7 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
         return FmuParameter(name, v(name), what, True, minimum, nz, tuple(setter))
 
     out: list[FmuParameter] = []
+    pos = {"minimum": 0.0, "nz": True}  # > 0
     if _b0_scales_gamma(c, sampling):
         out.append(
             tun(
@@ -184,8 +185,7 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
                 "sef.omega_c",
                 "SEF bandwidth (gains binomial(rho, i-1) omega_c^(rho-i+1))",
                 *(f"p->sef_gain[{i}] = (aiofl_real)fmu_binomial_power({i}, v);" for i in range(m)),
-                minimum=0.0,
-                nz=True,
+                **pos,
             )
         )
     elif c.sef == "nonlinear":
@@ -193,25 +193,12 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
         slope += "(double)p->sef_alpha[{i}] - 1.0);"
         for i in range(m):
             out.append(tun(f"sef.k{i + 1}", "SEF gain", f"p->sef_k[{i}] = (aiofl_real)v;"))
+            alpha = f"p->sef_alpha[{i}] = (aiofl_real)v;"
             out.append(
-                tun(
-                    f"sef.alpha{i + 1}",
-                    "fal exponent",
-                    f"p->sef_alpha[{i}] = (aiofl_real)v;",
-                    slope.format(i=i),
-                    minimum=0.0,
-                )
+                tun(f"sef.alpha{i + 1}", "fal exponent", alpha, slope.format(i=i), minimum=0)
             )
-            out.append(
-                tun(
-                    f"sef.delta{i + 1}",
-                    "fal linear zone",
-                    f"p->sef_delta[{i}] = (aiofl_real)v;",
-                    slope.format(i=i),
-                    minimum=0.0,
-                    nz=True,
-                )
-            )
+            delta = f"p->sef_delta[{i}] = (aiofl_real)v;"
+            out.append(tun(f"sef.delta{i + 1}", "fal zone", delta, slope.format(i=i), **pos))
     else:  # improved
         for i in range(m):
             for vec, field, what in (
@@ -222,15 +209,7 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
             ):
                 name = f"sef.{vec}{i + 1}"
                 out.append(tun(name, what, f"p->{field}[{i}] = (aiofl_real)v;"))
-        out.append(
-            tun(
-                "sef.v_limit",
-                "INLSEF output limit",
-                "p->sef_v_limit = (aiofl_real)v;",
-                minimum=0.0,
-                nz=True,
-            )
-        )
+        out.append(tun("sef.v_limit", "INLSEF limit", "p->sef_v_limit = (aiofl_real)v;", **pos))
     return calc + out
 
 
