@@ -23,12 +23,9 @@ and ``td.rho``; the integer parameter ``start`` (0 bumpless, 1 zero, 2 output).
 The default experiment's step size is Ts; the wrapper's comment says how it samples (only at
 communication points that are multiples of Ts; a step passing a sample instant is an error).
 
-The adapter: until the parameter-struct C API (``NAME_init/start/reset/step`` with a
-``const NAME_params *``) is on this branch, ``fmu_adapter.h`` wraps today's
-``aiofl_init``/``aiofl_step``: it includes ``aiofl_controller.c``, whose tunable
-``static const`` parameters this module turns into file-scope variables with ``__dflt``
-defaults, loads the instance's parameters into them before each call, and starts as the
-config's ``eso.init`` says whatever ``start`` is (:data:`_LEGACY`).
+The adapter (until the ``NAME_params`` C API lands): ``fmu_adapter.h`` includes today's
+``aiofl_controller.c`` with its tunable ``static const`` parameters made variables (defaults
+``X__dflt``), loaded from the instance before each call; start as ``eso.init`` says.
 """
 
 from __future__ import annotations
@@ -157,6 +154,7 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
         return FmuParameter(name, v(name), what, True, minimum, nz, tuple(setter))
 
     out: list[FmuParameter] = []
+    pos = {"minimum": 0.0, "nz": True}  # > 0
     if _b0_scales_gamma(c, sampling):
         out.append(
             tun(
@@ -191,8 +189,7 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
                 "sef.omega_c",
                 "SEF bandwidth (gains binomial(rho, i-1) omega_c^(rho-i+1))",
                 *(f"p->SEF_GAIN[{i}] = (aiofl_real)fmu_binomial_power({i}, v);" for i in range(m)),
-                minimum=0.0,
-                nz=True,
+                **pos,
             )
         )
     elif c.sef == "nonlinear":
@@ -200,25 +197,12 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
         slope += "(double)p->SEF_ALPHA[{i}] - 1.0);"
         for i in range(m):
             out.append(tun(f"sef.k{i + 1}", "SEF gain", f"p->SEF_K[{i}] = (aiofl_real)v;"))
+            alpha = f"p->SEF_ALPHA[{i}] = (aiofl_real)v;"
             out.append(
-                tun(
-                    f"sef.alpha{i + 1}",
-                    "fal exponent",
-                    f"p->SEF_ALPHA[{i}] = (aiofl_real)v;",
-                    slope.format(i=i),
-                    minimum=0.0,
-                )
+                tun(f"sef.alpha{i + 1}", "fal exponent", alpha, slope.format(i=i), minimum=0)
             )
-            out.append(
-                tun(
-                    f"sef.delta{i + 1}",
-                    "fal linear zone",
-                    f"p->SEF_DELTA[{i}] = (aiofl_real)v;",
-                    slope.format(i=i),
-                    minimum=0.0,
-                    nz=True,
-                )
-            )
+            delta = f"p->SEF_DELTA[{i}] = (aiofl_real)v;"
+            out.append(tun(f"sef.delta{i + 1}", "fal zone", delta, slope.format(i=i), **pos))
     else:  # improved
         for i in range(m):
             for vec, field, what in (
@@ -229,15 +213,7 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
             ):
                 name = f"sef.{vec}{i + 1}"
                 out.append(tun(name, what, f"p->{field}[{i}] = (aiofl_real)v;"))
-        out.append(
-            tun(
-                "sef.v_limit",
-                "INLSEF output limit",
-                "p->SEF_V_LIMIT = (aiofl_real)v;",
-                minimum=0.0,
-                nz=True,
-            )
-        )
+        out.append(tun("sef.v_limit", "INLSEF limit", "p->SEF_V_LIMIT = (aiofl_real)v;", **pos))
     return calc + out
 
 
