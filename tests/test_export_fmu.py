@@ -229,6 +229,42 @@ def test_a_parameter_set_through_fmi_gives_the_engines_commands_with_it(fmus, co
     assert rel(f.run(y, r), u_engine) > 1e-6  # the default is another controller
 
 
+def test_a_parameter_set_during_the_run_takes_effect_at_the_next_sample(fmus, loops):
+    f = fmus["dcmotor-arm-ladrc"]
+    y, r, u_before = (a[:300] for a in loops["dcmotor-arm-ladrc"])
+    new = {"law.b0": 0.7 * f.cfg.controller.value("law.b0")}
+    engines = [
+        DiscreteController(c, Sampling(TS))
+        for c in (f.cfg.controller, f.cfg.controller.with_values(**new))
+    ]
+    engines[0].init(y[0])
+    u_engine = []
+    for k in range(len(y)):
+        if k == 150:  # the second design continues from the first one's state
+            engines[1].state = engines[0].state
+        u_engine.append(engines[k >= 150].step(r[k], y[k]))
+    s = f.slave()
+    vin, vu = [f.vr[n] for n in f.inputs], f.vr["u"]
+    s.enterInitializationMode()
+    s.setReal(vin, [y[0], *r[0]])
+    s.exitInitializationMode()
+    u_fmu = []
+    for k in range(len(y)):
+        if k == 150:
+            s.setReal([f.vr["law.b0"]], [new["law.b0"]])
+        s.setReal(vin, [y[k], *r[k]])
+        u_fmu.append(s.getReal([vu])[0])
+        s.doStep(currentCommunicationPoint=k * TS, communicationStepSize=TS)
+    s.terminate()
+    s.freeInstance()
+    assert rel(np.array(u_fmu), np.array(u_engine)) <= 1e-12
+    assert (
+        np.array_equal(u_fmu[:150], u_before[:150])
+        or rel(np.array(u_fmu[:150]), u_before[:150]) < 1e-12
+    )
+    assert rel(np.array(u_fmu[150:]), u_before[150:]) > 1e-3
+
+
 def test_two_instances_keep_their_own_state_and_parameters(fmus, loops):
     f = fmus["dcmotor-arm-ladrc"]
     y, r, _ = (a[:200] for a in loops["dcmotor-arm-ladrc"])
