@@ -1,4 +1,6 @@
-"""Shared fixtures: one ``aiofl reproduce`` run per test session (it compiles a kernel).
+"""Shared fixtures: one ``aiofl reproduce`` run per test session, shared by every
+pytest-xdist worker (the first to need it runs it under a file lock; the others wait and
+read its output folder and its pickled :class:`aiofl.reporting.cases.Reproduction`).
 
 Every test (and every subprocess a test starts) shares one kernel cache,
 ``<repository>/.aiofl-cache`` unless ``AIOFL_CACHE_DIR`` is set: a kernel one test
@@ -8,36 +10,90 @@ user's own cache (:func:`aiofl.cache.cache_root`) is left alone.
 
 from __future__ import annotations
 
+import copyreg
+import fcntl
+import json
 import os
+import pickle
+import types
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 os.environ.setdefault("AIOFL_CACHE_DIR", str(Path(__file__).resolve().parents[1] / ".aiofl-cache"))
 
 
+def _mappingproxy(d: dict[str, Any]) -> types.MappingProxyType[str, Any]:
+    return types.MappingProxyType(d)
+
+
+# the layout's kind tables are read-only mappings; pickle them as such (the Reproduction
+# travels between test workers as a pickle)
+copyreg.pickle(types.MappingProxyType, lambda m: (_mappingproxy, (dict(m),)))
+
+
 @dataclass(frozen=True)
 class ReproduceRun:
-    """The output directory of one ``aiofl reproduce`` run and its CLI result."""
+    """The output directory of one ``aiofl reproduce`` run, its CLI result and the
+    :class:`~aiofl.reporting.cases.Reproduction` it wrote the files from."""
 
     out: Path
     exit_code: int
     stdout: str
     stderr: str
+    pickled: Path
+
+    def reproduction(self) -> Any:
+        """The run's Reproduction (runs with trajectories, verdicts, records, ...)."""
+        with self.pickled.open("rb") as fh:
+            return pickle.load(fh)  # written by this test session
+
+
+def _run_reproduce(shared: Path) -> None:
+    """``aiofl reproduce --out shared/results --draws 16`` in-process through the typer app,
+    keeping the Reproduction the command returns."""
+    from typer.testing import CliRunner
+
+    import aiofl.reporting.reproduce as module
+    from aiofl.cli.app import app
+
+    kept: list[Any] = []
+    original = module.reproduce
+
+    def keep(*args: Any, **kwargs: Any) -> Any:
+        kept.append(original(*args, **kwargs))
+        return kept[-1]
+
+    module.reproduce = keep
+    try:
+        # 16 model-error draws per design keep the session affordable (the default is 100)
+        res = CliRunner().invoke(
+            app, ["reproduce", "--out", str(shared / "results"), "--draws", "16"]
+        )
+    finally:
+        module.reproduce = original
+    if res.exception is not None and not isinstance(res.exception, SystemExit):
+        raise res.exception
+    with (shared / "reproduction.pickle").open("wb") as fh:
+        pickle.dump(kept[0] if kept else None, fh, protocol=pickle.HIGHEST_PROTOCOL)
+    run = {"exit_code": res.exit_code, "stdout": res.stdout, "stderr": res.stderr}
+    (shared / "run.json").write_text(json.dumps(run))
 
 
 @pytest.fixture(scope="session")
 def reproduced(tmp_path_factory: pytest.TempPathFactory) -> ReproduceRun:
-    """Run ``aiofl reproduce --out DIR --draws 16`` once (in-process, through the typer
-    app)."""
-    from typer.testing import CliRunner
-
-    from aiofl.cli.app import app
-
-    out = tmp_path_factory.mktemp("reproduce") / "results"
-    # 16 model-error draws per design keep the session affordable (the default is 100)
-    res = CliRunner().invoke(app, ["reproduce", "--out", str(out), "--draws", "16"])
-    if res.exception is not None and not isinstance(res.exception, SystemExit):
-        raise res.exception
-    return ReproduceRun(out, res.exit_code, res.stdout, res.stderr)
+    """One ``aiofl reproduce --out DIR --draws 16`` for the whole session: run by the first
+    worker that needs it (under a lock in the session's shared temporary folder), read by
+    the others."""
+    base = tmp_path_factory.getbasetemp()
+    root = base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+    shared = root / "reproduce-shared"
+    with (root / "reproduce.lock").open("w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        if not (shared / "run.json").exists():
+            shared.mkdir(exist_ok=True)
+            _run_reproduce(shared)
+    run = json.loads((shared / "run.json").read_text())
+    return ReproduceRun(shared / "results", pickled=shared / "reproduction.pickle", **run)

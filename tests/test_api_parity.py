@@ -32,9 +32,10 @@ from aiofl.config import ConfigError, parse_config
 from aiofl.config.objects import config_dict
 from aiofl.controller import _VALUE_RANGES, controller_batch, value_range
 from aiofl.engine.simulation import simulate, simulate_batch
+from aiofl.export.c_check import CC, WARN, build
 from aiofl.plants import get_plant
 from aiofl.tuning.space import to_toml
-from test_export import CC, CFLAGS, compile_library, needs_cc
+from test_export import needs_cc
 
 PENDULUM = get_plant("pendulum")
 CTRL = Controller.from_structure(
@@ -398,10 +399,10 @@ def test_the_notebook_path_on_a_python_plant(tmp_path: Path) -> None:
     assert len(rob.itae) == 3 and 0 <= rob.stable_fraction <= 1
     assert best.analyze()["verdict"] in ("stable", "unstable", "marginal")
     files = best.export(tmp_path / "c", ts=1e-3)
-    assert set(files) == {"aiofl_controller.h", "aiofl_controller.c"}
+    assert set(files) == {"aiofl_controller.h", "aiofl_controller.c", "aiofl_params.c"}
     texts = {n: p.read_text() for n, p in files.items()}
-    assert CC is not None and "-Werror" in CFLAGS
-    compile_library(tmp_path, texts)
+    assert CC is not None and "-Werror" in WARN
+    build(tmp_path / "lib", texts)
 
 
 def test_design_refuses_what_the_config_refuses() -> None:
@@ -436,6 +437,7 @@ def test_the_readme_notebook_block_runs(tmp_path: Path, monkeypatch: pytest.Monk
     exec(compile(block, "README.md", "exec"), namespace)
     assert (tmp_path / "out" / "c" / "aiofl_controller.c").is_file()
     assert (tmp_path / "out" / "tune" / "best.toml").is_file()
-    cmd = [str(CC), *CFLAGS, "-o", str(tmp_path / "lib.so"), "out/c/aiofl_controller.c", "-lm"]
+    srcs = ["out/c/aiofl_controller.c", "out/c/aiofl_params.c"]
+    cmd = [str(CC), *WARN, "-shared", "-fPIC", "-o", str(tmp_path / "lib.so"), *srcs, "-lm"]
     if CC is not None:
         assert subprocess.run(cmd, capture_output=True, check=False).returncode == 0

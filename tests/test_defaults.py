@@ -1,6 +1,6 @@
 """Defaults and inputs that mislead (issue 22): required controller parameters, documented
 defaults printed by ``--check``, ``[controller.discrete]`` sizes, ``--out`` checked before any
-work, stale staging folders, named options, and an export of a diverging design."""
+work, stale staging folders, named options, and an export of a diverging design (refused)."""
 
 from __future__ import annotations
 
@@ -218,11 +218,14 @@ def test_r_op_without_an_operating_point_names_the_option() -> None:
     assert res.stderr.startswith("aiofl: error: --r-op = 1e+300"), res.stderr
 
 
-def test_export_of_a_diverging_design_warns(tmp_path: Path) -> None:
-    """Regression: the paper's S1 LESO (diverging at 12-14 s) was exported without a word."""
-    res = runner.invoke(app, ["export", "paper-s1-leso", "--ts", "1e-3", "--out", str(tmp_path)])
-    assert res.exit_code == 0, res.output
-    assert "aiofl: warning: paper-s1-leso diverges at" in res.stderr
-    assert (tmp_path / "aiofl_controller.c").is_file()
-    ok = runner.invoke(app, ["export", "frontier-s1-ladrc", "--ts", "1e-3", "--out", str(tmp_path)])
+def test_export_of_a_diverging_design_is_refused(tmp_path: Path) -> None:
+    """Regression: the paper's S1 LESO (diverging at 12-14 s) was exported without a word;
+    then with a warning; now refused (exit 2, nothing written).  frontier-s1-ladrc at
+    0.2 ms (within 10 % of its continuous ITAE) is exported without a warning."""
+    out = tmp_path / "c"
+    res = runner.invoke(app, ["export", "paper-s1-leso", "--ts", "1e-3", "--out", str(out)])
+    assert res.exit_code == 2, res.output
+    assert "aiofl: error: paper-s1-leso diverges at" in res.stderr and not out.exists()
+    ok = runner.invoke(app, ["export", "frontier-s1-ladrc", "--ts", "2e-4", "--out", str(out)])
     assert ok.exit_code == 0 and "warning" not in ok.stderr, ok.stderr
+    assert (out / "aiofl_controller.c").is_file()

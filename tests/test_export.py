@@ -184,7 +184,7 @@ def test_shipped_designs_export_and_agree(tmp_path, preset, ts, t_final):
     _, _, u_c = loop(
         step, cfg.plant, cfg.scenario.reference, cfg.controller.rho, ts, t_final, x0=x0
     )
-    assert np.max(np.abs(u_c - np.array(u_e))) < 1e-9 * np.max(np.abs(u_e))
+    assert np.max(np.abs(u_c - np.array(u_e))) < 1e-12 * np.max(np.abs(u_e))
 
 
 @needs_cc

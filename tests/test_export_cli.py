@@ -32,11 +32,14 @@ def _run(args: list[str]):
         (["--prefix", "m" * 32], "--prefix"),
         (["--ts", "0"], "--ts"),
         (["--ts", "-1e-3"], "--ts"),
-        (["--ts", "1.5e-4"], "--ts = 0.00015 is not an integer multiple of the config's dt"),
+        (["--ts", "1.5e-4"], "--ts = 0.00015: "),
+        (["--ts", "1.5e-4"], "is not an integer multiple of the step dt = 0.0001 s"),
         (["--ts", "1e-3", "--format", "vhdl"], "--format = 'vhdl'; allowed: c"),
         (["--ts", "1e-3", "--precision", "half"], "--precision"),
         ([], "no sample time"),
         (["--ts", "1e-3", "--params-only", "--params-name", "2x"], "--params-name"),
+        (["--ts", "1e-3", "--params-only", "--params-name", "default_params"], "--params-name"),
+        (["--ts", "1e-3", "--params-only", "--params-name", "controller"], "--params-name"),
     ],
 )
 def test_bad_options_exit_2_naming_the_option(tmp_path, args, needle):
@@ -136,3 +139,24 @@ def test_params_only_and_prefix_through_the_cli(tmp_path):
 @pytest.mark.parametrize("ok", ["motor", "Motor2", "j_1", "x", "aiofl", "ctl_left_arm"])
 def test_good_prefixes_pass(ok):
     assert c_prefix(ok) == ok
+
+
+def test_a_hostile_config_name_gives_a_plain_instance_name(tmp_path):
+    """--params-only names the instance after the config's name, reduced to letters, digits
+    and _: a name holding a comment closer, a directive and U+202E gives a plain identifier,
+    and the code outside comments holds nothing of the rest."""
+    import re
+    from importlib.resources import files
+
+    text = (files("aiofl") / "presets" / "retuned-s1-ladrc.toml").read_text(encoding="utf-8")
+    hostile = 'name = "9 x */ #define aiofl_step EVIL /* \\u202e"'
+    cfg = tmp_path / "h.toml"
+    cfg.write_text(re.sub(r'^name = ".*"$', lambda _: hostile, text, count=1, flags=re.M))
+    out = tmp_path / "p"
+    res = _run([str(cfg), "--ts", "1e-3", "--params-only", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    names = sorted(p.name for p in out.iterdir() if not p.name.startswith("."))
+    assert names == ["aiofl_design_9_x_define_aiofl.c", "aiofl_design_9_x_define_aiofl.h"]
+    for p in out.glob("aiofl_*"):
+        code = re.sub(r"/\*.*?\*/", "", p.read_text(), flags=re.S)
+        assert "EVIL" not in code and "#define aiofl_step" not in code

@@ -109,3 +109,27 @@ def test_frontier_s1_ladrc_float_isu_is_the_double_one(table):
     (_, s_e), (_, s_f) = table["frontier-s1-ladrc"]["engine"], table["frontier-s1-ladrc"]["float"]
     assert 9.0 < s_e < 11.0 and abs(s_f / s_e - 1.0) < 1e-3  # ISU over 12 s
     assert np.isfinite(s_f)
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler on PATH")
+def test_without_the_offset_coordinates_float_does_not_hold(table, tmp_path):
+    """The same float code with y and r as floats (-DAIOFL_SIGNAL_IS_FLOAT: y rounded to 24
+    bits before the observer) on frontier-s1-ladrc: the ISU is several times the double
+    one, the issue's failure; the double signals are what makes float hold."""
+    cfg = load_config("frontier-s1-ladrc")
+    c, sc = cfg.controller, cfg.scenario
+    files = export_c(c, Sampling(TS), precision="float")
+    cc = CController(build(tmp_path, files, ["-DAIOFL_SIGNAL_IS_FLOAT"]), "float", signal="float")
+    started: list[bool] = []
+
+    def step(r: list[float], y: float) -> float:
+        if not started:
+            cc.start(y, c.eso_init)
+            started.append(True)
+        return cc.step(r, y)
+
+    t_final = min(sc.t_final, T_MAX)
+    t, y, u = loop(step, cfg.plant, sc.reference, c.rho, TS, t_final, n_sub=5)
+    _, s_q = itae_isu(t, y, u, sc.reference, TS)
+    _, s_e = table["frontier-s1-ladrc"]["engine"]
+    assert s_q > 2.0 * s_e, (s_q, s_e)

@@ -100,10 +100,10 @@ def test_reconciliation_sentence_states_both_sides() -> None:
 
 # -------------------------------------------------------------- the reproduction
 @pytest.fixture(scope="module")
-def rep():
-    from aiofl.reporting.cases import compute
-
-    return compute()
+def rep(reproduced):
+    """The session's ``aiofl reproduce`` run's Reproduction (conftest.py)."""
+    assert reproduced.exit_code == 0, reproduced.stderr
+    return reproduced.reproduction()
 
 
 def _window(run):

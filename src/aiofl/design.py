@@ -213,12 +213,19 @@ class Design:
         return closed_loop_verdict(self.config, amplitude=amplitude, linearization=lin)
 
     def export(
-        self, out: str | Path, *, ts: float | None = None, precision: str = "double"
+        self,
+        out: str | Path,
+        *,
+        ts: float | None = None,
+        precision: str = "double",
+        prefix: str = "aiofl",
     ) -> dict[str, Path]:
-        """Write the controller as C99 (``aiofl export``): ``aiofl_controller.h`` and
-        ``.c`` in ``out``, sampled at ``ts`` (default: the design's sampling); returns the
-        paths by file name.  Raises ``ValueError`` for what the C code cannot express
-        (:class:`aiofl.export.ExportError`); nothing is written then."""
+        """Write the controller as C99 (``aiofl export``): ``PREFIX_controller.h``,
+        ``PREFIX_controller.c`` and ``PREFIX_params.c`` (and ``PREFIX_model.h`` for a
+        model-assisted controller) in ``out``, sampled at ``ts`` (default: the design's
+        sampling); returns the paths by file name.  Raises ``ValueError`` for what the C
+        code cannot express or a bad prefix (:class:`aiofl.export.ExportError`); nothing is
+        written then.  Unlike ``aiofl export`` it runs no simulation first."""
         from aiofl.engine.discrete import Sampling
         from aiofl.export import ExportError, export_c
         from aiofl.outputs import atomic_write_text
@@ -237,6 +244,7 @@ class Design:
                 cfg.controller,
                 sampling,
                 precision=precision,
+                prefix=prefix,
                 title=cfg.name,
                 notes=[cfg.description] if cfg.description else [],
                 plant=cfg.plant,

@@ -13,7 +13,8 @@ listed), an ``--out`` that is a file, a controller the C cannot express (the IOF
 model-assisted controller of a plant without symbolic expressions), and a design whose
 closed loop diverges in its own simulation (the config as it is).
 
-Warnings (stderr, exit 0): the design sampled at Ts diverges, its sampled loop linearised
+Warnings (stderr, exit 0): the design sampled at Ts (without the converters' quanta, which
+are not part of the code) diverges, its sampled loop linearised
 at the operating point is unstable (:class:`aiofl.analysis.sampled_loop.SampledLoop`), or
 its ITAE exceeds the continuous design's by more than ``--tolerance`` (the criterion of
 ``aiofl analyze --sampling``); with ``--precision float``, float does not hold
@@ -26,7 +27,7 @@ import math
 import re
 from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import typer
 
@@ -85,7 +86,8 @@ def export_command(
         typer.Option("--ts", help="Sample time [s] (default: the config's [controller.discrete])."),
     ] = None,
     precision: Annotated[
-        str, typer.Option("--precision", help="Arithmetic of the C code: double or float.")
+        Literal["double", "float"],
+        typer.Option("--precision", help="Arithmetic of the C code (C double or float)."),
     ] = "double",
     prefix: Annotated[
         str, typer.Option("--prefix", help="Start of every C name (NAME_step, NAME_UP_RHO).")
@@ -108,6 +110,7 @@ def export_command(
     """Export the config's controller, sampled at Ts, as C99 (NAME_controller.h/.c in OUT)."""
     from aiofl.config import load_config
     from aiofl.export import PRECISIONS, ExportError
+    from aiofl.export.c_code import MAX_INSTANCE
     from aiofl.export.c_text import c_prefix
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 
@@ -120,26 +123,21 @@ def export_command(
         if not tolerance > 0:
             raise ValueError(f"--tolerance = {tolerance}; allowed: > 0")
         _check_out(out)
-        cfg = load_config(config)
-        sampling = _sampling(cfg, ts)
+        own = load_config(config)
+        cfg, sampling = _sampling(own, ts)
         opts: dict[str, Any] = {"precision": precision, "prefix": prefix}
         if params_only:
             name = params_name
             if name is None:  # the config's name as an identifier
                 name = re.sub(r"[^A-Za-z0-9]+", "_", cfg.name).strip("_").lower()
-                name = name if re.match(r"[a-z]", name) else "params_" + name
-            try:
-                opts["params_only"] = c_prefix(name)
-            except ValueError:
-                raise ValueError(
-                    f"--params-name = {name!r} is not a C identifier; allowed: a letter, then "
-                    "letters, digits and single _"
-                ) from None
+                name = name if re.match(r"[a-z]", name) else "design_" + name
+                name = name[:MAX_INSTANCE].rstrip("_")
+            opts["params_only"] = name  # checked by export_c
         try:
             files = FORMATS[fmt](cfg, sampling, config, opts)
         except ExportError as exc:
             raise ValueError(f"cannot export {cfg.name!r}: {exc}") from None
-        warnings = _loop_checks(cfg, sampling, config, tolerance)
+        warnings = _loop_checks(own, cfg, sampling, config, tolerance)
     if precision == "float" and not params_only:
         warnings += _float_check(cfg, sampling, config)
     with bad_input_exits(run=True), atomic_output_dir(out) as stage:
@@ -153,37 +151,39 @@ def export_command(
         typer.echo(f"aiofl: warning: {w}", err=True)
 
 
-def _sampling(cfg: Any, ts: float | None) -> Any:
-    """The export's sampling: the config's, at ``--ts`` when given (checked)."""
-    from dataclasses import replace
-
-    from aiofl.engine.discrete import Sampling
+def _sampling(cfg: Any, ts: float | None) -> tuple[Any, Any]:
+    """The config the export is written from and its sampling: the config's own, or the
+    config sampled at ``--ts`` (checked; Kalman gains from the measurement are designed for
+    it, as ``aiofl simulate --ts`` does)."""
+    from aiofl.config import ConfigError
 
     if ts is None:
         if cfg.sampling is None:
             raise ValueError(
                 "no sample time: give --ts or a [controller.discrete] table with ts in the config"
             )
-        return cfg.sampling
+        return cfg, cfg.sampling
     if not (math.isfinite(ts) and 0 < ts <= 1.0):  # the range of [controller.discrete] ts
         raise ValueError(f"--ts = {ts}; allowed: 0 < ts <= 1 [s]")
-    n = ts / cfg.dt
-    if abs(n - round(n)) > 1e-9 * max(1.0, n) or round(n) < 1:
-        raise ValueError(
-            f"--ts = {ts:g} is not an integer multiple of the config's dt = {cfg.dt:g} s"
-        )
-    return replace(cfg.sampling or Sampling(ts), ts=ts)
+    try:  # a positive integer multiple of dt, the horizon long enough
+        sampled = cfg.with_sample_time(ts)
+    except ConfigError as exc:
+        raise ValueError(f"--ts = {ts:g}: {exc}") from None
+    return sampled, sampled.sampling
 
 
-def _loop_checks(cfg: Any, sampling: Any, config: str, tolerance: float) -> list[str]:
-    """Refuse (ValueError) a design that diverges in its own simulation; the warnings on the
-    design sampled at the exported Ts."""
+def _loop_checks(own_cfg: Any, cfg: Any, sampling: Any, config: str, tolerance: float) -> list[str]:
+    """Refuse (ValueError) a design that diverges in its own simulation (``own_cfg``, the
+    config as it is); the warnings on the design sampled at the exported Ts (``cfg``)."""
+    from dataclasses import replace
 
     from aiofl.engine.simulation import simulate_batch
     from aiofl.plants.base import PlantError
 
+    # the discretisation alone: the converters' quanta are not part of the code
+    ideal = replace(sampling, y_quantum=0.0, u_quantum=0.0)
     try:
-        own = cfg.simulate(store=False)
+        own = own_cfg.simulate(store=False)
         res = simulate_batch(
             cfg.plant,
             [cfg.controller] * 2,
@@ -191,15 +191,15 @@ def _loop_checks(cfg: Any, sampling: Any, config: str, tolerance: float) -> list
             dt=cfg.dt,
             method=cfg.method,
             divergence_threshold=cfg.divergence_threshold,
-            sampling=[None, sampling],
+            sampling=[None, ideal],
         )
     except (PlantError, ValueError) as exc:
         return [f"{config}: could not simulate the design before export ({exc})"]
     if own.diverged:
-        how = f"sampled at Ts = {cfg.sampling.ts:g} s" if cfg.sampling else "continuous"
+        how = f"sampled at Ts = {own_cfg.sampling.ts:g} s" if own_cfg.sampling else "continuous"
         raise ValueError(
             f"{config} diverges at {own.diverged_at:.3g} s in its own simulation ({how}, "
-            f"{cfg.scenario.t_final:g}-s scenario): a controller that diverges is not exported"
+            f"{own_cfg.scenario.t_final:g}-s scenario): a controller that diverges is not exported"
         )
     out = []
     itae = res.metric("itae")

@@ -49,11 +49,16 @@ class CController:
     """An exported controller in a shared library: ``start(y0, mode)``, ``step(r, y)``."""
 
     def __init__(
-        self, lib: Path | ctypes.CDLL, precision: str, prefix: str = "aiofl", params: str = ""
+        self,
+        lib: Path | ctypes.CDLL,
+        precision: str,
+        prefix: str = "aiofl",
+        params: str = "",
+        signal: str = "double",
     ) -> None:
         self.lib = lib if isinstance(lib, ctypes.CDLL) else ctypes.CDLL(str(lib))
         real = ctypes.c_double if precision == "double" else ctypes.c_float
-        sig = ctypes.c_double
+        sig = ctypes.c_double if signal == "double" else ctypes.c_float  # NAME_signal
         self._start = getattr(self.lib, f"{prefix}_start")
         self._start.argtypes = [ctypes.c_void_p, ctypes.c_void_p, sig, ctypes.c_int]
         self._start.restype = None

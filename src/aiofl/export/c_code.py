@@ -69,6 +69,14 @@ SOURCE = "aiofl_controller.c"
 PARAMS = "aiofl_params.c"
 MODEL = "aiofl_model.h"
 PRECISIONS = ("double", "float")
+MAX_INSTANCE = 24
+"""Longest ``--params-name``: ``PREFIX_<it>_H`` stays within C99's 63 characters."""
+
+# names a parameter instance may not take: NAME_<it> would clash with the controller's
+_API_NAMES = frozenset(
+    "controller params model default_params state real signal init start reset step "  # noqa: SIM905
+    "nominal_model sign abspow inleso fal inlsef_term fhan".split()
+)
 _TD = {"exact": 0, "han": 1, "improved": 2, "linear": 3}
 _SEF = {"linear": 0, "nonlinear": 1, "improved": 2}
 
@@ -376,10 +384,21 @@ def export_c(
     """
     try:
         prefix = c_prefix(prefix)
-        if params_only is not None:
-            c_prefix(params_only)
     except ValueError as exc:
         raise ExportError(str(exc)) from None
+    ident = r"[A-Za-z][A-Za-z0-9]*(?:_[A-Za-z0-9]+)*"
+    if params_only is not None and (
+        len(params_only) > MAX_INSTANCE or not re.fullmatch(ident, params_only)
+    ):
+        raise ExportError(
+            f"--params-name = {params_only[:80]!r} is not a C identifier; allowed: a letter, "
+            f"then letters, digits and single _, at most {MAX_INSTANCE}"
+        )
+    if params_only is not None and params_only.lower() in _API_NAMES:
+        raise ExportError(
+            f"--params-name = {params_only!r} is a name of the controller's own files or API; "
+            f"allowed: any other identifier (not {', '.join(sorted(_API_NAMES))})"
+        )
     d = _Design(
         controller,
         sampling,

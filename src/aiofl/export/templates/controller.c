@@ -116,12 +116,13 @@ static aiofl_real aiofl_fhan(aiofl_real x1, aiofl_real x2, aiofl_real r, aiofl_r
 void aiofl_start(aiofl_state *s, const aiofl_params *p, aiofl_signal y0, int mode)
 {
     int i;
-    (void)p;
+    (void)p; /* the start does not depend on the design's numbers */
+    /* the ESO's prediction (y0, 0, ..., 0), or 0: p[0] holds p_1 - y_prev = 0 */
     for (i = 0; i <= AIOFL_RHO; ++i) {
-        s->p[i] = AIOFL_K(0.0); /* p_1 = y_prev: the first innovation is y - y0 */
+        s->p[i] = AIOFL_K(0.0);
         s->xhat[i] = AIOFL_K(0.0);
     }
-    s->y_prev = mode == AIOFL_START_ZERO ? 0 : y0; /* the ESO at (y0, 0, ..., 0) or 0 */
+    s->y_prev = mode == AIOFL_START_ZERO ? 0 : y0;
 #if AIOFL_TD != AIOFL_TD_EXACT
     for (i = 0; i < AIOFL_NTD; ++i) s->td[i] = AIOFL_K(0.0);
     /* the differentiator at rest at y0 (bumpless) or at 0: r_1 = r_prev, r_2.. = 0 */

@@ -1,0 +1,142 @@
+"""The report's reconciled orbit verdicts, computed on every core.
+
+:func:`aiofl.analysis.orbit.orbit_analysis` integrates the variational equation of a
+design's closed loop with scipy's BDF and a complex-step Jacobian: pure Python on one core,
+up to tens of seconds for an INLESO design, and independent from design to design.
+:func:`orbit_verdicts` hands them to worker processes (one per core, at most
+:data:`MAX_WORKERS`), each a fresh ``python -m aiofl.reporting.orbit_pool`` (not a fork of
+a process whose numba threads run, and not a re-import of the caller's ``__main__``, so a
+script without a ``__main__`` guard may call it).  A worker reads jobs (a preset's name,
+the report's sample time and the linearisation verdict) as length-prefixed pickles on its
+stdin, loads the config itself and writes each record back on stdout; the parent gives the
+next job to whichever worker is free.  The same function on the same inputs: the records
+equal those of the sequential loop (``workers=1``, also used for a single design or core).
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+import queue
+import struct
+import subprocess
+import sys
+import threading
+from collections.abc import Mapping
+from typing import IO, Any
+
+__all__ = ["MAX_WORKERS", "orbit_verdict", "orbit_verdicts"]
+
+MAX_WORKERS = 4
+"""At most this many worker processes (each holds a Python interpreter with aiofl)."""
+
+
+def orbit_verdict(cfg: Any, verdict: dict[str, Any]) -> dict[str, Any]:
+    """The reconciled verdict of a report's case (:func:`aiofl.analysis.orbit.orbit_analysis`,
+    its quick settings); a failure is reported in it, not raised."""
+    from aiofl.analysis.orbit import orbit_analysis
+
+    try:
+        return orbit_analysis(cfg, verdict, unit=cfg.plant.output_unit, quick=True)
+    except Exception as exc:  # the report must not fail because one analysis did
+        return {"verdict": f"orbit analysis failed: {type(exc).__name__}: {exc}", "short": "—"}
+
+
+def _verdict(preset: str, ts: float | None, verdict: dict[str, Any]) -> dict[str, Any]:
+    """One design's :func:`orbit_verdict`, its config loaded by name: a worker's job."""
+    from aiofl.config import load_config
+
+    cfg = load_config(preset)
+    if ts is not None:
+        cfg = cfg.with_sample_time(ts)
+    return orbit_verdict(cfg, verdict)
+
+
+def _send(stream: IO[bytes], obj: Any) -> None:
+    data = pickle.dumps(obj, protocol=pickle.HIGHEST_PROTOCOL)
+    stream.write(struct.pack("<Q", len(data)) + data)
+    stream.flush()
+
+
+def _receive(stream: IO[bytes]) -> Any:
+    head = stream.read(8)
+    if len(head) < 8:
+        raise EOFError("the orbit worker closed its output")
+    (size,) = struct.unpack("<Q", head)
+    return pickle.loads(stream.read(size))  # our own worker's records
+
+
+Job = tuple[str, float | None, dict[str, Any]]
+"""A worker's job: preset name, sample time, linearisation verdict."""
+
+
+def _serve(jobs: queue.Queue[Job], out: dict[str, Any]) -> None:
+    """Run one worker process and feed it jobs until the queue is empty."""
+    cmd = [sys.executable, "-m", "aiofl.reporting.orbit_pool"]
+    with subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.PIPE) as proc:
+        assert proc.stdin is not None and proc.stdout is not None
+        try:
+            while True:
+                try:
+                    job = jobs.get_nowait()
+                except queue.Empty:
+                    break
+                _send(proc.stdin, job)
+                out[job[0]] = _receive(proc.stdout)
+        except (EOFError, OSError):
+            pass  # a dead worker: its unfinished job is done by orbit_verdicts itself
+        finally:
+            proc.stdin.close()
+
+
+def orbit_verdicts(
+    jobs: Mapping[str, dict[str, Any]], ts: float | None = None, workers: int | None = None
+) -> dict[str, dict[str, Any]]:
+    """The orbit verdict of each preset in ``jobs`` (name → its linearisation verdict).
+
+    Parameters
+    ----------
+    jobs
+        Preset name → :func:`aiofl.analysis.linearize.closed_loop_verdict` record.
+    ts
+        The report's sample time (``aiofl reproduce --ts``), applied to each config.
+    workers
+        Worker processes (default: the usable cores, at most :data:`MAX_WORKERS`); 1 runs
+        them in this process, one after the other.
+
+    Returns
+    -------
+    dict
+        Preset name → the record of :func:`aiofl.analysis.orbit.orbit_analysis`, in the
+        order of ``jobs``.  A design whose worker died is analysed here instead.
+    """
+    n = workers if workers is not None else min(len(os.sched_getaffinity(0)), MAX_WORKERS)
+    n = max(1, min(n, len(jobs)))
+    if n == 1:
+        return {name: _verdict(name, ts, v) for name, v in jobs.items()}
+    todo: queue.Queue[Job] = queue.Queue()
+    for name, v in jobs.items():
+        todo.put((name, ts, v))
+    done: dict[str, Any] = {}
+    threads = [threading.Thread(target=_serve, args=(todo, done)) for _ in range(n)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    return {name: done[name] if name in done else _verdict(name, ts, v) for name, v in jobs.items()}
+
+
+def _worker() -> None:
+    """The worker's loop: a job from stdin, its record to stdout, until stdin closes."""
+    stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
+    sys.stdout = sys.stderr  # nothing else may write into the record stream
+    while True:
+        try:
+            preset, ts, verdict = _receive(stdin)
+        except EOFError:
+            return
+        _send(stdout, _verdict(preset, ts, verdict))
+
+
+if __name__ == "__main__":
+    _worker()

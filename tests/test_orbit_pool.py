@@ -1,0 +1,41 @@
+"""The report's orbit verdicts in worker processes equal the sequential ones."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from aiofl.config import load_config
+from aiofl.reporting.cases import closed_loop_verdict
+from aiofl.reporting.orbit_pool import orbit_verdicts
+
+# two designs whose equilibrium is unstable (so the tracking orbit is analysed) and whose
+# analysis is among the cheapest (~1.5 s each)
+PRESETS = ("frontier-s3-inleso", "retuned-s2-inleso")
+
+
+def _same(a, b, path=""):
+    """Equal records, the wall time ("seconds") aside."""
+    if isinstance(a, dict):
+        assert set(a) == set(b), path
+        for k in a:
+            if k != "seconds":
+                _same(a[k], b[k], f"{path}.{k}")
+    elif isinstance(a, (list, tuple, np.ndarray)):
+        assert len(a) == len(b), path
+        for i, (x, y) in enumerate(zip(a, b, strict=True)):
+            _same(x, y, f"{path}[{i}]")
+    else:
+        assert a == b, (path, a, b)
+
+
+@pytest.mark.slow  # two worker processes start and import aiofl (~5 s)
+def test_orbit_verdicts_in_two_workers_equal_the_sequential_loop():
+    jobs = {p: closed_loop_verdict(load_config(p), orbit=False) for p in PRESETS}
+    assert all(v["verdict"] == "unstable" for v in jobs.values())
+    alone = orbit_verdicts(jobs, workers=1)
+    pooled = orbit_verdicts(jobs, workers=2)
+    assert list(pooled) == list(PRESETS)
+    for p in PRESETS:
+        assert pooled[p]["floquet"] is not None, pooled[p]
+        _same(alone[p], pooled[p], p)
