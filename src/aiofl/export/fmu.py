@@ -244,7 +244,6 @@ def _adapter(
         f"#define FMU_N_CALC {len(calc)}",
         f"#define FMU_N_TUN {len(tun)}",
         f"#define FMU_START_DEFAULT {START_MODES[controller.eso_init]}",
-        "#define FMU_START_ONLY (-1) /* every start mode */",
         "",
         "typedef aiofl_state fmu_ctl_state;",
         "typedef aiofl_params fmu_ctl_params;",

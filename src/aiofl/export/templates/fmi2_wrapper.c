@@ -10,7 +10,7 @@
  *   fmu_ctl_state, fmu_ctl_params         the controller's state and (per-instance) parameters
  *   fmu_ctl_defaults(p)                   p = the exported design
  *   fmu_ctl_start(s, p, y0, mode)         start modes 0 bumpless, 1 zero, 2 output
- *   FMU_START_DEFAULT, FMU_START_ONLY     the default mode; the only one the C has (-1: all)
+ *   FMU_START_DEFAULT                     the default start mode (the config's eso.init)
  *   fmu_ctl_step(s, p, r, y)              one sample; r = r, r_1, ... (FMU_N_IN - 1 values)
  *   FMU_N_CALC, fmu_calc_values[]         calculated parameters (Ts first), read only
  *   FMU_N_TUN, fmu_tun_defaults[],        tunable parameters: defaults, lower bounds, whether
@@ -307,9 +307,6 @@ fmi2Status fmi2SetInteger(fmi2Component comp, const fmi2ValueReference vr[], siz
             return fmu_fail(c, "fmi2SetInteger", "start is fixed: set it before initialisation");
         if (value[i] < 0 || value[i] > 2)
             return fmu_fail(c, "fmi2SetInteger", "start: allowed 0 bumpless, 1 zero, 2 output");
-        if (FMU_START_ONLY >= 0 && value[i] != FMU_START_ONLY)
-            return fmu_fail(c, "fmi2SetInteger",
-                            "start: this controller's C starts only as its config says");
     }
     for (i = 0; i < nvr; ++i) c->start = value[i];
     c->computed = 0;
