@@ -92,8 +92,8 @@ def test_a_design_unstable_at_the_asked_ts_is_exported_with_warnings(tmp_path):
     assert res.exit_code == 0 and "warning" not in res.output, res.output
 
 
-def test_the_format_hook_lists_c():
-    assert list(FORMATS) == ["c"]
+def test_the_format_hook_lists_c_and_fmu():
+    assert list(FORMATS) == ["c", "fmu"]
 
 
 @needs_cc

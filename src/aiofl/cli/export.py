@@ -55,8 +55,24 @@ def _c_files(cfg: Any, sampling: Any, config: str, opts: dict[str, Any]) -> dict
     )
 
 
+def _fmu_files(
+    cfg: Any, sampling: Any, config: str, opts: dict[str, Any]
+) -> dict[str, str | bytes]:
+    """``NAME.fmu``: the C above as an FMI 2.0 co-simulation FMU (:mod:`aiofl.export.fmu`)."""
+    from aiofl.export.fmu import export_fmu_for_config
+
+    if opts.get("params_only"):
+        raise ValueError("--params-only: writes C parameter files; allowed with --format c")
+    precision, prefix = opts.get("precision", "double"), opts.get("prefix", "aiofl")
+    name, data = export_fmu_for_config(
+        cfg, sampling, precision=precision, config=config, prefix=prefix
+    )
+    return {name: data}
+
+
 FORMATS: dict[str, Callable[[Any, Any, str, dict[str, Any]], dict[str, str | bytes]]] = {
-    "c": _c_files
+    "c": _c_files,
+    "fmu": _fmu_files,
 }
 """``--format`` -> the function giving its files ``(cfg, sampling, config, options) ->
 {name: text or bytes}`` (options: precision, prefix, params_only)."""
@@ -76,7 +92,9 @@ def export_command(
     prefix: Annotated[
         str, typer.Option("--prefix", help="Start of every C name (NAME_step, NAME_UP_RHO).")
     ] = "aiofl",
-    fmt: Annotated[str, typer.Option("--format", help="Output format: c.")] = "c",
+    fmt: Annotated[
+        str, typer.Option("--format", help="c: C99 sources; fmu: an FMI 2.0 co-simulation FMU.")
+    ] = "c",
     params_only: Annotated[
         bool,
         typer.Option("--params-only", help="Write only another parameter instance (.h/.c)."),

@@ -48,6 +48,7 @@ from aiofl.components.observers import eso_gains
 from aiofl.config import RunConfig, list_presets, load_config
 from aiofl.engine.simulation import SimulationResult, simulate_batch
 from aiofl.reporting.behaviour import TOLERANCE, Behaviour, analysis_numbers, measure_result
+from aiofl.reporting.orbit_pool import orbit_verdict, orbit_verdicts
 from aiofl.reporting.paper import PAPER_PRESETS, PAPER_TABLES, SCENARIOS
 
 __all__ = [
@@ -451,17 +452,6 @@ def closed_loop_verdict(cfg: RunConfig, *, orbit: bool = True) -> dict[str, Any]
     return out
 
 
-def orbit_verdict(cfg: RunConfig, verdict: dict[str, Any]) -> dict[str, Any]:
-    """The reconciled verdict of a case (:func:`aiofl.analysis.orbit.orbit_analysis`, its
-    quick settings); a failure is reported in it, not raised."""
-    from aiofl.analysis.orbit import orbit_analysis
-
-    try:
-        return orbit_analysis(cfg, verdict, unit=cfg.plant.output_unit, quick=True)
-    except Exception as exc:  # the report must not fail because one analysis did
-        return {"verdict": f"orbit analysis failed: {type(exc).__name__}: {exc}", "short": "—"}
-
-
 # ----------------------------------------------------------------------- orchestration
 @dataclass(frozen=True)
 class Reproduction:
@@ -566,8 +556,6 @@ def compute(
     stage("closed-loop analysis")
     verdicts = {r.case.preset: closed_loop_verdict(r.case.config, orbit=False) for r in runs}
     # the orbit verdicts (Python-level variational integration) on every core
-    from aiofl.reporting.orbit_pool import orbit_verdicts
-
     need = {r.case.preset: verdicts[r.case.preset] for r in runs if not r.result.diverged}
     for name, orbit in orbit_verdicts(need, ts).items():
         verdicts[name]["orbit"] = orbit

@@ -25,17 +25,26 @@ import threading
 from collections.abc import Mapping
 from typing import IO, Any
 
-__all__ = ["MAX_WORKERS", "orbit_verdicts"]
+__all__ = ["MAX_WORKERS", "orbit_verdict", "orbit_verdicts"]
 
 MAX_WORKERS = 4
 """At most this many worker processes (each holds a Python interpreter with aiofl)."""
 
 
+def orbit_verdict(cfg: Any, verdict: dict[str, Any]) -> dict[str, Any]:
+    """The reconciled verdict of a report's case (:func:`aiofl.analysis.orbit.orbit_analysis`,
+    its quick settings); a failure is reported in it, not raised."""
+    from aiofl.analysis.orbit import orbit_analysis
+
+    try:
+        return orbit_analysis(cfg, verdict, unit=cfg.plant.output_unit, quick=True)
+    except Exception as exc:  # the report must not fail because one analysis did
+        return {"verdict": f"orbit analysis failed: {type(exc).__name__}: {exc}", "short": "—"}
+
+
 def _verdict(preset: str, ts: float | None, verdict: dict[str, Any]) -> dict[str, Any]:
-    """One design's orbit verdict (:func:`aiofl.reporting.cases.orbit_verdict`), loaded by
-    name: a worker's job."""
+    """One design's :func:`orbit_verdict`, its config loaded by name: a worker's job."""
     from aiofl.config import load_config
-    from aiofl.reporting.cases import orbit_verdict
 
     cfg = load_config(preset)
     if ts is not None:
