@@ -110,8 +110,10 @@ def orbit_verdicts(
         Preset name → the record of :func:`aiofl.analysis.orbit.orbit_analysis`, in the
         order of ``jobs``.  A design whose worker died is analysed here instead.
     """
-    n = workers if workers is not None else min(len(os.sched_getaffinity(0)), MAX_WORKERS)
-    n = max(1, min(n, len(jobs)))
+    if workers is None:  # the cores this process may use (sched_getaffinity: Linux only)
+        usable = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
+        workers = min(len(usable) if usable else (os.cpu_count() or 1), MAX_WORKERS)
+    n = max(1, min(workers, len(jobs)))
     if n == 1:
         return {name: _verdict(name, ts, v) for name, v in jobs.items()}
     todo: queue.Queue[Job] = queue.Queue()
