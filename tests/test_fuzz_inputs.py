@@ -34,13 +34,19 @@ from typer.testing import CliRunner
 
 from aiofl.cli.app import app
 
-_SPEC = importlib.util.spec_from_file_location(
-    "fuzz_inputs", Path(__file__).resolve().parents[1] / "benchmarks" / "fuzz_inputs.py"
-)
-assert _SPEC is not None and _SPEC.loader is not None
-fuzz = importlib.util.module_from_spec(_SPEC)
-sys.modules.setdefault("fuzz_inputs", fuzz)
-_SPEC.loader.exec_module(fuzz)
+
+def _benchmark(name: str) -> Any:
+    """A script of benchmarks/ loaded as a module (the fuzzers' cases and tables)."""
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault(name, module)
+    spec.loader.exec_module(module)
+    return module
+
+
+fuzz = _benchmark("fuzz_inputs")
 
 BASES = fuzz.base_cases()
 SLFJM_BASES = sorted(n for n, (text, _) in BASES.items() if 'plant = "slfjm"' in text)
@@ -218,42 +224,9 @@ def test_every_key_of_a_preset_with_an_edge_value_is_refused_or_valid(literal: s
 # The tables and commands added after the fuzzer (sampled controllers, C export, robustness,
 # robust / multi-objective tuning): each table is mutated on its own, appended to a short
 # SLFJM preset, and driven through its command on cheap settings.
-SHORT = BASES["retuned-s1-leso"][0].split("\n[tune]")[0]
-DISCRETE = """
-[controller.discrete]
-ts = 0.001
-delay = 0
-y_quantum = 0.0
-u_quantum = 0.0
-eso = "zoh"
-td = "fhan"
-h0 = 0.002
-"""
-UNCERTAINTY = """
-[uncertainty]
-draws = 3
-seed = 0
-ts = [0.0005, 0.002]
-noise_variance = [0.0, 1e-6]
-[uncertainty.parameters]
-J_l = { uniform = 0.2 }
-K_s = { normal = 0.05 }
-R_m = { log_uniform = [0.5, 2.0] }
-"""
-TUNE = """
-[tune]
-algorithm = "nsga2"
-objectives = ["itae", "isu"]
-constraints = ["isu <= 1e3", "stable_fraction >= 1"]
-choose = "knee"
-t_final = 0.2
-population = 4
-generations = 1
-seed = 1
-robust = { draws = 2, aggregate = "cvar", alpha = 0.9 }
-[tune.parameters]
-'eso.omega0' = { lo = 10.0, hi = 100.0, log = true }
-"""
+# the tables and the short preset are the table fuzzer's own (benchmarks/fuzz_tables.py)
+tables = _benchmark("fuzz_tables")
+SHORT, DISCRETE, UNCERTAINTY, TUNE = tables.SHORT, tables.DISCRETE, tables.UNCERTAINTY, tables.TUNE
 TABLE_LITERALS = (
     *fuzz.BAD_LITERALS,
     "1e9",  # draws = 1e9 (a float) and as an integer below
