@@ -163,7 +163,32 @@ def parse_front(text: str, *, name: str, scenario: int, structure: str) -> Shipp
             "(itae, isu, ...), then constraints ('isu <= 15.5'), then chosen"
         )
     i_itae, i_isu = _pick(header, "itae", name), _pick(header, "isu", name)
-    values, itae, isu, chosen = [], [], [], []
+    values, cols, chosen = checked_rows(header, body, name, n_par, {"itae": i_itae, "isu": i_isu})
+    return ShippedFront(
+        scenario=scenario,
+        structure=structure,
+        path=name,
+        names=tuple(header[:n_par]),
+        values=values,
+        itae=cols["itae"],
+        isu=cols["isu"],
+        chosen=chosen,
+    )
+
+
+def checked_rows(
+    header: list[str],
+    body: list[tuple[int, list[str]]],
+    name: str,
+    n_par: int,
+    columns: dict[str, int],
+) -> tuple[NDArray[np.float64], dict[str, NDArray[np.float64]], int]:
+    """A front file's checked rows: parameters (first ``n_par`` columns, finite), the named
+    ``columns`` (``itae`` > 0, ``isu`` >= 0, finite) and the one row with ``chosen`` = 1;
+    raises :class:`FrontFileError` naming the line."""
+    i_itae, i_isu = columns["itae"], columns["isu"]
+    values, chosen = [], []
+    cols: dict[str, list[float]] = {k: [] for k in columns}
     for n, row in body:
         where = f"{name}, line {n}"
         nums = [_float(c, where, h) for c, h in zip(row[:-1], header[:-1], strict=True)]
@@ -176,21 +201,13 @@ def parse_front(text: str, *, name: str, scenario: int, structure: str) -> Shipp
         if row[-1].strip() not in ("0", "1"):
             raise FrontFileError(f"{where}: chosen is {row[-1]!r}; allowed: 0 or 1")
         values.append(nums[:n_par])
-        itae.append(nums[i_itae])
-        isu.append(nums[i_isu])
+        for k, i in columns.items():
+            cols[k].append(nums[i])
         chosen.append(row[-1].strip() == "1")
     if sum(chosen) != 1:
         raise FrontFileError(f"{name}: {sum(chosen)} rows have chosen = 1; expected exactly 1")
-    return ShippedFront(
-        scenario=scenario,
-        structure=structure,
-        path=name,
-        names=tuple(header[:n_par]),
-        values=np.array(values, dtype=np.float64),
-        itae=np.array(itae),
-        isu=np.array(isu),
-        chosen=chosen.index(True),
-    )
+    arrays = {k: np.array(v) for k, v in cols.items()}
+    return np.array(values, dtype=np.float64), arrays, chosen.index(True)
 
 
 def parse_robust(text: str, front: ShippedFront, *, name: str) -> ShippedFront:

@@ -33,7 +33,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl.reporting.cases import Reproduction
-from aiofl.reporting.fronts import FrontFileError, _float, _match_rows, _rows
+from aiofl.reporting.fronts import FrontFileError, _match_rows, _rows, checked_rows
 from aiofl.reporting.tables import DASH, fmt, metric_units
 
 __all__ = [
@@ -142,33 +142,16 @@ def parse_noise_front(text: str, *, name: str, structure: str, label: str = "") 
     i_isu, i_st = _col(header, "isu:nominal", name), _col(header, "stable_fraction", name)
     if i_itae == 0:
         raise FrontFileError(f"{name}: no parameter columns before 'itae:nominal'")
-    cols: dict[str, list[float]] = {k: [] for k in ("itae", "cvar", "isu", "stable")}
-    values, chosen = [], []
-    for n, row in body:
-        where = f"{name}, line {n}"
-        nums = [_float(c, where, h) for c, h in zip(row[:-1], header[:-1], strict=True)]
-        if not all(math.isfinite(v) for v in nums[:i_itae]):
-            raise FrontFileError(f"{where}: a parameter value is missing or not finite")
-        if not (math.isfinite(nums[i_itae]) and nums[i_itae] > 0):
-            raise FrontFileError(f"{where}: ITAE {row[i_itae]!r} is not a finite number > 0")
-        if not (math.isfinite(nums[i_isu]) and nums[i_isu] >= 0):
-            raise FrontFileError(f"{where}: ISU {row[i_isu]!r} is not a finite number >= 0")
-        if row[-1].strip() not in ("0", "1"):
-            raise FrontFileError(f"{where}: chosen is {row[-1]!r}; allowed: 0 or 1")
-        values.append(nums[:i_itae])
-        for k, i in (("itae", i_itae), ("cvar", i_cvar), ("isu", i_isu), ("stable", i_st)):
-            cols[k].append(nums[i])
-        chosen.append(row[-1].strip() == "1")
-    if sum(chosen) != 1:
-        raise FrontFileError(f"{name}: {sum(chosen)} rows have chosen = 1; expected exactly 1")
+    columns = {"itae": i_itae, "cvar": i_cvar, "isu": i_isu, "stable": i_st}
+    values, cols, chosen = checked_rows(header, body, name, i_itae, columns)
     return NoiseFront(
         structure=structure,
         label=label or structure,
         path=name,
         names=tuple(header[:i_itae]),
-        values=np.array(values, dtype=np.float64),
-        **{k: np.array(v) for k, v in cols.items()},  # type: ignore[arg-type]
-        chosen=chosen.index(True),
+        values=values,
+        **cols,  # type: ignore[arg-type]
+        chosen=chosen,
     )
 
 
