@@ -18,6 +18,7 @@ from aiofl.engine.simulation import simulate
 from aiofl.plants import get_plant
 from aiofl.plants.base import Plant
 from aiofl.scenario import Scenario
+from test_sampling_criteria import PLANT
 
 BETA_SLFJM = 1.61 * 0.00767 * 70.0 / (0.0059 * 0.0021 * 2.6)
 
@@ -156,16 +157,8 @@ dt = 1e-4
 
 
 # ----------------------------------------------------------------- the delay margin
-FIRST_ORDER_PLANT = """
-name = "first_order_delay"
-description = "y' = k u"
-states = ["y"]
-f = ["0"]
-g = ["k"]
-h = "y"
-[params]
-k = 3.0
-"""
+# the first-order plant file of the sampling-criteria tests (one plant: one kernel compiled)
+FIRST_ORDER_PLANT = PLANT
 
 FIRST_ORDER_RUN = """
 name = "first-order-ladrc"

@@ -16,19 +16,10 @@ from scipy.optimize import brentq
 from aiofl.config import load_config
 from aiofl.tuning.margins import candidate_margins, design_warnings
 from aiofl.tuning.robust import objective_matrix, parse_constraint, parse_quantity
+from test_sampling_criteria import PLANT
 
 BETA, W0 = 3.0, 40.0
 
-PLANT = """
-name = "first_order_sampling"
-description = "y' = k u"
-states = ["y"]
-f = ["0"]
-g = ["k"]
-h = "y"
-[params]
-k = 3.0
-"""
 
 RUN = """
 name = "first-order-margins"
