@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aiofl.engine import compile, instances
+from aiofl.engine import compile, instances, sampled
 from aiofl.plants import get_plant
 from reachable import reachable_compiled
 
@@ -35,6 +35,8 @@ def _recipes() -> dict[str, compile.Recipe]:
         "scalar": rec(plant, 1, variant="scalar"),
         "sampled scalar": rec(plant, 1, sampled_data=True, variant="scalar"),
         "guarded": rec(plant, 1, variant="guarded"),
+        "discrete controller": sampled.standalone_recipe(),
+        "model-assisted discrete controller": sampled.standalone_recipe(plant),
     }
 
 
@@ -55,11 +57,11 @@ def test_fingerprint_covers_every_source_a_kernel_runs(name):
     kernel once skipped the guard and the lane kernels' list missed files)."""
     recipe = _recipes()[name]
     reached = _code_files(recipe)
-    assert str(SRC / "engine" / "loop.py") in reached  # the walk sees the templates' code
+    assert recipe.entry.function.__code__.co_filename in reached  # the walk sees the templates
     assert str(SRC / "components" / "fastmath.py") in reached  # and the components'
     plant_files = {  # covered by the plant's part of the fingerprint
         getattr(fn, "py_func", fn).__code__.co_filename
-        for fn in (getattr(recipe.plant, k) for k in compile.PLANT_FUNCTIONS)
+        for fn in (getattr(recipe.plant, k, None) for k in compile.PLANT_FUNCTIONS)
         if fn is not None
     }
     missing = sorted(reached - set(recipe.sources) - plant_files)
@@ -79,6 +81,30 @@ def test_editing_any_source_changes_the_fingerprint(tmp_path):
             sources = (*recipe.sources[:i], str(copy), *recipe.sources[i + 1 :])
             edited = dataclasses.replace(recipe, sources=sources)
             assert compile.fingerprint(edited) != before, (name, path)
+
+
+def test_the_fingerprint_does_not_depend_on_the_hash_seed():
+    """Two processes with different string-hash seeds give every recipe the same
+    fingerprint (the fast-math flags are a set: its plain repr changed with the seed, so
+    the scalar kernels and the discrete controller were compiled in every process)."""
+    code = (
+        "import json, test_compile as t; from aiofl.engine import compile as c; "
+        "print(json.dumps({k: c.fingerprint(r) for k, r in t._recipes().items()}))"
+    )
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).parent), *sys.path])}
+    out = []
+    for seed in ("1", "2"):
+        proc = subprocess.run(
+            [sys.executable, "-c", code],
+            env={**env, "PYTHONHASHSEED": seed},
+            capture_output=True,
+            text=True,
+            check=True,
+        )
+        out.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+    assert out[0] == out[1]
+    assert out[0] == {k: compile.fingerprint(r) for k, r in _recipes().items()}
+    assert compile._canonical_repr({"b", "a"}) == compile._canonical_repr({"a", "b"})
 
 
 def test_kind_plant_and_options_are_part_of_the_fingerprint():

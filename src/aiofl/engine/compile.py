@@ -8,7 +8,9 @@ width; the one-member kernels; the diagnostic kernel) is described by a :class:`
   intrinsics);
 - ``templates``, plain Python functions compiled into that namespace under the global name
   the others call them by, each with its numba options (:class:`Template`);
-- ``entry``, the template a caller runs (the time loop): the one function cached on disk;
+- ``entry``, the template a caller runs (the time loop), cached on disk; ``also_cached``
+  names further templates a caller runs directly (the discrete controller's setup, start
+  and step), cached the same way;
 - ``sources``, the files its compiled code comes from, and the ``plant`` it runs.
 
 :func:`build` compiles a recipe.  The entry is cached under a **fingerprint** of everything
@@ -107,6 +109,9 @@ class Recipe:
         The function the caller runs, cached on disk.
     sources
         The files whose text the compiled code comes from (besides the plant's functions).
+    also_cached
+        Names of templates that callers run directly too (besides the entry): cached on
+        disk under the same fingerprint, each in its own files.
     """
 
     kind: str
@@ -115,6 +120,7 @@ class Recipe:
     templates: tuple[Template, ...]
     entry: Template
     sources: tuple[str, ...]
+    also_cached: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -222,6 +228,21 @@ def _plant_parts(plant: Plant | None) -> list[str] | None:
     return parts
 
 
+def _canonical_repr(value: Any) -> str:
+    """``repr`` that is the same in every process: a set's (or a mapping's) items sorted,
+    since the iteration order of a set of strings changes with Python's hash seed (the
+    fast-math flags are a set; their plain ``repr`` gave the scalar kernels a new
+    fingerprint in every process, so they were never loaded from the cache)."""
+    if isinstance(value, set | frozenset):
+        return "{" + ", ".join(sorted(_canonical_repr(v) for v in value)) + "}"
+    if isinstance(value, Mapping):
+        items = sorted((repr(k), _canonical_repr(v)) for k, v in value.items())
+        return "{" + ", ".join(f"{k}: {v}" for k, v in items) + "}"
+    if isinstance(value, list | tuple):
+        return type(value).__name__ + "(" + ", ".join(_canonical_repr(v) for v in value) + ")"
+    return repr(value)
+
+
 def fingerprint(recipe: Recipe) -> str | None:
     """A digest of everything ``recipe``'s compiled code depends on (see the module
     notes), or None if a plant function cannot be fingerprinted."""
@@ -233,7 +254,7 @@ def fingerprint(recipe: Recipe) -> str | None:
         return None
     parts = [sys.version, numba.__version__, llvmlite.__version__, recipe.kind]
     for tpl in (*recipe.templates, recipe.entry):
-        opts = sorted((k, repr(v)) for k, v in tpl.options.items())
+        opts = sorted((k, _canonical_repr(v)) for k, v in tpl.options.items())
         parts.append(f"{tpl.name}:{tpl.function.__name__}:{opts}")
     parts += [f"{os.path.basename(p)}={source_digest(p)}" for p in recipe.sources]
     parts += plant_parts
@@ -284,14 +305,20 @@ def build(recipe: Recipe, *, cache: bool = True) -> Instance:
         folder = None
     key = plant_key(recipe.plant) if recipe.plant is not None else "noplant"
     suffix = f"{recipe.kind}_{key}_{fp}" if folder is not None else f"{recipe.kind}_{id(recipe):x}"
+    unknown = set(recipe.also_cached) - {tpl.name for tpl in recipe.templates}
+    if unknown:
+        raise ValueError(f"also_cached names no template of the recipe: {sorted(unknown)}")
     ns = dict(recipe.bindings)
     for tpl in recipe.templates:
         ns[tpl.name] = instantiate(tpl.function, ns, suffix, **tpl.options)
     entry = instantiate(recipe.entry.function, ns, suffix, **recipe.entry.options)
-    if folder is not None:
-        entry._cache = KernelCache.for_function(entry.py_func, folder, fp)
-        prune_kernels(folder, recipe.entry.function, f"{recipe.kind}_{key}_", fp)
     ns[recipe.entry.name] = entry
+    if folder is not None:
+        cached = [recipe.entry, *(t for t in recipe.templates if t.name in recipe.also_cached)]
+        for tpl in cached:
+            fn = ns[tpl.name]
+            fn._cache = KernelCache.for_function(fn.py_func, folder, fp)
+            prune_kernels(folder, tpl.function, f"{recipe.kind}_{key}_", fp)
     return Instance(entry=entry, namespace=ns, cached=folder is not None, fingerprint=fp)
 
 

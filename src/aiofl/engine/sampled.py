@@ -44,6 +44,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
+from aiofl.cache import cache_enabled
 from aiofl.controller import Controller, controller_batch
 from aiofl.engine import bindings, member
 from aiofl.engine import compile as compile_
@@ -388,34 +389,38 @@ _LOCK = threading.Lock()
 _STANDALONE: dict[int, tuple[Any, SimpleNamespace]] = {}
 
 
-def _standalone(plant: Any = None) -> SimpleNamespace:
-    """The controller update compiled without the plant's dynamics (for
-    :class:`DiscreteController`); given ``plant``, with its nominal normal form
-    ``alpha_beta_of_xi`` for the model-assisted observer."""
+def standalone_recipe(plant: Any = None) -> compile_.Recipe:
+    """The recipe of the controller update compiled without the plant's dynamics (for
+    :class:`DiscreteController`): the per-member setup, the start and the step, each
+    cached on disk; given ``plant``, with its nominal normal form ``alpha_beta_of_xi`` for
+    the model-assisted observer."""
     from aiofl.plants.base import _no_alpha_beta
 
+    ns = dict(vars(member))
+    ns.update(_N=1, _N_P=1, _NZ=1, **bindings.component_functions())
+    _bind(ns)
+    ab = plant.compiled[5] if plant is not None else _no_alpha_beta
+    ns["_PAB"] = compile_.rejit(getattr(ab, "py_func", ab), error_model="numpy")
+    opts = _opts()
+    tpl = compile_.Template
+    return compile_.Recipe(
+        kind="standalone",
+        plant=plant,
+        bindings=ns,
+        templates=(tpl("_SETUP", member._tpl_setup, opts), tpl("_CTRL_INIT", _tpl_ctrl_init, opts)),
+        entry=tpl("_CTRL_STEP", _tpl_ctrl_step, opts),
+        sources=_sources(),
+        also_cached=("_SETUP", "_CTRL_INIT"),
+    )
+
+
+def _standalone(plant: Any = None) -> SimpleNamespace:
+    """The compiled :func:`standalone_recipe` of ``plant`` (built once per process; loaded
+    from the disk cache when it was compiled before)."""
     key = id(plant)
     with _LOCK:
         if key not in _STANDALONE or _STANDALONE[key][0] is not plant:
-            ns = dict(vars(member))
-            ns.update(_N=1, _N_P=1, _NZ=1, **bindings.component_functions())
-            _bind(ns)
-            ab = plant.compiled[5] if plant is not None else _no_alpha_beta
-            ns["_PAB"] = compile_.rejit(getattr(ab, "py_func", ab), error_model="numpy")
-            opts = _opts()
-            tpl = compile_.Template
-            recipe = compile_.Recipe(
-                kind="standalone",
-                plant=plant,
-                bindings=ns,
-                templates=(
-                    tpl("_SETUP", member._tpl_setup, opts),
-                    tpl("_CTRL_INIT", _tpl_ctrl_init, opts),
-                ),
-                entry=tpl("_CTRL_STEP", _tpl_ctrl_step, opts),
-                sources=_sources(),
-            )
-            space = compile_.build(recipe, cache=False).namespace
+            space = compile_.build(standalone_recipe(plant), cache=cache_enabled()).namespace
             fns = SimpleNamespace(
                 setup=space["_SETUP"], init=space["_CTRL_INIT"], step=space["_CTRL_STEP"]
             )
