@@ -22,7 +22,13 @@ from typing import Any
 
 import pytest
 
+from aiofl.blas_threads import one_blas_thread
+
 os.environ.setdefault("AIOFL_CACHE_DIR", str(Path(__file__).resolve().parents[1] / ".aiofl-cache"))
+
+# the tests' matrices are small and both cores are busy (pytest-xdist): one BLAS thread, as
+# the aiofl command has (aiofl.blas_threads)
+one_blas_thread()
 
 
 def _mappingproxy(d: dict[str, Any]) -> types.MappingProxyType[str, Any]:

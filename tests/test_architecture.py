@@ -19,8 +19,15 @@ PACKAGE = SRC / "aiofl"
 LAYERS: tuple[tuple[str, ...], ...] = (
     # lowest first; a module may import from its own layer (without a cycle) or below
     # the paper's pieces; atomic file output; the bounds on every input size; the disk cache;
-    # single-value checks shared by the Python objects and the config schema
-    ("aiofl.components", "aiofl.outputs", "aiofl.limits", "aiofl.cache", "aiofl.checks"),
+    # single-value checks shared by the Python objects and the config schema; one BLAS thread
+    (
+        "aiofl.components",
+        "aiofl.outputs",
+        "aiofl.limits",
+        "aiofl.cache",
+        "aiofl.checks",
+        "aiofl.blas_threads",
+    ),
     ("aiofl.layout",),  # the member vocabulary: component kinds, parameter columns
     # plain descriptions of a design, a test and the model error (uncertainty)
     ("aiofl.controller", "aiofl.scenario", "aiofl.uncertainty"),

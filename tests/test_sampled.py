@@ -113,6 +113,36 @@ def test_the_kernel_runs_the_discrete_controller_update(slfjm):
         np.testing.assert_allclose(applied, expect, rtol=0, atol=1e-12 * scale)
 
 
+@pytest.mark.parametrize("preset", ["retuned-s1-leso", "retuned-s1-inleso", "assisted-s1-ladrc"])
+def test_run_and_step_each_are_step_bit_for_bit(preset):
+    """``DiscreteController.run(n, r, y)`` is n calls of ``step(r, y)``, and ``step_each``
+    from several states is ``step`` from each (bit for bit; the controller's own state is
+    left alone by step_each)."""
+    cfg = load_config(preset)
+    plant = cfg.plant if cfg.controller.eso_model != "none" else None
+    a, b = (DiscreteController(cfg.controller, Sampling(1e-3), plant) for _ in range(2))
+    a.init(0.01)
+    b.init(0.01)
+    r = [0.3, 0.1, 0.0, 0.0, 0.0]
+    us = [a.step(r, 0.02) for _ in range(37)]
+    assert b.run(37, r, 0.02) == us[-1]
+    np.testing.assert_array_equal(a.state, b.state)
+    rng = np.random.default_rng(1)
+    states = a.state + 1e-3 * rng.standard_normal((5, a.state.size))
+    ys = 0.02 + 1e-3 * rng.standard_normal(5)
+    kept = b.state
+    nxt, u_each = b.step_each(states, r, ys)
+    np.testing.assert_array_equal(b.state, kept)
+    for k in range(5):
+        b.state = states[k]
+        assert b.step(r, ys[k]) == u_each[k]
+        np.testing.assert_array_equal(b.state, nxt[k])
+    with pytest.raises(ValueError, match="allowed"):
+        b.step_each(states[:, :3], r, ys)
+    with pytest.raises(ValueError, match="allowed"):
+        b.run(0, r, 0.0)
+
+
 def test_quantised_measurement_and_command(slfjm):
     yq, uq = 1e-3, 0.05
     res = simulate(

@@ -136,26 +136,21 @@ class SampledLoop:
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
         """``(J, c+, u)`` at ``c0``: J (n_c+1, n_c+1) maps (δc, δy) to (δc+, δu)."""
         y0 = self.y_op
-
-        def step(c: NDArray[np.float64], y: float) -> NDArray[np.float64]:
-            dc.state = c
-            u = dc.step(rr, y)
-            return np.append(dc.state, u)
-
-        base = step(c0, y0)
         nc = c0.size
-        jac = np.zeros((nc + 1, nc + 1))
+        # rows: c0, then ±h along each state and along y (central differences)
+        hs = 1e-6 * np.maximum(1.0, np.abs(np.append(c0, y0)))
+        states = np.repeat(c0[None, :], 2 * nc + 3, axis=0)
+        ys = np.full(2 * nc + 3, y0)
         for j in range(nc + 1):
-            x = c0[j] if j < nc else y0
-            h = 1e-6 * max(1.0, abs(x))
-            if j < nc:
-                cp, cm = c0.copy(), c0.copy()
-                cp[j] += h
-                cm[j] -= h
-                jac[:, j] = (step(cp, y0) - step(cm, y0)) / (2 * h)
-            else:
-                jac[:, j] = (step(c0, y0 + h) - step(c0, y0 - h)) / (2 * h)
-        return jac, base[:nc], base[nc]
+            for row, sign in ((1 + 2 * j, 1.0), (2 + 2 * j, -1.0)):
+                if j < nc:
+                    states[row, j] += sign * hs[j]
+                else:
+                    ys[row] += sign * hs[j]
+        nxt, us = dc.step_each(states, rr, ys)
+        out = np.column_stack([nxt, us])
+        jac = ((out[1::2] - out[2::2]) / (2 * hs[:, None])).T
+        return jac, out[0, :nc], out[0, nc]
 
     def _equilibrium(self, dc: Any, rr: NDArray[np.float64]) -> NDArray[np.float64]:
         """The controller state with :math:`c^+ = c` and :math:`u = u^*` at
@@ -163,8 +158,7 @@ class SampledLoop:
         Newton steps solved by least squares."""
         dc.init(self.y_op)
         c = dc.state
-        for _ in range(50):
-            dc.step(rr, self.y_op)
+        dc.run(50, rr, self.y_op)
         if np.all(np.isfinite(dc.state)) and np.max(np.abs(dc.state)) < 1e8:
             c = dc.state
         for _ in range(3):

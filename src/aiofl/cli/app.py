@@ -542,7 +542,11 @@ def reproduce_command(
 
 
 def main() -> None:
-    """Entry point of the ``aiofl`` console script."""
+    """Entry point of the ``aiofl`` console script (BLAS limited to one thread:
+    :mod:`aiofl.blas_threads`)."""
+    from aiofl.blas_threads import one_blas_thread
+
+    one_blas_thread()
     app()
 
 

@@ -223,6 +223,24 @@ def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri, pn):  # pragma: no cover - co
 
 
 # ---------------------------------------------------- in the time loop, lane by lane
+def _tpl_ctrl_run(iq, q, dsc, cs, scr, y, rr, ri, pn, n):  # pragma: no cover - compiled
+    """``n`` samples of :func:`_tpl_ctrl_step` with the same measurement ``y`` and
+    reference ``rr[ri]`` (a controller settling at an operating point); returns the last
+    u, ``cs`` updated."""
+    u = 0.0
+    for _ in range(n):
+        u = _CTRL_STEP(iq, q, dsc, cs, scr, y, rr, ri, pn)
+    return u
+
+
+def _tpl_ctrl_step_each(iq, q, dsc, states, scr, ys, rr, ri, pn, us):  # pragma: no cover
+    """One sample of :func:`_tpl_ctrl_step` from each row of ``states`` (updated in place)
+    with measurement ``ys[k]``, its command into ``us[k]``: the perturbed states of a
+    finite-difference Jacobian in one call."""
+    for k in range(states.shape[0]):
+        us[k] = _CTRL_STEP(iq, q, dsc, states[k], scr, ys[k], rr, ri, pn)
+
+
 def _tpl_setup(lanes, batch, q, qt, iq, ctrl):  # pragma: no cover - compiled
     """Per-member constants of the group's lanes, one row per lane (``q[l]``, read by the
     scalar controller update), their discrete rows (``ctrl[0, l]``) and the group's ``iq``
@@ -407,10 +425,15 @@ def standalone_recipe(plant: Any = None) -> compile_.Recipe:
         kind="standalone",
         plant=plant,
         bindings=ns,
-        templates=(tpl("_SETUP", member._tpl_setup, opts), tpl("_CTRL_INIT", _tpl_ctrl_init, opts)),
+        templates=(
+            tpl("_SETUP", member._tpl_setup, opts),
+            tpl("_CTRL_INIT", _tpl_ctrl_init, opts),
+            tpl("_CTRL_RUN", _tpl_ctrl_run, opts),
+            tpl("_CTRL_STEP_EACH", _tpl_ctrl_step_each, opts),
+        ),
         entry=tpl("_CTRL_STEP", _tpl_ctrl_step, opts),
         sources=_sources(),
-        also_cached=("_SETUP", "_CTRL_INIT"),
+        also_cached=("_SETUP", "_CTRL_INIT", "_CTRL_RUN", "_CTRL_STEP_EACH"),
     )
 
 
@@ -422,7 +445,11 @@ def _standalone(plant: Any = None) -> SimpleNamespace:
         if key not in _STANDALONE or _STANDALONE[key][0] is not plant:
             space = compile_.build(standalone_recipe(plant), cache=cache_enabled()).namespace
             fns = SimpleNamespace(
-                setup=space["_SETUP"], init=space["_CTRL_INIT"], step=space["_CTRL_STEP"]
+                setup=space["_SETUP"],
+                init=space["_CTRL_INIT"],
+                step=space["_CTRL_STEP"],
+                run=space["_CTRL_RUN"],
+                step_each=space["_CTRL_STEP_EACH"],
             )
             _STANDALONE[key] = (plant, fns)
         return _STANDALONE[key][1]
@@ -508,16 +535,55 @@ class DiscreteController:
         iq[IQ_EINIT] = L.ESO_INIT_BUMPLESS
         self._fn.init(iq, self._cs, float(y0))
 
-    def step(self, r: float | Sequence[float] | NDArray[np.float64], y: float) -> float:
-        """One sample: ``r`` = r (or r, ṙ, ..., r^(ρ)) at t_k, ``y`` the measurement; returns u."""
+    def _reference(self, r: float | Sequence[float] | NDArray[np.float64]) -> None:
         rv = np.atleast_1d(np.asarray(r, dtype=np.float64))
         self._rr[0, :] = 0.0
         self._rr[0, : rv.size] = rv
+
+    def step(self, r: float | Sequence[float] | NDArray[np.float64], y: float) -> float:
+        """One sample: ``r`` = r (or r, ṙ, ..., r^(ρ)) at t_k, ``y`` the measurement; returns u."""
+        self._reference(r)
         return float(
             self._fn.step(
                 self._iq, self._q, self.row, self._cs, self._scr, y, self._rr, 0, self._pn
             )
         )
+
+    def run(self, n: int, r: float | Sequence[float] | NDArray[np.float64], y: float) -> float:
+        """``n`` samples (n ≥ 1) with the same reference ``r`` and measurement ``y`` in one
+        compiled call (:meth:`step` n times); returns the last u."""
+        if not 1 <= n <= 10**9:
+            raise ValueError(f"n = {n}; allowed: 1 <= n <= 1e9")
+        self._reference(r)
+        return float(
+            self._fn.run(
+                self._iq, self._q, self.row, self._cs, self._scr, y, self._rr, 0, self._pn, n
+            )
+        )
+
+    def step_each(
+        self,
+        states: NDArray[np.float64],
+        r: float | Sequence[float] | NDArray[np.float64],
+        ys: NDArray[np.float64],
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """One sample from each of several controller states (rows of ``states``, shape
+        (K, len(state))) with the measurements ``ys`` (K,) and one reference ``r``:
+        ``(next states, commands)``, as :meth:`step` from each (the controller's own
+        state is left alone).  For finite-difference Jacobians of the update."""
+        st = np.array(states, dtype=np.float64, order="C", ndmin=2)
+        yv = np.ascontiguousarray(ys, dtype=np.float64).reshape(-1)
+        if st.ndim != 2 or st.shape[1] != self._cs.size or yv.size != st.shape[0]:
+            raise ValueError(
+                f"states has shape {st.shape} and ys {yv.shape}; allowed: (K, {self._cs.size}) "
+                "and (K,)"
+            )
+        self._reference(r)
+        us = np.empty(st.shape[0])
+        self._fn.step_each(
+            self._iq, self._q, self.row, st, self._scr, yv, self._rr, 0, self._pn, us
+        )
+        return st, us
 
     @property
     def state(self) -> NDArray[np.float64]:

@@ -129,7 +129,11 @@ def orbit_verdicts(
 
 
 def _worker() -> None:
-    """The worker's loop: a job from stdin, its record to stdout, until stdin closes."""
+    """The worker's loop: a job from stdin, its record to stdout, until stdin closes
+    (BLAS limited to one thread: :mod:`aiofl.blas_threads`)."""
+    from aiofl.blas_threads import one_blas_thread
+
+    one_blas_thread()
     stdin, stdout = sys.stdin.buffer, sys.stdout.buffer
     sys.stdout = sys.stderr  # nothing else may write into the record stream
     while True:

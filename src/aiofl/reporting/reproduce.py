@@ -19,6 +19,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import replace
 from pathlib import Path
 
+from aiofl.blas_threads import one_blas_thread
 from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 from aiofl.reporting.cases import Reproduction, compute
 from aiofl.reporting.figures import figure_png, scenario_figure
@@ -80,9 +81,22 @@ def reproduce(
     -------
     Reproduction
     """
-    stage = on_stage or (lambda _msg: None)
     if not 0 <= draws <= MAX_DRAWS:
         raise ValueError(f"draws = {draws}; allowed: 0 <= draws <= {MAX_DRAWS} (0 = skip)")
+    with one_blas_thread():  # small matrices on busy cores (aiofl.blas_threads)
+        return _reproduce(out, available, on_stage, ts, draws, seed, fronts_dir)
+
+
+def _reproduce(
+    out: str | Path,
+    available: Iterable[str] | None,
+    on_stage: Callable[[str], None] | None,
+    ts: float | None,
+    draws: int,
+    seed: int,
+    fronts_dir: str | Path | None,
+) -> Reproduction:
+    stage = on_stage or (lambda _msg: None)
     rep = compute(available=available, on_stage=stage, ts=ts)
     t0 = time.perf_counter()
     table = compute_robustness([r.case for r in rep.runs], draws=draws, seed=seed, on_stage=stage)
