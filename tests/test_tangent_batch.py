@@ -157,3 +157,32 @@ def test_batch_jacobian_with_the_finite_difference_fallback() -> None:
         -((z[0] - 1) ** 2)
     )
     assert batch[0, 0] == pytest.approx(slope, rel=1e-7)
+
+
+def test_reads_first_argument_only_where_the_code_never_touches_x() -> None:
+    """A plant function that never reads x is evaluated once per batch (constant in x);
+    anything that might read it is not."""
+    from aiofl.analysis.derivatives import reads_first_argument
+
+    def gain(x, p):
+        return (0.0, p[0])
+
+    def uses(x, p):
+        return (x[0] * p[0],)
+
+    def captures(x, p):
+        return (lambda: x[0])()
+
+    def dynamic(x, p):
+        return (locals()["x"][0],)
+
+    def rebinds(x, p):
+        x = p
+        return (x[0],)
+
+    assert not reads_first_argument(gain)
+    assert all(reads_first_argument(fn) for fn in (uses, captures, dynamic, rebinds, len, None))
+    cfg = load_config("retuned-s1-inleso")
+    loop = OrbitLoop(cfg.plant, cfg.controller, cfg.scenario)
+    assert loop.derivatives.reads_state["f"] and loop.derivatives.reads_state["h"]
+    assert not loop.derivatives.reads_state["g"]  # slfjm's input gain b = k_m k_g / (R_m J_h)

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import builtins
 import cmath
+import dis
 import math
 import types
 import warnings
@@ -136,6 +137,30 @@ def complex_safe(fn: Callable[..., Any]) -> Callable[..., Any] | None:
     return types.FunctionType(code, glb, py.__name__, py.__defaults__, py.__closure__)
 
 
+_DYNAMIC = frozenset({"locals", "vars", "eval", "exec"})
+
+
+def reads_first_argument(fn: Callable[..., Any] | None) -> bool:
+    """Whether the Python function ``fn`` can depend on its first argument (the state x).
+
+    False only when its code provably never touches it: no instruction loads, stores or
+    deletes that local, no nested function captures it, and the code names none of
+    ``locals, vars, eval, exec``.  Such a function is constant in x (its Jacobian is 0),
+    e.g. a constant input gain g(x) = b.  True for anything without Python code."""
+    code = getattr(fn, "__code__", None)
+    if code is None or code.co_argcount < 1:
+        return True
+    name = code.co_varnames[0]
+    if name in code.co_cellvars or _DYNAMIC & set(code.co_names):
+        return True
+    for ins in dis.get_instructions(code):
+        if ins.opcode in dis.haslocal or ins.opcode in dis.hasfree:
+            args = ins.argval if isinstance(ins.argval, tuple) else (ins.argval,)
+            if name in args:
+                return True
+    return False
+
+
 def _call_complex(cfn: Callable[..., Any], x: NDArray[Any], p: NDArray[np.float64]) -> NDArray[Any]:
     """``cfn(x, p)`` as a complex array; a cast that would drop an imaginary part (numpy's
     ComplexWarning, e.g. ``math.erf`` of a numpy complex) raises it as an error."""
@@ -148,8 +173,7 @@ def _step_inputs(x: NDArray[np.float64], columns: Any) -> NDArray[np.complex128]
     """The complex steps :math:`x + ihe_j`, j in ``columns``, as rows."""
     steps = np.empty((len(columns), x.size), dtype=np.complex128)
     steps[:] = x
-    for k, j in enumerate(columns):
-        steps[k, j] += 1j * COMPLEX_STEP
+    steps[np.arange(len(columns)), np.asarray(columns)] += 1j * COMPLEX_STEP
     return steps
 
 
@@ -179,6 +203,7 @@ class PlantDerivatives:
             if fn is not None:
                 self.functions[name] = fn
                 self.complex[name] = complex_safe(fn)
+        self.reads_state = {name: reads_first_argument(cfn) for name, cfn in self.complex.items()}
         self.method: dict[str, str] = dict.fromkeys(self.functions, "complex step")
         self._verified: set[tuple[bytes, bytes]] = set()
         self.notes: list[str] = []
@@ -266,10 +291,12 @@ class PlantDerivatives:
 
         from one complex-step call per perturbed input j (a row of Im x not all 0):
         :math:`J_\phi e_j = \operatorname{Im}\phi(x_r + ihe_j)/h`, the value the real part
-        of the first; for a function sent to the finite difference, the real value and
-        :meth:`fd_jacobian`.  This is what :meth:`evaluate` gives column by column (to
-        rounding) in fewer calls.  Other batches (real, or columns at different real
-        points, or a Jacobian that is not finite) are evaluated column by column.
+        of the first; from a single call for a function that does not read x
+        (:func:`reads_first_argument`); for a function sent to the finite difference, the
+        real value and :meth:`fd_jacobian`.  These are the numbers :meth:`evaluate` gives
+        column by column (to the last bit, where the real part does not move with the step),
+        in fewer calls.  Other batches (real, or columns at different real points, or a
+        Jacobian that is not finite) are evaluated column by column.
         """
         xr = x.real
         x0 = np.ascontiguousarray(xr[:, 0])
@@ -284,7 +311,12 @@ class PlantDerivatives:
         out = []
         for name in names:
             if self.method[name] == "complex step" and self.complex[name] is not None:
-                try:  # h·J's columns times Im x / h (exactly 1 on a step of h)
+                try:
+                    if not self.reads_state[name]:  # constant in x: one call serves all
+                        values = self._call_steps(name, x0[None, :].astype(np.complex128), p)
+                        out.append(np.repeat(values, x.shape[1], axis=1))
+                        continue
+                    # h·J's columns times Im x / h (exactly 1 on a step of h)
                     values = self._call_steps(name, steps, p)
                     value, jac, weights = values[:, 0].real, values.imag, ratio
                 except (TypeError, np.exceptions.ComplexWarning) as exc:  # outside the namespace

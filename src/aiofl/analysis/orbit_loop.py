@@ -74,7 +74,7 @@ def _cs(value: Callable[[float], float], slope: Callable[[float], float], e: Any
     if isinstance(e, np.ndarray):
         er = e.real
         e0 = float(er.flat[0])
-        if e.dtype.kind != "c" or not np.all(er == e0):
+        if e.dtype.kind != "c" or not (er == e0).all():
             return np.array([_cs(value, slope, v) for v in e.flat]).reshape(e.shape)
         out = np.empty(e.shape, dtype=np.complex128)
         out.real = value(e0)
@@ -138,6 +138,7 @@ class OrbitLoop(ClosedLoop):
         self.dt = float(dt)
         self.describing: tuple[float, ...] | None = None
         self._record: list[Any] | None = None
+        # (start, dt, times, outputs (r1, r2) as the rows of a 2 x len(times) array)
         self._han: tuple[float, float, NDArray[np.float64], NDArray[np.float64]] | None = None
         c = controller
         self.nonsmooth = [
@@ -294,7 +295,8 @@ class OrbitLoop(ClosedLoop):
         out = _han_rk4(float(x0[0]), float(x0[1]), r, rh, big_r, self.dt, n)
         ts = ts[:n]
         kernel = np.ones(20) / 20.0
-        smooth = np.column_stack([np.convolve(out[:, j], kernel, mode="same") for j in range(2)])
+        # one contiguous row per output: numpy's interp copies a strided column on every call
+        smooth = np.stack([np.convolve(out[:, j], kernel, mode="same") for j in range(2)])
         self._han = (start, self.dt, ts, smooth)
 
     def inputs_at(self, t: float) -> NDArray[np.float64]:
@@ -304,7 +306,7 @@ class OrbitLoop(ClosedLoop):
             if self._han is None:
                 raise ValueError("call han_signal(t0, t1) first")
             _, _, ts, sig = self._han
-            return np.array([np.interp(t, ts, sig[:, 0]), np.interp(t, ts, sig[:, 1])])
+            return np.array([np.interp(t, ts, sig[0]), np.interp(t, ts, sig[1])])
         return reference_derivatives(self.scenario.reference, t, self.rho)
 
     def disturbance_at(self, t: float) -> float:
