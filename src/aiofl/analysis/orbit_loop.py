@@ -322,9 +322,14 @@ class OrbitLoop(ClosedLoop):
         reference held at its operating value; ``d`` a constant disturbance (default
         :meth:`disturbance_at`)."""
 
+        last: list[Any] = [None, None]  # (t, inputs at t): BDF's Newton iterations, and
+        # the Jacobian BDF takes with them, evaluate F several times at one t (read only)
+
         def inputs(t: float) -> tuple[Any, float]:
-            rd = None if hold else self.inputs_at(t)
-            return rd, (self.disturbance_at(t) if d is None else d)
+            if last[0] is None or t != last[0]:
+                rd = None if hold else self.inputs_at(t)
+                last[:] = [t, (rd, self.disturbance_at(t) if d is None else d)]
+            return last[1]
 
         def f(t: float, z: NDArray[np.float64]) -> NDArray[np.float64]:
             rd, dd = inputs(t)
