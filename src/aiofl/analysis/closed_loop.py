@@ -84,6 +84,24 @@ size of its terms, :math:`|F_i(z)| \le 10^{-9} \sum_j |J_{ij}|\,\max(|z_j|, s_j)
 (s: the typical magnitudes of the scaled solve)."""
 
 
+def _is_complex(v: Any) -> bool:
+    """Whether v (a number, an array or a sequence of numbers) is complex: numpy's
+    ``iscomplexobj`` without converting an array or a number."""
+    if isinstance(v, complex | np.ndarray | np.generic):
+        return isinstance(v, complex) or v.dtype.kind == "c"
+    if isinstance(v, list | tuple):
+        return any(_is_complex(item) for item in v)
+    return False
+
+
+def _dot(k: NDArray[np.float64], v: NDArray[Any]) -> Any:
+    """``numpy.dot(k, v)`` of a vector v, or of each column of a batch v (one dot of a
+    contiguous copy per column: the summation order, hence the last bit, of one state's)."""
+    if v.ndim == 1:
+        return np.dot(k, v)
+    return np.array([np.dot(k, col) for col in np.ascontiguousarray(v.T)])
+
+
 def reference_operating_value(ref: Reference) -> float:
     """The constant :math:`r^*` the loop is linearised at (sine offset, step final value)."""
     if ref.kind == "sine":
@@ -235,6 +253,7 @@ class ClosedLoop:
             self.itd_constants = improved_td_constants(
                 c.value("td.a"), c.value("td.b"), c.value("td.c")
             )
+            self.itd_rho = c.value("td.rho")
         if c.td == "linear":
             self.prefilter = linear_prefilter_coefficients(c.rho, c.value("td.omega"))
         self.r_op = reference_operating_value(scenario.reference)
@@ -248,9 +267,9 @@ class ClosedLoop:
     def _sef(self, e: NDArray[Any], rff: Any) -> Any:
         c, m = self.controller, self.m
         if c.sef == "linear":
-            return (rff + np.dot(self.lin_k[:m], e[:m])) / self.b0
+            return (rff + _dot(self.lin_k[:m], e[:m])) / self.b0
         if self.mode == "linearise":
-            return np.dot(self.k_sef, e[:m])
+            return _dot(self.k_sef, e[:m])
         if c.sef == "nonlinear":
             return sum(
                 c.value(f"sef.k{i + 1}")
@@ -286,7 +305,11 @@ class ClosedLoop:
 
     def _saturate(self, u: Any) -> Any:
         """The actuator range :math:`[u_{min}, u_{max}]`, branch chosen by the real part
-        (slope 1 inside, 0 at a limit; the engine's ``saturate_range``)."""
+        (slope 1 inside, 0 at a limit; the engine's ``saturate_range``), per column of a
+        batch."""
+        if isinstance(u, np.ndarray) and u.ndim:
+            inside = np.where(u.real < self.u_min, self.u_min, u)
+            return np.where(u.real > self.u_max, self.u_max, inside)
         if u.real > self.u_max:
             return self.u_max
         if u.real < self.u_min:
@@ -306,50 +329,58 @@ class ClosedLoop:
         noise: Any = 0.0,
         u_plant: Any = None,
     ) -> tuple[NDArray[Any], Any, Any]:
-        r""":math:`(\dot z, y, u)` at state z.
+        r""":math:`(\dot z, y, u)` at state z, or at each column of a batch of states.
 
         Parameters
         ----------
         z
             State (layout of :attr:`state_names`); complex in ``"linearise"`` mode for the
-            complex step.
+            complex step.  In ``"linearise"`` mode z may be a batch of K states, shape
+            (n_z, K): every operation acts along the trailing axis and column k of
+            :math:`\dot z` (and entry k of y, u) is the right-hand side at column k, the
+            plant's functions on a tangent batch (columns :math:`z + ihe_j`) evaluated by
+            :meth:`aiofl.analysis.derivatives.PlantDerivatives.evaluate_columns`.
         rd
             :math:`(r, \dot r, \dots, r^{(\rho)})`; default the operating point
-            :math:`(r^*, 0, \dots)`.
+            :math:`(r^*, 0, \dots)`.  With a batch: shape (ρ+1,) (shared) or (ρ+1, K).
         d
-            Disturbance :math:`\tau_d` (default: its operating value).
+            Disturbance :math:`\tau_d` (default: its operating value); scalar or shape (K,).
         noise
-            Measurement noise added to y for the ESO.
+            Measurement noise added to y for the ESO; scalar or shape (K,).
         u_plant
             If given, the loop is broken at the plant input: the plant is driven by
             ``u_plant`` and the returned u is the controller's output (which its ESO uses).
         """
         c, rho, m, n = self.controller, self.rho, self.m, self.n
         cplx = (
-            np.iscomplexobj(z)
-            or (rd is not None and np.iscomplexobj(rd))
-            or np.iscomplexobj(d)
-            or np.iscomplexobj(noise)
-            or np.iscomplexobj(u_plant)
+            _is_complex(z)
+            or (rd is not None and _is_complex(rd))
+            or _is_complex(d)
+            or _is_complex(noise)
+            or _is_complex(u_plant)
         )
         if cplx and self.mode == "exact":
             raise ValueError("complex arguments need mode = 'linearise'")
         dtype = np.complex128 if cplx else np.float64
         z = np.asarray(z, dtype=dtype)
-        rdv = np.zeros(rho + 1, dtype=dtype)
+        batch = z.shape[1:]  # () for one state, (K,) for K columns
+        if batch and self.mode == "exact":
+            raise ValueError("a batch of states needs mode = 'linearise'")
+        rdv = np.zeros((rho + 1, *batch), dtype=dtype)
         if rd is None:
             rdv[0] = self.r_op
         else:
             k = min(len(rd), rho + 1)
-            rdv[:k] = np.asarray(rd, dtype=dtype)[:k]
+            rda = np.asarray(rd, dtype=dtype)[:k]
+            rdv[:k] = rda[:, None] if batch and rda.ndim == 1 else rda
         d = self.d_op if d is None else d
         x = z[:n]
         td = z[self.o_td : self.o_td + self.n_td]
         xi = z[self.o_eso : self.o_eso + rho + 1]
-        dz = np.zeros(self.n_z, dtype=dtype)
+        dz = np.zeros((self.n_z, *batch), dtype=dtype)
         r = rdv[0]
         rff: Any = 0.0
-        prof = np.zeros(rho, dtype=dtype)
+        prof = np.zeros((rho, *batch), dtype=dtype)
         if c.td == "exact":
             prof[:] = rdv[:rho]
             rff = rdv[rho]
@@ -365,7 +396,7 @@ class ClosedLoop:
                 dz[self.o_td], dz[self.o_td + 1] = improved_td_rhs(td[0], td[1], r, a, b, cc, rr)
             else:  # eq. (21) with numpy's tanh (the engine's fast_tanh is tanh to 2 ulp)
                 b_over_c, gain = self.itd_constants
-                rr = c.value("td.rho")
+                rr = self.itd_rho
                 dz[self.o_td] = td[1]
                 dz[self.o_td + 1] = -rr * rr * np.tanh(b_over_c * td[0] - gain * r) - rr * td[1]
             prof[:2] = td[:2]
@@ -377,7 +408,13 @@ class ClosedLoop:
                 rff = linear_prefilter_update.py_func(td, d_td, 0, rho, r, self.prefilter, 0)
             prof[:] = td[:rho]
         p_true = self.p_true
-        y = self._plant("h", x, p_true)[0]
+        need_bd = self.plant.bd is not None and (np.any(d != 0.0) if batch else d != 0.0)
+        if batch:  # the plant's functions at x in one tangent-batch evaluation
+            names = ("h", "f", "g", "bd") if need_bd else ("h", "f", "g")
+            hx, *fgb = self.derivatives.evaluate_columns(names, x, p_true)
+        else:
+            hx = self._plant("h", x, p_true)
+        y = hx[0]
         model = c.law == "aiofl" and c.eso_model == "nominal"
         if model:  # the nominal (α, β) at x̂ = Φ⁻¹(ξ̂), model-assisted law
             a_hat, b_hat = self._plant("alpha_beta_of_xi", xi[:rho], self.p_nom)
@@ -388,19 +425,22 @@ class ClosedLoop:
             u = self._sef(e, rff) - xi[rho] / self.b0
         else:
             nfx = self._plant("normal_form", x, self.p_nom)
-            acc = rff + np.dot(self.lin_k[:m], prof[:m] - nfx[:m])
+            acc = rff + _dot(self.lin_k[:m], prof[:m] - nfx[:m])
             u = (-nfx[rho] + acc) / nfx[rho + 1]
         u = self._saturate(u)
         inj = self._injection(y + noise - xi[0])
         o = self.o_eso
-        dz[o : o + rho] = xi[1 : rho + 1] + self.betas[:rho] * inj
+        betas = self.betas[:, None] if batch else self.betas
+        dz[o : o + rho] = xi[1 : rho + 1] + betas[:rho] * inj
         dz[o + rho - 1] += a_hat + b_hat * u if model else self.b0 * u
-        dz[o + rho] = self.betas[rho] * inj
+        dz[o + rho] = betas[rho] * inj
         u_in = u if u_plant is None else u_plant
-        dz[:n] = self._plant("f", x, p_true) + self._plant("g", x, p_true) * u_in
-        if d != 0.0 and self.plant.bd is not None:
-            dz[:n] += self._plant("bd", x, p_true) * d
-        if not cplx:
+        if not batch:
+            fgb = [self._plant(name, x, p_true) for name in ("f", "g", "bd")[: 3 if need_bd else 2]]
+        dz[:n] = fgb[0] + fgb[1] * u_in
+        if need_bd:
+            dz[:n] += fgb[2] * d
+        if not cplx and not batch:
             y, u = float(y), float(u)
         return dz, y, u
 
@@ -461,6 +501,16 @@ class ClosedLoop:
         if broken:  # output: the controller's u only
             return a, b, c[1:], d[1:]
         return a, b, c, d
+
+    def tangent_batch(self, z: NDArray[np.float64]) -> NDArray[np.complex128]:
+        r"""The n_z complex steps of z as the columns of one batch for :meth:`rhs`:
+        :math:`Z_{:,j} = z + ihe_j` (h = :data:`aiofl.analysis.derivatives.COMPLEX_STEP`),
+        so that :math:`\operatorname{Im}F(Z)/h` is the Jacobian :math:`\partial F/\partial z`."""
+        z = np.asarray(z, dtype=np.float64)
+        batch = np.empty((z.size, z.size), dtype=np.complex128)
+        batch.real = z[:, None]
+        batch.imag = COMPLEX_STEP * np.eye(z.size)
+        return batch
 
     def jacobian(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
         r""":math:`A = \partial F/\partial z` at z by the complex step (for the operating-point

@@ -29,10 +29,11 @@ from __future__ import annotations
 
 import builtins
 import cmath
+import dis
 import math
 import types
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -136,12 +137,44 @@ def complex_safe(fn: Callable[..., Any]) -> Callable[..., Any] | None:
     return types.FunctionType(code, glb, py.__name__, py.__defaults__, py.__closure__)
 
 
+_DYNAMIC = frozenset({"locals", "vars", "eval", "exec"})
+
+
+def reads_first_argument(fn: Callable[..., Any] | None) -> bool:
+    """Whether the Python function ``fn`` can depend on its first argument (the state x).
+
+    False only when its code provably never touches it: no instruction loads, stores or
+    deletes that local, no nested function captures it, and the code names none of
+    ``locals, vars, eval, exec``.  Such a function is constant in x (its Jacobian is 0),
+    e.g. a constant input gain g(x) = b.  True for anything without Python code."""
+    code = getattr(fn, "__code__", None)
+    if code is None or code.co_argcount < 1:
+        return True
+    name = code.co_varnames[0]
+    if name in code.co_cellvars or _DYNAMIC & set(code.co_names):
+        return True
+    for ins in dis.get_instructions(code):
+        if ins.opcode in dis.haslocal or ins.opcode in dis.hasfree:
+            args = ins.argval if isinstance(ins.argval, tuple) else (ins.argval,)
+            if name in args:
+                return True
+    return False
+
+
 def _call_complex(cfn: Callable[..., Any], x: NDArray[Any], p: NDArray[np.float64]) -> NDArray[Any]:
     """``cfn(x, p)`` as a complex array; a cast that would drop an imaginary part (numpy's
     ComplexWarning, e.g. ``math.erf`` of a numpy complex) raises it as an error."""
     with warnings.catch_warnings():
         warnings.simplefilter("error", np.exceptions.ComplexWarning)
         return np.asarray(cfn(x, p), dtype=np.complex128).reshape(-1)
+
+
+def _step_inputs(x: NDArray[np.float64], columns: Any) -> NDArray[np.complex128]:
+    """The complex steps :math:`x + ihe_j`, j in ``columns``, as rows."""
+    steps = np.empty((len(columns), x.size), dtype=np.complex128)
+    steps[:] = x
+    steps[np.arange(len(columns)), np.asarray(columns)] += 1j * COMPLEX_STEP
+    return steps
 
 
 class PlantDerivatives:
@@ -170,6 +203,7 @@ class PlantDerivatives:
             if fn is not None:
                 self.functions[name] = fn
                 self.complex[name] = complex_safe(fn)
+        self.reads_state = {name: reads_first_argument(cfn) for name, cfn in self.complex.items()}
         self.method: dict[str, str] = dict.fromkeys(self.functions, "complex step")
         self._verified: set[tuple[bytes, bytes]] = set()
         self.notes: list[str] = []
@@ -180,7 +214,10 @@ class PlantDerivatives:
         return np.asarray(self.functions[name](x, p), dtype=np.float64).reshape(-1)
 
     def evaluate(self, name: str, x: NDArray[Any], p: NDArray[np.float64]) -> NDArray[Any]:
-        """Value of plant function ``name`` at x (real or complex-step), as a 1-D array."""
+        """Value of plant function ``name`` at x (real or complex-step), as a 1-D array; for
+        x of shape (n, K) the K columns' values, shape (n_out, K) (:meth:`evaluate_columns`)."""
+        if x.ndim > 1:
+            return self.evaluate_columns((name,), x, p)[0]
         if not np.iscomplexobj(x):
             return self._real(name, x, p)
         cfn = self.complex[name]
@@ -226,15 +263,79 @@ class PlantDerivatives:
         self, name: str, x: NDArray[np.float64], p: NDArray[np.float64]
     ) -> NDArray[np.float64]:
         """Jacobian of function ``name`` at real x by the complex step of the re-bound function."""
+        return self._call_steps(name, _step_inputs(x, range(x.size)), p).imag / COMPLEX_STEP
+
+    def _call_steps(
+        self, name: str, steps: NDArray[np.complex128], p: NDArray[np.float64]
+    ) -> NDArray[np.complex128]:
+        """The re-bound function at each row of ``steps``, as the columns of an (n_out × rows)
+        array, called under one guard that raises numpy's ComplexWarning (as
+        :func:`_call_complex`)."""
         cfn = self.complex[name]
         if cfn is None:
             raise TypeError(f"{name} has no Python code to evaluate on complex numbers")
-        cols = []
-        for j in range(x.size):
-            xc = x.astype(np.complex128)
-            xc[j] += 1j * COMPLEX_STEP
-            cols.append(_call_complex(cfn, xc, p).imag / COMPLEX_STEP)
-        return np.column_stack(cols)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", np.exceptions.ComplexWarning)
+            values = [cfn(xc, p) for xc in steps]
+        return np.array(values, dtype=np.complex128).reshape(len(steps), -1).T
+
+    def evaluate_columns(
+        self, names: Sequence[str], x: NDArray[Any], p: NDArray[np.float64]
+    ) -> list[NDArray[Any]]:
+        r"""Functions ``names`` on the K columns of x (n × K), each of shape (n_out, K).
+
+        A *tangent batch* (complex columns sharing one real point :math:`x_r`, e.g.
+        :math:`x_r + ihe_j`) is, to first order in Im x,
+
+        .. math:: \phi(x_r) + i\,J_\phi(x_r)\,\operatorname{Im}x,
+
+        from one complex-step call per perturbed input j (a row of Im x not all 0):
+        :math:`J_\phi e_j = \operatorname{Im}\phi(x_r + ihe_j)/h`, the value the real part
+        of the first; from a single call for a function that does not read x
+        (:func:`reads_first_argument`); for a function sent to the finite difference, the
+        real value and :meth:`fd_jacobian`.  These are the numbers :meth:`evaluate` gives
+        column by column (to the last bit, where the real part does not move with the step),
+        in fewer calls.  Other batches (real, or columns at different real points, or a
+        Jacobian that is not finite) are evaluated column by column.
+        """
+        xr = x.real
+        x0 = np.ascontiguousarray(xr[:, 0])
+        if x.dtype.kind != "c" or (xr != x0[:, None]).any():
+            return [self._column_by_column(name, x, p) for name in names]
+        xi = x.imag
+        moved = (xi != 0.0).any(axis=1).nonzero()[0]
+        if moved.size == 0:
+            zero = np.zeros(x.shape[1], dtype=np.complex128)
+            return [self._real(name, x0, p)[:, None] + zero for name in names]
+        steps, ratio = _step_inputs(x0, moved), xi[moved] / COMPLEX_STEP
+        out = []
+        for name in names:
+            if self.method[name] == "complex step" and self.complex[name] is not None:
+                try:
+                    if not self.reads_state[name]:  # constant in x: one call serves all
+                        values = self._call_steps(name, x0[None, :].astype(np.complex128), p)
+                        out.append(np.repeat(values, x.shape[1], axis=1))
+                        continue
+                    # h·J's columns times Im x / h (exactly 1 on a step of h)
+                    values = self._call_steps(name, steps, p)
+                    value, jac, weights = values[:, 0].real, values.imag, ratio
+                except (TypeError, np.exceptions.ComplexWarning) as exc:  # outside the namespace
+                    self._fall_back(name, f"{type(exc).__name__}: {exc}")
+            if self.method[name] != "complex step" or self.complex[name] is None:
+                value = self._real(name, x0, p)
+                jac, weights = self.fd_jacobian(name, x0, p)[:, moved], xi[moved]
+            if not np.isfinite(jac).all():  # 0·inf would spread to every column
+                out.append(self._column_by_column(name, x, p))
+                continue
+            col = np.empty((value.size, x.shape[1]), dtype=np.complex128)
+            col.real = value[:, None]
+            col.imag = jac @ weights
+            out.append(col)
+        return out
+
+    def _column_by_column(self, name: str, x: NDArray[Any], p: NDArray[np.float64]) -> NDArray[Any]:
+        cols = [self.evaluate(name, np.ascontiguousarray(x[:, k]), p) for k in range(x.shape[1])]
+        return np.stack(cols, axis=-1)
 
     def _fall_back(self, name: str, reason: str) -> None:
         if self.method[name] != "finite difference":

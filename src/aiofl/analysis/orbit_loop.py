@@ -55,16 +55,31 @@ from aiofl.scenario import Reference, Scenario
 
 __all__ = ["SLOPE_FLOOR", "Nonlinearity", "OrbitLoop", "reference_derivatives"]
 
+Scalar = Callable[[float], float]
+
 SLOPE_FLOOR = 1e-12
 """|e| below which the slope of :math:`|e|^{a}`, a < 1, is taken at this value."""
 
 
 def _complex(e: Any) -> bool:
-    return isinstance(e, complex | np.complexfloating)
+    return isinstance(e, complex | np.complexfloating) or (
+        isinstance(e, np.ndarray) and e.dtype.kind == "c"
+    )
 
 
 def _cs(value: Callable[[float], float], slope: Callable[[float], float], e: Any) -> Any:
-    """φ(e) on a real number, :math:`\\varphi(e_r) + i h \\varphi'(e_r)` on a complex step."""
+    r"""φ(e) on a real number, :math:`\varphi(e_r) + i h \varphi'(e_r)` on a complex step;
+    on an array of complex steps (a tangent batch) the same per entry, φ and φ' taken once
+    when the entries share their real part."""
+    if isinstance(e, np.ndarray):
+        er = e.real
+        e0 = float(er.flat[0])
+        if e.dtype.kind != "c" or not (er == e0).all():
+            return np.array([_cs(value, slope, v) for v in e.flat]).reshape(e.shape)
+        out = np.empty(e.shape, dtype=np.complex128)
+        out.real = value(e0)
+        out.imag = e.imag * slope(e0)
+        return out
     if _complex(e):
         er = float(e.real)
         return complex(value(er), float(e.imag) * slope(er))
@@ -123,6 +138,7 @@ class OrbitLoop(ClosedLoop):
         self.dt = float(dt)
         self.describing: tuple[float, ...] | None = None
         self._record: list[Any] | None = None
+        # (start, dt, times, outputs (r1, r2) as the rows of a 2 x len(times) array)
         self._han: tuple[float, float, NDArray[np.float64], NDArray[np.float64]] | None = None
         c = controller
         self.nonsmooth = [
@@ -171,28 +187,46 @@ class OrbitLoop(ClosedLoop):
         if self.describing is not None:
             s = sum(self.describing[i] * e[i] for i in range(m))
             return s if c.sef == "nonlinear" else self._limit(s)
+        total: Any = 0.0
         if c.sef == "nonlinear":
-            total: Any = 0.0
-            for i, (k, a, d, slope_in) in enumerate(self._sef_constants):
-                total = total + k * _cs(
-                    lambda x, a=a, d=d: fal(x, a, d),
-                    lambda x, a=a, d=d, s=slope_in: s if abs(x) <= d else _pow_slope(x, a),
-                    e[i],
-                )
+            for i, (k, value, slope) in enumerate(self._sef_functions):
+                total = total + k * _cs(value, slope, e[i])
             return total
-        total = 0.0
-        for i, (k, kb, mu, a) in enumerate(self._sef_constants):
-            total = total + _cs(
-                lambda x, k=k, kb=kb, mu=mu, a=a: inlsef_term(x, k, kb, mu, a),
-                lambda x, k=k, kb=kb, mu=mu, a=a: _inlsef_slope(x, k, kb, mu, a),
-                e[i],
-            )
-        return self._limit(total)
+        for i, (_, value, slope) in enumerate(self._sef_functions):
+            total = total + _cs(value, slope, e[i])
+        return self._limit(total, by_component=True)
+
+    @functools.cached_property
+    def _sef_functions(self) -> list[tuple[float, Scalar, Scalar]]:
+        r"""Per fed-back error: :math:`(k, \varphi, \varphi')` of its term, :math:`k\,
+        \mathrm{fal}` (17) or the INLSEF term (20) (k = 1, unused), built once (the
+        right-hand side runs ~10⁶ times per orbit)."""
+        out: list[tuple[float, Scalar, Scalar]] = []
+        for i in range(self.m):
+            if self.controller.sef == "nonlinear":
+                k, a, d, s = self._sef_constants[i]
+                out.append(
+                    (
+                        k,
+                        lambda x, a=a, d=d: fal(x, a, d),
+                        lambda x, a=a, d=d, s=s: s if abs(x) <= d else _pow_slope(x, a),
+                    )
+                )
+            else:
+                k1, k2, mu, a = self._sef_constants[i]
+                out.append(
+                    (
+                        1.0,
+                        lambda x, k1=k1, k2=k2, mu=mu, a=a: inlsef_term(x, k1, k2, mu, a),
+                        lambda x, k1=k1, k2=k2, mu=mu, a=a: _inlsef_slope(x, k1, k2, mu, a),
+                    )
+                )
+        return out
 
     @functools.cached_property
     def _sef_constants(self) -> list[tuple[float, ...]]:
         """Per fed-back error: (k, α, δ, δ^(α-1)) of fal (17) or (k, k_b, μ, α) of the
-        INLSEF (20), read once (the right-hand side runs ~10⁶ times per orbit)."""
+        INLSEF (20), read once."""
         c = self.controller
         if c.sef == "nonlinear":
             out = []
@@ -206,16 +240,33 @@ class OrbitLoop(ClosedLoop):
         ]
 
     @functools.cached_property
-    def _injection_constants(self) -> tuple[float, float, float, float]:
-        """(k_α, k_β, g_α, g_β) of the INLESO's injection g(e) (19), read once."""
+    def _injection_functions(self) -> tuple[Scalar, Scalar]:
+        r"""(g, g') of the INLESO's injection (19), :math:`g'(e) = k_\alpha\alpha|e|^{\alpha-1}
+        + k_\beta(\beta+1)|e|^\beta`, built once."""
         c = self.controller
         ka, kb, ga, gb = (
             c.value(k) for k in ("eso.k_alpha", "eso.k_beta", "eso.g_alpha", "eso.g_beta")
         )
-        return ka, kb, ga, gb
+        return (
+            lambda x: inleso_injection(x, ka, kb, ga, gb),
+            lambda x: ka * _pow_slope(x, ga) + (kb * (gb + 1.0) * abs(x) ** gb if kb else 0.0),
+        )
 
-    def _limit(self, s: Any) -> Any:
-        vl = self.controller.value("sef.v_limit")
+    @functools.cached_property
+    def _v_limit(self) -> float:
+        """The INLSEF's limit :math:`v_l` (20), read once."""
+        return self.controller.value("sef.v_limit")
+
+    def _limit(self, s: Any, *, by_component: bool = False) -> Any:
+        """The INLSEF's limit :math:`v_l\tanh(s/v_l)` (20).  On a batch, s/v_l divided as
+        one column's s would be, to the last bit: ``by_component`` where that is a Python
+        complex (the sum of :func:`_cs`'s terms; Python divides each part by v_l), by numpy
+        otherwise (a numpy scalar, e.g. the describing gains' sum)."""
+        vl = self._v_limit
+        if by_component and isinstance(s, np.ndarray):
+            q = np.empty_like(s)
+            q.real, q.imag = s.real / vl, s.imag / vl
+            return vl * np.tanh(q)
         return vl * np.tanh(s / vl) if _complex(s) else inlsef_limit(float(s), vl)
 
     def _injection(self, e: Any) -> Any:
@@ -226,12 +277,7 @@ class OrbitLoop(ClosedLoop):
             self._record.append(e)
         if self.describing is not None:
             return self.describing[-1] * e
-        ka, kb, ga, gb = self._injection_constants
-        return _cs(
-            lambda x: inleso_injection(x, ka, kb, ga, gb),
-            lambda x: ka * _pow_slope(x, ga) + (kb * (gb + 1.0) * abs(x) ** gb if kb else 0.0),
-            e,
-        )
+        return _cs(*self._injection_functions, e)
 
     # ------------------------------------------------------------------ inputs
     def han_signal(self, t0: float, t1: float) -> None:
@@ -249,7 +295,8 @@ class OrbitLoop(ClosedLoop):
         out = _han_rk4(float(x0[0]), float(x0[1]), r, rh, big_r, self.dt, n)
         ts = ts[:n]
         kernel = np.ones(20) / 20.0
-        smooth = np.column_stack([np.convolve(out[:, j], kernel, mode="same") for j in range(2)])
+        # one contiguous row per output: numpy's interp copies a strided column on every call
+        smooth = np.stack([np.convolve(out[:, j], kernel, mode="same") for j in range(2)])
         self._han = (start, self.dt, ts, smooth)
 
     def inputs_at(self, t: float) -> NDArray[np.float64]:
@@ -259,7 +306,7 @@ class OrbitLoop(ClosedLoop):
             if self._han is None:
                 raise ValueError("call han_signal(t0, t1) first")
             _, _, ts, sig = self._han
-            return np.array([np.interp(t, ts, sig[:, 0]), np.interp(t, ts, sig[:, 1])])
+            return np.array([np.interp(t, ts, sig[0]), np.interp(t, ts, sig[1])])
         return reference_derivatives(self.scenario.reference, t, self.rho)
 
     def disturbance_at(self, t: float) -> float:
@@ -275,9 +322,14 @@ class OrbitLoop(ClosedLoop):
         reference held at its operating value; ``d`` a constant disturbance (default
         :meth:`disturbance_at`)."""
 
+        last: list[Any] = [None, None]  # (t, inputs at t): BDF's Newton iterations, and
+        # the Jacobian BDF takes with them, evaluate F several times at one t (read only)
+
         def inputs(t: float) -> tuple[Any, float]:
-            rd = None if hold else self.inputs_at(t)
-            return rd, (self.disturbance_at(t) if d is None else d)
+            if last[0] is None or t != last[0]:
+                rd = None if hold else self.inputs_at(t)
+                last[:] = [t, (rd, self.disturbance_at(t) if d is None else d)]
+            return last[1]
 
         def f(t: float, z: NDArray[np.float64]) -> NDArray[np.float64]:
             rd, dd = inputs(t)
@@ -292,30 +344,21 @@ class OrbitLoop(ClosedLoop):
     def jacobian_at(
         self, z: NDArray[np.float64], rd: Any = None, d: Any = None
     ) -> NDArray[np.float64]:
-        """:math:`\\partial F/\\partial z` at z with the given inputs, by the complex step."""
-        z = np.asarray(z, dtype=np.float64)
-        cols = []
-        for j in range(self.n_z):
-            zc = z.astype(np.complex128)
-            zc[j] += 1j * COMPLEX_STEP
-            cols.append(self.rhs(zc, rd=rd, d=d)[0].imag / COMPLEX_STEP)
-        return np.column_stack(cols)
+        r""":math:`\partial F/\partial z` at z with the given inputs, by the complex step:
+        one right-hand side call on the tangent batch :math:`Z = z\mathbf 1^T + ihI`
+        (:meth:`ClosedLoop.tangent_batch`), column j :math:`\operatorname{Im}F(z + ihe_j)/h`."""
+        return self.rhs(self.tangent_batch(z), rd=rd, d=d)[0].imag / COMPLEX_STEP
 
     def error_rows(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
         """∂e_i/∂z of the nonlinearities' inputs at z (rows in :meth:`nonlinearities`
-        order), by the complex step with the inputs recorded."""
-        z = np.asarray(z, dtype=np.float64)
-        rows = []
-        for j in range(self.n_z):
-            zc = z.astype(np.complex128)
-            zc[j] += 1j * COMPLEX_STEP
-            self._record = []
-            try:
-                self.rhs(zc)
-                rows.append([complex(v).imag / COMPLEX_STEP for v in self._record])
-            finally:
-                self._record = None
-        return np.array(rows, dtype=np.float64).T.reshape(-1, self.n_z)
+        order), by the complex step on the tangent batch with the inputs recorded."""
+        self._record = []
+        try:
+            self.rhs(self.tangent_batch(z))
+            rows = [np.asarray(v).imag / COMPLEX_STEP for v in self._record]
+        finally:
+            self._record = None
+        return np.array(rows, dtype=np.float64).reshape(-1, self.n_z)
 
 
 @njit(cache=False)

@@ -198,9 +198,13 @@ def variational_flow(
     # Φ in the coordinates z / scale (balanced: the observer's couplings span 1e16)
     phi = np.eye(n) if phi0 is None else np.asarray(phi0, dtype=np.float64) / d[:, None]
     grid = np.asarray(sol.t, dtype=np.float64)
-    fine = np.concatenate(
-        [np.linspace(a, b, split, endpoint=False) for a, b in itertools.pairwise(grid)]
-        + [grid[-1:]]
+    fine = (
+        grid
+        if split == 1  # linspace(a, b, 1, endpoint=False) is [a]
+        else np.concatenate(
+            [np.linspace(a, b, split, endpoint=False) for a, b in itertools.pairwise(grid)]
+            + [grid[-1:]]
+        )
     )
     for a, b in itertools.pairwise(fine):
         tm = 0.5 * (a + b)

@@ -1,0 +1,188 @@
+"""The Jacobian of the orbit loop from one right-hand side call on a tangent batch.
+
+:meth:`aiofl.analysis.orbit_loop.OrbitLoop.jacobian_at` evaluates the loop once on the n_z
+complex steps :math:`z + ihe_j` as the columns of a batch (the plant's functions by
+:meth:`aiofl.analysis.derivatives.PlantDerivatives.evaluate_columns`, the non-smooth
+elements by their value and slope at the shared real part).  It must equal the complex step
+taken column by column (one scalar right-hand side call per column, the definition) for
+every controller structure, on a plant differentiated by the complex step and on one whose
+complex step falls back to finite differences; so must the describing-function Jacobian,
+the nonlinearities' error rows, and a batch whose columns are at different real points.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from aiofl.analysis.derivatives import COMPLEX_STEP
+from aiofl.analysis.orbit_loop import OrbitLoop
+from aiofl.config import load_config
+
+
+def _column_by_column(loop: OrbitLoop, z: np.ndarray, rd=None, d=None) -> np.ndarray:
+    cols = []
+    for j in range(loop.n_z):
+        zc = z.astype(np.complex128)
+        zc[j] += 1j * COMPLEX_STEP
+        cols.append(loop.rhs(zc, rd=rd, d=d)[0].imag / COMPLEX_STEP)
+    return np.column_stack(cols)
+
+
+def _assert_same(a: np.ndarray, b: np.ndarray) -> None:
+    """Equal to the last bit.  Not a tolerance: scipy's BDF takes its Newton iterations,
+    hence its steps, from this Jacobian, and an orbit it integrates over hundreds of
+    periods' worth of steps moves with them (differences of 3e-15 in a few entries, from
+    numpy dividing a complex array by multiplying with the reciprocal, changed
+    retuned-s1-inleso's largest Floquet multiplier from 0.90 to 0.53)."""
+    assert a.shape == b.shape
+    assert np.array_equal(a, b), float(np.max(np.abs(a - b) / np.maximum(np.abs(b), 1e-300)))
+
+
+def _loop(preset: str, **change: object) -> OrbitLoop:
+    cfg = load_config(preset)
+    ctrl = cfg.controller
+    td = change.pop("td", None)
+    if td is not None:
+        ctrl = replace(ctrl, td=td)
+    if change:
+        ctrl = ctrl.with_values(**change)
+    loop = OrbitLoop(cfg.plant, ctrl, cfg.scenario, dt=float(cfg.dt))
+    if ctrl.td == "han":
+        loop.han_signal(0.0, 1.0)
+    return loop
+
+
+def _points(loop: OrbitLoop, count: int = 3) -> list[np.ndarray]:
+    """States around the loop's initial guess, spread so that fal, g(e) and the INLSEF
+    run on both branches."""
+    z = loop.initial_guess()
+    rng = np.random.default_rng(7)
+    return [
+        z + 0.05 * rng.standard_normal(z.size) * np.maximum(np.abs(z), 1.0) for _ in range(count)
+    ]
+
+
+STRUCTURES = [
+    ("paper-s1-leso", {}),  # linear ESO, fal NLSEF, Han TD (an input)
+    ("retuned-s1-inleso", {}),  # INLESO g(e), INLSEF with its tanh limit, improved TD
+    ("retuned-s1-ladrc", {}),  # linear ESO and SEF
+    ("retuned-s1-ladrc", {"td": "linear", "td.omega": 25.0}),  # linear prefilter
+    ("assisted-s1-ladrc", {}),  # model-assisted law, eso.model = "nominal"
+    ("iofl-s1", {}),  # classical IOFL law on the normal form
+    ("paper-s2-inleso", {"law.u_max": 1e-3}),  # saturation active (slope 0)
+]
+
+
+@pytest.mark.parametrize(("preset", "change"), STRUCTURES)
+def test_batch_jacobian_equals_the_column_by_column_complex_step(
+    preset: str, change: dict[str, object]
+) -> None:
+    loop = _loop(preset, **change)
+    for k, z in enumerate(_points(loop)):
+        rd, d = loop.inputs_at(0.21 * k), 0.1 * k
+        batch = loop.jacobian_at(z, rd, d)
+        _assert_same(batch, _column_by_column(loop, z, rd, d))
+        assert np.any(batch != 0.0)
+    if "law.u_max" in change:  # every column saturated: u does not move
+        assert np.all(np.abs(loop.rhs(z, rd, d)[2]) <= 1e-3)
+        assert np.all(np.imag(loop.rhs(loop.tangent_batch(z), rd, d)[2]) == 0.0)
+
+
+@pytest.mark.parametrize("preset", ["paper-s1-leso", "retuned-s1-inleso"])
+def test_describing_jacobian_and_error_rows_equal_column_by_column(preset: str) -> None:
+    loop = _loop(preset)
+    z = _points(loop, 1)[0]
+    loop.describing = tuple(0.5 + 0.1 * i for i in range(len(loop.nonlinearities())))
+    try:
+        _assert_same(loop.jacobian_at(z), _column_by_column(loop, z))
+    finally:
+        loop.describing = None
+    rows = []
+    for j in range(loop.n_z):  # the recorded inputs' complex steps, one column at a time
+        zc = z.astype(np.complex128)
+        zc[j] += 1j * COMPLEX_STEP
+        loop._record = []
+        loop.rhs(zc)
+        rows.append([complex(v).imag / COMPLEX_STEP for v in loop._record])
+    loop._record = None
+    _assert_same(loop.error_rows(z), np.array(rows).T)
+
+
+def test_a_batch_at_different_real_points_is_each_columns_value() -> None:
+    """Columns that do not share a real point (no tangent batch) are evaluated one by one:
+    the plant's functions and the non-smooth elements give each column's own value."""
+    loop = _loop("retuned-s1-inleso")
+    zs = np.column_stack(_points(loop, 4)).astype(np.complex128)
+    zs.imag[2] = 1e-30
+    dz, y, u = loop.rhs(zs, loop.inputs_at(0.1), 0.05)
+    for k in range(zs.shape[1]):
+        dzk, yk, uk = loop.rhs(zs[:, k], loop.inputs_at(0.1), 0.05)
+        assert np.array_equal(dz[:, k], dzk)
+        assert (y[k], u[k]) == (yk, uk)
+
+
+def _erf_plant():
+    """A tank whose f calls math.erf (no complex version: the complex step raises numpy's
+    ComplexWarning and the function is differentiated by finite differences)."""
+    from aiofl.plants.base import Plant
+
+    def f(x: np.ndarray, p: np.ndarray) -> tuple[float]:
+        return (-p[0] * math.sqrt(abs(x[0])) + 1e-3 * math.erf(x[0] - 1.0),)
+
+    def g(x: np.ndarray, p: np.ndarray) -> tuple[float]:
+        return (p[1],)
+
+    def h(x: np.ndarray, p: np.ndarray) -> float:
+        return x[0]
+
+    return Plant("erf-tank", 1, f, g, h, {"a": 0.2, "k": 0.04}, relative_degree=1)
+
+
+def test_batch_jacobian_with_the_finite_difference_fallback() -> None:
+    cfg = load_config("tank-ladrc")
+    loops = [OrbitLoop(_erf_plant(), cfg.controller, cfg.scenario) for _ in range(2)]
+    z = loops[0].operating_point() + 0.01
+    batch = loops[0].jacobian_at(z)  # the first call meets the ComplexWarning
+    assert loops[0].derivatives.method["f"] == "finite difference"
+    assert any("ComplexWarning" in n for n in loops[0].derivatives.notes)
+    assert loops[0].derivatives.method["g"] == loops[0].derivatives.method["h"] == "complex step"
+    _assert_same(batch, _column_by_column(loops[1], z))
+    assert loops[1].derivatives.notes == loops[0].derivatives.notes
+    # d/dH of −a√H + 1e-3·erf(H − 1): the finite difference to ~1e-8
+    slope = -0.2 / (2 * math.sqrt(z[0])) + 1e-3 * 2 / math.sqrt(math.pi) * math.exp(
+        -((z[0] - 1) ** 2)
+    )
+    assert batch[0, 0] == pytest.approx(slope, rel=1e-7)
+
+
+def test_reads_first_argument_only_where_the_code_never_touches_x() -> None:
+    """A plant function that never reads x is evaluated once per batch (constant in x);
+    anything that might read it is not."""
+    from aiofl.analysis.derivatives import reads_first_argument
+
+    def gain(x, p):
+        return (0.0, p[0])
+
+    def uses(x, p):
+        return (x[0] * p[0],)
+
+    def captures(x, p):
+        return (lambda: x[0])()
+
+    def dynamic(x, p):
+        return (locals()["x"][0],)
+
+    def rebinds(x, p):
+        x = p
+        return (x[0],)
+
+    assert not reads_first_argument(gain)
+    assert all(reads_first_argument(fn) for fn in (uses, captures, dynamic, rebinds, len, None))
+    cfg = load_config("retuned-s1-inleso")
+    loop = OrbitLoop(cfg.plant, cfg.controller, cfg.scenario)
+    assert loop.derivatives.reads_state["f"] and loop.derivatives.reads_state["h"]
+    assert not loop.derivatives.reads_state["g"]  # slfjm's input gain b = k_m k_g / (R_m J_h)
