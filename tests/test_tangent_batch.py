@@ -186,3 +186,36 @@ def test_reads_first_argument_only_where_the_code_never_touches_x() -> None:
     loop = OrbitLoop(cfg.plant, cfg.controller, cfg.scenario)
     assert loop.derivatives.reads_state["f"] and loop.derivatives.reads_state["h"]
     assert not loop.derivatives.reads_state["g"]  # slfjm's input gain b = k_m k_g / (R_m J_h)
+
+
+def test_the_orbit_jacobian_checks_the_plants_complex_step_first() -> None:
+    """A plant written with numpy.abs (the modulus of a complex step: its derivative is
+    lost) is caught at the orbit loop's first Jacobian: its plant Jacobian comes from finite
+    differences (noted), and the loop's Jacobian equals that of the same plant written with
+    abs (exact) to ~1e-8; unchecked, ∂(−a√|H|)/∂H came out 0."""
+    from aiofl.plants.base import Plant
+
+    def f_builtin(x: np.ndarray, p: np.ndarray) -> tuple[float]:
+        return (-p[0] * math.sqrt(abs(x[0])),)
+
+    def f_numpy(x: np.ndarray, p: np.ndarray) -> tuple[float]:
+        return (-p[0] * np.sqrt(np.abs(x[0])),)
+
+    def g(x: np.ndarray, p: np.ndarray) -> tuple[float]:
+        return (p[1],)
+
+    def h(x: np.ndarray, p: np.ndarray) -> float:
+        return x[0]
+
+    cfg = load_config("tank-ladrc")
+    jac = {}
+    for name, f in (("builtin", f_builtin), ("numpy", f_numpy)):
+        plant = Plant(name, 1, f, g, h, {"a": 0.2, "k": 0.04}, relative_degree=1)
+        loop = OrbitLoop(plant, cfg.controller, cfg.scenario, dt=float(cfg.dt))
+        z = loop.initial_guess()
+        z[0] = 1.0
+        jac[name] = loop.jacobian_at(z)
+        notes = loop.derivatives.notes
+        assert any("finite differences" in n for n in notes) == (name == "numpy")
+    assert jac["builtin"][0, 0] == pytest.approx(-0.1, rel=1e-14)  # −a/(2√H) at H = 1
+    assert np.allclose(jac["numpy"], jac["builtin"], rtol=1e-8, atol=1e-10)

@@ -474,9 +474,7 @@ class ClosedLoop:
         if self.mode != "linearise":
             raise ValueError("linear_model needs mode = 'linearise'")
         z = np.asarray(z, dtype=np.float64)
-        self.derivatives.verify(z[: self.n], self.p_true)
-        if self.controller.law == "iofl":
-            self.derivatives.verify(z[: self.n], self.p_nom)
+        self.verify_derivatives(z)
         v = self.operating_inputs()
         u_star = self.rhs(z)[2] if broken else None
         n_in = 1 if broken else v.size
@@ -501,6 +499,16 @@ class ClosedLoop:
         if broken:  # output: the controller's u only
             return a, b, c[1:], d[1:]
         return a, b, c, d
+
+    def verify_derivatives(self, z: NDArray[np.float64]) -> None:
+        """Check the plant's complex-step derivatives against finite differences at z's
+        plant state (:meth:`aiofl.analysis.derivatives.PlantDerivatives.verify`; with the
+        true parameters, and the nominal ones the IOFL law's model runs with): a function
+        that fails it is differentiated by finite differences from then on (noted)."""
+        x = np.asarray(z, dtype=np.float64)[: self.n]
+        self.derivatives.verify(x, self.p_true)
+        if self.controller.law == "iofl":
+            self.derivatives.verify(x, self.p_nom)
 
     def tangent_batch(self, z: NDArray[np.float64]) -> NDArray[np.complex128]:
         r"""The n_z complex steps of z as the columns of one batch for :meth:`rhs`:

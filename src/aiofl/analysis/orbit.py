@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from aiofl.analysis.derivatives import COMPLEX_STEP
 from aiofl.analysis.orbit_loop import OrbitLoop
 from aiofl.analysis.variational import (
     OrbitDiverges,
@@ -80,9 +81,9 @@ def _outputs(loop: OrbitLoop, zs: NDArray[np.float64]) -> tuple[NDArray[Any], ND
 
 
 def _output_row(loop: OrbitLoop, z: NDArray[np.float64]) -> NDArray[np.float64]:
-    """∂y/∂z at z by the complex step."""
-    h = 1e-30
-    return np.array([complex(loop.rhs(z + 1j * h * e)[1]).imag / h for e in np.eye(loop.n_z)])
+    """∂y/∂z at z by the complex step (one call on the tangent batch)."""
+    y = loop.rhs(loop.tangent_batch(z))[1]
+    return np.asarray(y).imag / COMPLEX_STEP
 
 
 def equilibrium_limit_cycle(
@@ -370,7 +371,8 @@ def orbit_analysis(
         {"bounded", "amplitude_y", "amplitude_u", "frequency", "describing":
         {"amplitude_y", "frequency"}} or None, "floquet": {"multipliers", "largest", ...} or
         None, "ftle": {"largest", ...} or None, "verdict": sentence, "short": label,
-        "seconds": wall time}``.
+        "seconds": wall time}``, and ``"notes"`` when a plant function's Jacobian came
+        from finite differences (:class:`aiofl.analysis.derivatives.PlantDerivatives`).
     """
     from aiofl.analysis.linearize import closed_loop_verdict, linearize_closed_loop
 
@@ -387,10 +389,12 @@ def orbit_analysis(
         "floquet": None,
         "ftle": None,
     }
+    loops: list[OrbitLoop] = []
     if out["equilibrium"] == "unstable":
         try:
             lin = linearize_closed_loop(cfg, amplitude=float(v.get("amplitude", 1e-3)))
             loop = _loop(cfg)
+            loops.append(loop)
             df = limit_cycle_describing(loop, lin.z_op, lin.a, **points)
             start = df["amplitude_y"] if df else None
             if simulate_cycle:
@@ -406,6 +410,7 @@ def orbit_analysis(
     skip_orbit = out["equilibrium"] == "stable" and not q.get("orbit_when_stable", True)
     try:
         loop = _loop(cfg)
+        loops.append(loop)
         if skip_orbit:
             out["orbit_skipped"] = "equilibrium stable (aiofl analyze --closed-loop runs it)"
         elif cfg.scenario.reference.kind == "sine":
@@ -416,6 +421,9 @@ def orbit_analysis(
         out["orbit_diverges"] = str(exc)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
         out["orbit_error"] = f"{type(exc).__name__}: {exc}"
+    notes = list(dict.fromkeys(n for lp in loops for n in lp.derivatives.notes))
+    if notes:  # a plant function differentiated by finite differences
+        out["notes"] = notes
     out["verdict"], out["short"] = reconciled_text(out, unit)
     out["seconds"] = time.perf_counter() - t_start
     return out

@@ -138,6 +138,7 @@ class OrbitLoop(ClosedLoop):
         self.dt = float(dt)
         self.describing: tuple[float, ...] | None = None
         self._record: list[Any] | None = None
+        self._derivatives_checked = False
         # (start, dt, times, outputs (r1, r2) as the rows of a 2 x len(times) array)
         self._han: tuple[float, float, NDArray[np.float64], NDArray[np.float64]] | None = None
         c = controller
@@ -340,6 +341,15 @@ class OrbitLoop(ClosedLoop):
             return self.jacobian_at(z, rd, dd)
 
         return f, jac
+
+    def tangent_batch(self, z: NDArray[np.float64]) -> NDArray[np.complex128]:
+        """:meth:`ClosedLoop.tangent_batch`; the first one of the loop checks the plant's
+        complex-step derivatives there first (:meth:`ClosedLoop.verify_derivatives`: a
+        plant written with ``numpy.abs`` would otherwise give the orbit a wrong Jacobian)."""
+        if not self._derivatives_checked:
+            self.verify_derivatives(z)
+            self._derivatives_checked = True
+        return super().tangent_batch(z)
 
     def jacobian_at(
         self, z: NDArray[np.float64], rd: Any = None, d: Any = None
