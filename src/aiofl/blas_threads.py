@@ -2,11 +2,12 @@
 
 aiofl's matrices are small (a closed loop has ≤ 30 states): a multi-threaded BLAS gains
 nothing on them and loses much when the cores are busy.  OpenBLAS's worker threads wait
-for each other at every call; with the cores taken by the engine's numba threads or by the
-orbit-analysis workers (:mod:`aiofl.reporting.orbit_pool`), a 5 × 5 ``scipy.linalg.expm``
-took 0.7 ms instead of 23 µs on the 2-core development machine, and the report's
-linearisations, matrix exponentials and implicit integrations all call BLAS or LAPACK
-(``benchmarks/bench_blas_threads.py`` measures it).  One thread computes the same numbers.
+for each other at every call; with the cores taken by the engine's numba threads, the
+orbit-analysis workers (:mod:`aiofl.reporting.orbit_pool`) or another job, the report's
+``scipy.linalg.expm`` of ≤ 9 × 9 matrices averaged 7.6 ms per call instead of ~10 µs on the
+2-core development machine, and the report's linearisations, matrix exponentials and
+implicit integrations all call BLAS or LAPACK (``benchmarks/bench_blas_threads.py``
+measures it).  One thread computes the same numbers.
 
 :func:`one_blas_thread` limits the BLAS libraries loaded in this process to one thread, by
 :mod:`threadpoolctl` (which knows OpenBLAS, MKL and BLIS); the ``aiofl`` command, the
