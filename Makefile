@@ -20,10 +20,11 @@ run: $(STAMP)
 	$(BIN)/aiofl reproduce --out $(OUT)
 
 # the tests run on every core (pytest-xdist; a test file stays on one worker, so its
-# fixtures are built once); they share one kernel cache (tests/conftest.py)
+# fixtures are built once; the files reading the session's `aiofl reproduce` form one
+# group that starts first: tests/conftest.py); they share one kernel cache
 test: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
-	$(BIN)/python -m pytest -n auto --dist loadfile
+	$(BIN)/python -m pytest -n auto --dist loadgroup --no-loadscope-reorder
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
