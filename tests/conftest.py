@@ -130,6 +130,5 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         group = REPRODUCE_GROUP if mod in readers else mod
         for item in its:
             item.add_marker(pytest.mark.xdist_group(group))
-    # by name within one count: every worker must collect the same order
-    rest = sorted(set(by_module) - readers, key=lambda m: (-len(by_module[m]), m))
+    rest = sorted(set(by_module) - readers, key=lambda m: -len(by_module[m]))
     items[:] = [i for mod in (*sorted(readers), *rest) for i in by_module[mod]]
