@@ -20,11 +20,10 @@ run: $(STAMP)
 	$(BIN)/aiofl reproduce --out $(OUT)
 
 # the tests run on every core (pytest-xdist; a test file stays on one worker, so its
-# fixtures are built once; the files reading the session's `aiofl reproduce` form one
-# group that starts first: tests/conftest.py); they share one kernel cache
+# fixtures are built once); they share one kernel cache (tests/conftest.py)
 test: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
-	$(BIN)/python -m pytest -n auto --dist loadgroup --no-loadscope-reorder
+	$(BIN)/python -m pytest -n auto --dist loadfile
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks

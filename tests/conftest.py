@@ -103,32 +103,3 @@ def reproduced(tmp_path_factory: pytest.TempPathFactory) -> ReproduceRun:
             _run_reproduce(shared)
     run = json.loads((shared / "run.json").read_text())
     return ReproduceRun(shared / "results", pickled=shared / "reproduction.pickle", **run)
-
-
-REPRODUCE_GROUP = "reproduce"
-"""The pytest-xdist group of every test module that reads the session's ``aiofl reproduce``."""
-
-
-@pytest.hookimpl(tryfirst=True)
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """One pytest-xdist group per test module (``--dist loadgroup``: a module stays on one
-    worker, so its fixtures are built once), except that the modules reading the session's
-    ``aiofl reproduce`` (:func:`reproduced`) form one group, which runs first.
-
-    The reproduction is the longest piece of work of a session (about a minute warm, two
-    cold): started first on one worker, it overlaps everything the other worker does; when
-    its readers sat in different modules on both workers, one worker waited for the other's
-    run (12–43 s idle), and started late it ended the session alone.  The other modules
-    follow with most tests first (xdist's own order for ``loadfile``)."""
-    by_module: dict[str, list[pytest.Item]] = {}
-    for item in items:
-        by_module.setdefault(item.nodeid.split("::", 1)[0], []).append(item)
-    readers = {
-        mod for mod, its in by_module.items() if any("reproduced" in i.fixturenames for i in its)
-    }
-    for mod, its in by_module.items():
-        group = REPRODUCE_GROUP if mod in readers else mod
-        for item in its:
-            item.add_marker(pytest.mark.xdist_group(group))
-    rest = sorted(set(by_module) - readers, key=lambda m: -len(by_module[m]))
-    items[:] = [i for mod in (*sorted(readers), *rest) for i in by_module[mod]]
