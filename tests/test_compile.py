@@ -356,5 +356,42 @@ def test_prepare_specs_and_a_disabled_cache(monkeypatch):
         with pytest.raises(ValueError, match="allowed"):
             prepare.parse_spec(bad)
     assert prepare.main(["slfjm", "c9"]) == 2
+    assert prepare.main(["slfjm", "dc", "c9"]) == 2  # refused before anything compiles
     monkeypatch.setenv("AIOFL_NO_CACHE", "1")
     assert prepare.prepare_in_background("slfjm", [(32, False)]) is None
+    assert prepare.prepare_in_background("slfjm", [], controller=True) is None
+
+
+def test_the_prepared_discrete_controller_is_the_one_a_command_loads(tmp_path, monkeypatch):
+    """``python -m aiofl.engine.prepare slfjm dc`` fills the cache with the discrete
+    controller's entries; a later process building a DiscreteController (another design,
+    the same plant-free update) loads every entry it calls and compiles none."""
+    monkeypatch.delenv("AIOFL_NO_CACHE", raising=False)
+    env = {**os.environ, "AIOFL_CACHE_DIR": str(tmp_path)}
+    cmd = [sys.executable, "-m", "aiofl.engine.prepare", "slfjm", "dc"]
+    subprocess.run(cmd, env=env, check=True, capture_output=True)
+    names = sorted(p.name.split("_standalone")[0] for p in (tmp_path / "kernels").glob("*.nbi"))
+    assert names == [
+        "member._tpl_setup",
+        "sampled._tpl_ctrl_init",
+        "sampled._tpl_ctrl_run",
+        "sampled._tpl_ctrl_step",
+        "sampled._tpl_ctrl_step_each",
+    ]
+    probe = (
+        "import numpy as np\n"
+        "from aiofl.config import load_config\n"
+        "from aiofl.engine.discrete import Sampling\n"
+        "from aiofl.engine.sampled import DiscreteController\n"
+        "dc = DiscreteController(load_config('retuned-s1-leso').controller, Sampling(1e-3))\n"
+        "dc.init(0.1); dc.step([0.2, 0.0], 0.1); dc.run(3, 0.2, 0.1)\n"
+        "dc.step_each(np.repeat(dc.state[None, :], 2, axis=0), 0.2, np.array([0.1, 0.2]))\n"
+        "fns = [dc._fn.setup, dc._fn.init, dc._fn.step, dc._fn.run, dc._fn.step_each]\n"
+        "print(sum(len(f.stats.cache_misses) for f in fns), "
+        "sum(len(f.stats.cache_hits) for f in fns))\n"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", probe], env=env, check=True, capture_output=True, text=True
+    )
+    misses, hits = (int(v) for v in out.stdout.split())
+    assert (misses, hits) == (0, 5)

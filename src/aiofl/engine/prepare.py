@@ -17,7 +17,9 @@ disabled nothing is started.
 
 ``python -m aiofl.engine.prepare PLANT SPEC...`` is that process: ``PLANT`` a registered
 plant's name or a plant file, each ``SPEC`` an instance as ``c1``, ``c32``, ``s1``, ``s32``
-(continuous or sampled, lane width).
+(continuous or sampled, lane width), or ``dc``: the discrete controller's update compiled
+without a plant (:class:`aiofl.engine.sampled.DiscreteController`, which the sampled loop's
+linearisation and the exports step).
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ __all__ = ["parse_spec", "prepare", "prepare_in_background", "probe"]
 def parse_spec(text: str) -> tuple[int, bool]:
     """``"c32"`` -> (32, False), ``"s1"`` -> (1, True); raises ValueError otherwise."""
     if len(text) < 2 or text[0] not in "cs" or not text[1:].isdigit():
-        raise ValueError(f"instance spec {text!r}; allowed: c1, c32, s1, s32")
+        raise ValueError(f"instance spec {text!r}; allowed: c1, c32, s1, s32 (or {CONTROLLER})")
     width = int(text[1:])
     if width not in (1, 32):
         raise ValueError(f"instance spec {text!r}: lane width {width}; allowed: 1, 32")
@@ -86,8 +88,33 @@ def probe(plant: Plant) -> tuple[NDArray[np.int64], Batch, Outputs]:
     return np.zeros((1, 1), dtype=np.int64), batch, out
 
 
-def prepare(plant: Plant, specs: Sequence[tuple[int, bool]]) -> None:
-    """Compile (or load) the instances ``specs`` (lane width, sampled) of ``plant``."""
+CONTROLLER = "dc"
+"""The spec of the discrete controller's update compiled without a plant."""
+
+
+def prepare_controller() -> None:
+    """Compile (or load) :class:`~aiofl.engine.sampled.DiscreteController`'s entries (setup,
+    start, step, n steps, one step from each of several states) by stepping a plain LADRC
+    once through each: the argument types are those of every controller without a plant
+    model."""
+    from aiofl.controller import Controller
+    from aiofl.engine.discrete import Sampling
+    from aiofl.engine.sampled import DiscreteController
+
+    values = {"eso.omega0": 10.0, "sef.omega_c": 2.0, "td.omega": 5.0, "law.b0": 1.0}
+    ladrc = Controller.from_structure("LADRC", rho=1, values=values)
+    dc = DiscreteController(ladrc, Sampling(1e-3))
+    dc.init(0.0)
+    dc.step(0.0, 0.0)
+    dc.run(1, 0.0, 0.0)
+    dc.step_each(dc.state[None, :], 0.0, np.zeros(1))
+
+
+def prepare(plant: Plant, specs: Sequence[tuple[int, bool]], *, controller: bool = False) -> None:
+    """Compile (or load) the discrete controller's update (``controller``, first) and the
+    instances ``specs`` (lane width, sampled) of ``plant``."""
+    if controller:
+        prepare_controller()
     groups, batch, out = probe(plant)
     for width, sampled_data in specs:
         inst = instance_for(plant, width, sampled_data=sampled_data)
@@ -95,14 +122,15 @@ def prepare(plant: Plant, specs: Sequence[tuple[int, bool]]) -> None:
 
 
 def prepare_in_background(
-    plant: str, specs: Sequence[tuple[int, bool]]
+    plant: str, specs: Sequence[tuple[int, bool]], *, controller: bool = False
 ) -> subprocess.Popen[bytes] | None:
     """Start a process compiling the instances ``specs`` of the plant named ``plant`` (a
-    registered name or a plant file) into the disk cache, in that order; None when the
-    cache is off or nothing is asked.  The process is stopped when this one exits."""
-    if not cache_enabled() or not specs:
+    registered name or a plant file) into the disk cache, in that order, after the discrete
+    controller's update when ``controller``; None when the cache is off or nothing is
+    asked.  The process is stopped when this one exits."""
+    if not cache_enabled() or not (specs or controller):
         return None
-    args = [f"{'s' if s else 'c'}{w}" for w, s in specs]
+    args = [CONTROLLER] * controller + [f"{'s' if s else 'c'}{w}" for w, s in specs]
     try:
         proc = subprocess.Popen(
             [sys.executable, "-m", "aiofl.engine.prepare", plant, *args],
@@ -133,12 +161,13 @@ def main(argv: Sequence[str]) -> int:
     from aiofl.plants.registry import get_plant
 
     try:
-        specs = [parse_spec(a) for a in argv[1:]]
+        specs = [parse_spec(a) for a in argv[1:] if a != CONTROLLER]
     except ValueError as exc:
         print(f"aiofl.engine.prepare: {exc}", file=sys.stderr)
         return 2
     name = argv[0]
-    prepare(plant_from_file(name) if name.endswith(".toml") else get_plant(name), specs)
+    plant = plant_from_file(name) if name.endswith(".toml") else get_plant(name)
+    prepare(plant, specs, controller=CONTROLLER in argv[1:])
     return 0
 
 

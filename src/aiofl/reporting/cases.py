@@ -522,15 +522,19 @@ def _engine_settings(cases: Sequence[Case], n_batches: int) -> dict[str, str]:
 
 def _prepare_later_instances(cases: list[Case], *, sampled: bool) -> None:
     """Compile, in a second process, the instances of the cases' plants this run needs
-    after its first simulation (:mod:`aiofl.engine.prepare`): the width-1 sampled one for
-    the sampling limits and the width-32 one for the robustness draws (sampled when every
-    design is); the first simulation compiles the width-1 one meanwhile."""
+    after its first simulation (:mod:`aiofl.engine.prepare`), in the order it needs them:
+    the discrete controller's update (the sampled loop's linearisation), the sampled ones
+    of width 1 and 32 for the sampling limits (a ladder of sample times per design: the
+    kinds with many members run in lanes) and the sensor rows, then the width-32 one for
+    the robustness draws (sampled when every design is); the first simulation compiles the
+    width-1 one meanwhile."""
     from aiofl.engine.prepare import prepare_in_background
     from aiofl.plants.registry import available_plants
 
     names = {c.config.plant.name for c in cases} & set(available_plants())
-    for name in sorted(names):
-        prepare_in_background(name, [(1, True), (32, sampled)])
+    specs = list(dict.fromkeys([(1, True), (32, True), (32, sampled)]))
+    for i, name in enumerate(sorted(names)):  # the plant-free controller update once
+        prepare_in_background(name, specs, controller=i == 0)
 
 
 def compute(
