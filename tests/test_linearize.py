@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+from typing import Any
 
 import numpy as np
 import pytest
@@ -469,22 +470,19 @@ def test_tank_tracking_model_matches_the_nonlinear_simulation() -> None:
 # ---------------------------------------------------- plant derivatives fallback
 
 
-def test_plant_without_complex_support_falls_back_to_finite_differences() -> None:
-    """A plant written with numpy.abs (the modulus on complex numbers, so the complex step
-    would lose the derivative) is caught by the check against finite differences: its
-    Jacobian comes from scipy.differentiate (noted), and agrees with the same plant written
-    with abs (re-bound, exact) to ~1e-8.  A plant calling math.erf (no complex version)
-    falls back the same way."""
+def tank_f_abs(x: np.ndarray, p: np.ndarray) -> tuple[float]:
+    """A one-tank plant's f, −a√|H|, with the built-in abs (re-bound: exact complex step)."""
+    return (-p[0] * math.sqrt(abs(x[0])),)
+
+
+def tank_f_numpy_abs(x: np.ndarray, p: np.ndarray) -> tuple[float]:
+    """The same f with numpy.abs: the modulus of a complex step, whose derivative is lost."""
+    return (-p[0] * np.sqrt(np.abs(x[0])),)
+
+
+def tank_plant(name: str, f: Any) -> Any:
+    """The one-tank plant ``f`` with g = k, y = H (parameters a = 0.2, k = 0.04)."""
     from aiofl.plants.base import Plant
-
-    def f_builtin(x: np.ndarray, p: np.ndarray) -> tuple[float]:
-        return (-p[0] * math.sqrt(abs(x[0])),)
-
-    def f_numpy(x: np.ndarray, p: np.ndarray) -> tuple[float]:
-        return (-p[0] * np.sqrt(np.abs(x[0])),)
-
-    def f_erf(x: np.ndarray, p: np.ndarray) -> tuple[float]:  # erf has no complex version
-        return (-p[0] * math.sqrt(abs(x[0])) + 1e-3 * (math.erf(x[0] - 1.0)),)
 
     def g(x: np.ndarray, p: np.ndarray) -> tuple[float]:
         return (p[1],)
@@ -492,10 +490,23 @@ def test_plant_without_complex_support_falls_back_to_finite_differences() -> Non
     def h(x: np.ndarray, p: np.ndarray) -> float:
         return x[0]
 
+    return Plant(name, 1, f, g, h, {"a": 0.2, "k": 0.04}, relative_degree=1)
+
+
+def test_plant_without_complex_support_falls_back_to_finite_differences() -> None:
+    """A plant written with numpy.abs (the modulus on complex numbers, so the complex step
+    would lose the derivative) is caught by the check against finite differences: its
+    Jacobian comes from scipy.differentiate (noted), and agrees with the same plant written
+    with abs (re-bound, exact) to ~1e-8.  A plant calling math.erf (no complex version)
+    falls back the same way."""
+
+    def f_erf(x: np.ndarray, p: np.ndarray) -> tuple[float]:  # erf has no complex version
+        return (-p[0] * math.sqrt(abs(x[0])) + 1e-3 * (math.erf(x[0] - 1.0)),)
+
     cfg = load_config("tank-ladrc")
     results = {}
-    for name, f in (("builtin", f_builtin), ("numpy", f_numpy), ("erf", f_erf)):
-        plant = Plant(name, 1, f, g, h, {"a": 0.2, "k": 0.04}, relative_degree=1)
+    for name, f in (("builtin", tank_f_abs), ("numpy", tank_f_numpy_abs), ("erf", f_erf)):
+        plant = tank_plant(name, f)
         results[name] = linearize_closed_loop(
             plant=plant, controller=cfg.controller, scenario=cfg.scenario
         )

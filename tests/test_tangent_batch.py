@@ -193,25 +193,12 @@ def test_the_orbit_jacobian_checks_the_plants_complex_step_first() -> None:
     lost) is caught at the orbit loop's first Jacobian: its plant Jacobian comes from finite
     differences (noted), and the loop's Jacobian equals that of the same plant written with
     abs (exact) to ~1e-8; unchecked, ∂(−a√|H|)/∂H came out 0."""
-    from aiofl.plants.base import Plant
-
-    def f_builtin(x: np.ndarray, p: np.ndarray) -> tuple[float]:
-        return (-p[0] * math.sqrt(abs(x[0])),)
-
-    def f_numpy(x: np.ndarray, p: np.ndarray) -> tuple[float]:
-        return (-p[0] * np.sqrt(np.abs(x[0])),)
-
-    def g(x: np.ndarray, p: np.ndarray) -> tuple[float]:
-        return (p[1],)
-
-    def h(x: np.ndarray, p: np.ndarray) -> float:
-        return x[0]
+    from test_linearize import tank_f_abs, tank_f_numpy_abs, tank_plant
 
     cfg = load_config("tank-ladrc")
     jac = {}
-    for name, f in (("builtin", f_builtin), ("numpy", f_numpy)):
-        plant = Plant(name, 1, f, g, h, {"a": 0.2, "k": 0.04}, relative_degree=1)
-        loop = OrbitLoop(plant, cfg.controller, cfg.scenario, dt=float(cfg.dt))
+    for name, f in (("builtin", tank_f_abs), ("numpy", tank_f_numpy_abs)):
+        loop = OrbitLoop(tank_plant(name, f), cfg.controller, cfg.scenario, dt=float(cfg.dt))
         z = loop.initial_guess()
         z[0] = 1.0
         jac[name] = loop.jacobian_at(z)
