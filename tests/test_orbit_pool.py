@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
+
 import numpy as np
 import pytest
 
@@ -39,3 +43,23 @@ def test_orbit_verdicts_in_two_workers_equal_the_sequential_loop():
     for p in PRESETS:
         assert pooled[p]["floquet"] is not None, pooled[p]
         _same(alone[p], pooled[p], p)
+
+
+def test_one_blas_thread_limits_numpy_and_scipy_in_a_fresh_process() -> None:
+    """In a process that has imported neither numpy nor scipy (the aiofl command, an orbit
+    worker), ``one_blas_thread`` still limits both BLAS libraries, numpy's and scipy's, to
+    one thread (threadpoolctl limits only what is loaded: called first, it left scipy's at
+    its default)."""
+    code = (
+        "import json, sys\n"
+        "from aiofl.blas_threads import one_blas_thread\n"
+        "assert 'scipy' not in sys.modules\n"
+        "one_blas_thread()\n"
+        "import scipy.linalg\n"
+        "from threadpoolctl import threadpool_info\n"
+        "print(json.dumps([i['num_threads'] for i in threadpool_info() "
+        "if i['user_api'] == 'blas']))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    threads = json.loads(out.stdout.strip().splitlines()[-1])
+    assert len(threads) >= 2 and set(threads) == {1}

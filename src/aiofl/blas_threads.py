@@ -25,7 +25,13 @@ __all__ = ["one_blas_thread"]
 def one_blas_thread() -> Any:
     """Limit BLAS to one thread in this process: the returned
     :class:`threadpoolctl.threadpool_limits` is also a context manager that restores the
-    previous limits on exit (called bare, the limit stays for the process)."""
+    previous limits on exit (called bare, the limit stays for the process).
+
+    threadpoolctl limits the libraries loaded when it is called, so numpy's and scipy's
+    BLAS (each wheel ships its own OpenBLAS) are loaded first: a limit set before
+    ``scipy.linalg`` was imported left scipy's at two threads."""
+    import numpy.linalg  # noqa: F401 - loads numpy's BLAS
+    import scipy.linalg  # noqa: F401 - loads scipy's BLAS
     from threadpoolctl import threadpool_limits
 
     return threadpool_limits(limits=1, user_api="blas")
