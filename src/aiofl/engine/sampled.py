@@ -222,7 +222,6 @@ def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri, pn):  # pragma: no cover - co
     return u
 
 
-# ---------------------------------------------------- in the time loop, lane by lane
 def _tpl_ctrl_run(iq, q, dsc, cs, scr, y, rr, ri, pn, n):  # pragma: no cover - compiled
     """``n`` samples of :func:`_tpl_ctrl_step` with the same measurement ``y`` and
     reference ``rr[ri]`` (a controller settling at an operating point); returns the last
@@ -241,6 +240,7 @@ def _tpl_ctrl_step_each(iq, q, dsc, states, scr, ys, rr, ri, pn, us):  # pragma:
         us[k] = _CTRL_STEP(iq, q, dsc, states[k], scr, ys[k], rr, ri, pn)
 
 
+# ---------------------------------------------------- in the time loop, lane by lane
 def _tpl_setup(lanes, batch, q, qt, iq, ctrl):  # pragma: no cover - compiled
     """Per-member constants of the group's lanes, one row per lane (``q[l]``, read by the
     scalar controller update), their discrete rows (``ctrl[0, l]``) and the group's ``iq``
@@ -409,9 +409,10 @@ _STANDALONE: dict[int, tuple[Any, SimpleNamespace]] = {}
 
 def standalone_recipe(plant: Any = None) -> compile_.Recipe:
     """The recipe of the controller update compiled without the plant's dynamics (for
-    :class:`DiscreteController`): the per-member setup, the start and the step, each
-    cached on disk; given ``plant``, with its nominal normal form ``alpha_beta_of_xi`` for
-    the model-assisted observer."""
+    :class:`DiscreteController`): the per-member setup, the start, the step, n steps at one
+    measurement and one step from each of several states, each cached on disk; given
+    ``plant``, with its nominal normal form ``alpha_beta_of_xi`` for the model-assisted
+    observer."""
     from aiofl.plants.base import _no_alpha_beta
 
     ns = dict(vars(member))
@@ -552,8 +553,8 @@ class DiscreteController:
     def run(self, n: int, r: float | Sequence[float] | NDArray[np.float64], y: float) -> float:
         """``n`` samples (n ≥ 1) with the same reference ``r`` and measurement ``y`` in one
         compiled call (:meth:`step` n times); returns the last u."""
-        if not 1 <= n <= 10**9:
-            raise ValueError(f"n = {n}; allowed: 1 <= n <= 1e9")
+        if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= 10**9:
+            raise ValueError(f"n = {n!r}; allowed: an integer, 1 <= n <= 1e9")
         self._reference(r)
         return float(
             self._fn.run(
