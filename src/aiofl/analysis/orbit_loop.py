@@ -259,7 +259,7 @@ class OrbitLoop(ClosedLoop):
         return self.controller.value("sef.v_limit")
 
     def _limit(self, s: Any, *, by_component: bool = False) -> Any:
-        """The INLSEF's limit :math:`v_l\tanh(s/v_l)` (20).  On a batch, s/v_l divided as
+        r"""The INLSEF's limit :math:`v_l\tanh(s/v_l)` (20).  On a batch, s/v_l divided as
         one column's s would be, to the last bit: ``by_component`` where that is a Python
         complex (the sum of :func:`_cs`'s terms; Python divides each part by v_l), by numpy
         otherwise (a numpy scalar, e.g. the describing gains' sum)."""
