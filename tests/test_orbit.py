@@ -243,3 +243,35 @@ def test_finite_time_lyapunov_of_a_linear_system_is_its_eigenvalues() -> None:
         lambda t, z: a @ z, lambda t, z: a, np.array([1.0, 1.0]), 0.0, 20.0, renorm=1.0
     )
     assert exps == pytest.approx([-1.0, -3.0], abs=0.05)
+
+
+def test_an_orbit_that_does_not_settle_across_1_is_not_determined() -> None:
+    """The tracking orbit's word comes from the multipliers only when they decide: an orbit
+    that did not close and whose largest multiplier went from below 1 to above it over the
+    periods analysed (retuned-s1-inleso's quick analysis: 0.9–3.8, closing to 7.5 %) is
+    "not determined", in the sentence, the short label, the metrics' ``tracking_orbit`` and
+    the reconciliation with the run (which then still starts with the equilibrium); one
+    that closes, or stays on one side of 1, keeps its word."""
+    from aiofl.analysis.orbit import NOT_DETERMINED, floquet_word, reconciled_text
+    from aiofl.reporting.behaviour import Behaviour, orbit_numbers, orbit_stable, reconcile
+
+    def floquet(largest: float, rng: tuple[float, float], closing: float) -> dict:
+        return {"largest": largest, "range": list(rng), "closing": closing, "passes": 2}
+
+    unsettled = floquet(0.9, (0.9, 3.8), 0.075)
+    assert floquet_word(unsettled) == NOT_DETERMINED
+    assert floquet_word(floquet(0.9, (0.9, 3.8), 1e-4)) == "stable"  # it closed
+    assert floquet_word(floquet(0.48, (0.46, 0.48), 0.044)) == "stable"  # below 1 throughout
+    assert floquet_word(floquet(30.0, (30.0, 48.0), 0.21)) == "unstable"  # above throughout
+    assert floquet_word(floquet(0.73, (0.73, 1.0), 1.7)) == NOT_DETERMINED  # reaches 1
+    info = {"equilibrium": "unstable", "max_real": 16.3, "floquet": unsettled}
+    text, short = reconciled_text(info, "rad")
+    assert "tracking orbit not determined" in text and "0.9–3.8" in text
+    assert "orbit stable" not in text and "orbit unstable" not in text
+    assert short.startswith("tracking not determined (μ 0.9–3.8)")
+    verdict = {"verdict": "unstable", "orbit": {**info, "verdict": text, "short": short}}
+    assert orbit_numbers(verdict)["tracking_orbit"] == NOT_DETERMINED
+    assert orbit_stable(verdict) is None
+    run = Behaviour("tracks", 5.0, None, 0.004, 0.004, 6e-5, 0.79, 1.06)
+    sentence = reconcile(verdict, run, "rad")
+    assert sentence.startswith("Equilibrium unstable") and "decides neither way" in sentence

@@ -23,7 +23,10 @@ answers the three questions separately and writes one sentence from them
    :func:`aiofl.analysis.variational.periodic_orbit`), started at the sine's crest from the
    equilibrium there; for a step or samples, the largest finite-time Lyapunov exponent
    over the horizon from the initial state.  Measurement noise is 0; the disturbance is
-   at its final value for the periodic orbit, a step at its time for the exponent.
+   at its final value for the periodic orbit, a step at its time for the exponent.  An
+   orbit that does not close and whose largest multiplier crosses 1 over the periods
+   analysed is "not determined" (:func:`floquet_word`): it has not reached a periodic
+   steady state, and its multipliers decide nothing.
 """
 
 from __future__ import annotations
@@ -48,8 +51,10 @@ from aiofl.analysis.variational import (
 )
 
 __all__ = [
+    "NOT_DETERMINED",
     "START",
     "equilibrium_limit_cycle",
+    "floquet_word",
     "format_orbit_text",
     "limit_cycle_describing",
     "orbit_analysis",
@@ -261,6 +266,24 @@ def _g(x: float, d: int = 2) -> str:
     return f"{x:.{d}g}"
 
 
+NOT_DETERMINED = "not determined"
+"""The tracking orbit's verdict when the analysis decides nothing (:func:`floquet_word`)."""
+
+
+def floquet_word(floquet: dict[str, Any]) -> str:
+    """The tracking orbit's verdict from a :func:`tracking_floquet` record: ``"stable"``
+    (largest multiplier < 1), ``"unstable"``, or :data:`NOT_DETERMINED` when the orbit did
+    not close (by more than :data:`CLOSES`) and the largest multiplier moved from below 1
+    to 1 or above over the periods analysed: the multipliers of an orbit that has not
+    settled describe no periodic orbit, and the last period's (retuned-s1-inleso: 0.9, with
+    0.9–3.8 over two periods) moved with the last bit of the Jacobian."""
+    mu = float(floquet["largest"])
+    lo, hi = floquet.get("range") or (mu, mu)
+    if floquet.get("closing", 0.0) > CLOSES and lo < 1.0 <= hi:
+        return NOT_DETERMINED
+    return "stable" if mu < 1 else "unstable"
+
+
 def reconciled_text(info: dict[str, Any], unit: str = "") -> tuple[str, str]:
     """``(sentence, short)`` from an :func:`orbit_analysis` record: the equilibrium, the limit
     cycle it settles on, and the tracking orbit, e.g. "equilibrium unstable (max Re λ =
@@ -305,7 +328,7 @@ def reconciled_text(info: dict[str, Any], unit: str = "") -> tuple[str, str]:
     fl, ft = info.get("floquet"), info.get("ftle")
     if fl is not None:
         mu = fl["largest"]
-        word = "stable" if mu < 1 else "unstable"
+        word = floquet_word(fl)
         lo, hi = fl.get("range") or (mu, mu)
         caveat = ""
         if fl.get("closing", 0.0) > CLOSES:
@@ -314,8 +337,16 @@ def reconciled_text(info: dict[str, Any], unit: str = "") -> tuple[str, str]:
                 f"multiplier ranges {_g(lo)}–{_g(hi)} over {fl['passes']} periods"
             )
         mu_text = _g(mu, 2) if mu >= 1e-12 else "< 1e-12"
-        parts.append(f"tracking orbit {word} (largest Floquet multiplier {mu_text}{caveat})")
-        short.insert(0, f"tracking {word} (μ {'' if mu < 1e-12 else '= '}{mu_text})")
+        if word == NOT_DETERMINED:
+            parts.append(
+                f"tracking orbit {word}: its largest Floquet multiplier ranges {_g(lo)}–"
+                f"{_g(hi)} over {fl['passes']} periods, on both sides of 1, and the orbit "
+                f"closes only to {_g(100 * fl['closing'])} % (last period: {mu_text})"
+            )
+            short.insert(0, f"tracking {word} (μ {_g(lo)}–{_g(hi)})")
+        else:
+            parts.append(f"tracking orbit {word} (largest Floquet multiplier {mu_text}{caveat})")
+            short.insert(0, f"tracking {word} (μ {'' if mu < 1e-12 else '= '}{mu_text})")
     elif ft is not None:
         lam = ft["largest"]
         word = "perturbations decay" if lam < 0 else "perturbations grow"

@@ -225,14 +225,20 @@ def analysis_numbers(verdict: Mapping[str, Any]) -> dict[str, Any]:
 
 def orbit_numbers(verdict: Mapping[str, Any]) -> dict[str, Any]:
     """The reconciled verdict's numbers for ``metrics.json`` (null where not analysed):
-    ``reconciled`` (the sentence), ``largest_multiplier`` (Floquet, sine references),
+    ``reconciled`` (the sentence), ``tracking_orbit`` (``"stable"``, ``"unstable"`` or
+    ``"not determined"``: :func:`aiofl.analysis.orbit.floquet_word`; sine references),
+    ``largest_multiplier`` (Floquet, sine references),
     ``ftle`` (largest finite-time Lyapunov exponent, other references), the limit cycle's
     ``limit_cycle_amplitude_y``, ``limit_cycle_amplitude_u``, ``limit_cycle_frequency``."""
     orb = verdict.get("orbit") or {}
     lc = orb.get("limit_cycle") or {}
     bounded = bool(lc.get("bounded"))
+    fl = orb.get("floquet")
+    from aiofl.analysis.orbit import floquet_word
+
     return {
         "reconciled": orb.get("verdict"),
+        "tracking_orbit": floquet_word(fl) if fl else None,
         "largest_multiplier": _finite((orb.get("floquet") or {}).get("largest")),
         "ftle": _finite((orb.get("ftle") or {}).get("largest")),
         "limit_cycle_amplitude_y": _finite(lc.get("amplitude_y")) if bounded else None,
@@ -241,12 +247,21 @@ def orbit_numbers(verdict: Mapping[str, Any]) -> dict[str, Any]:
     }
 
 
+def _not_determined() -> str:
+    from aiofl.analysis.orbit import NOT_DETERMINED
+
+    return NOT_DETERMINED
+
+
 def orbit_stable(verdict: Mapping[str, Any]) -> bool | None:
     """Whether the tracking orbit is stable (largest Floquet multiplier < 1, or largest
-    finite-time Lyapunov exponent < 0); None where it was not analysed."""
+    finite-time Lyapunov exponent < 0); None where it was not analysed or the analysis
+    decided nothing (:data:`aiofl.analysis.orbit.NOT_DETERMINED`)."""
     nums = orbit_numbers(verdict)
     if (verdict.get("orbit") or {}).get("orbit_diverges"):
         return False
+    if nums["tracking_orbit"] == _not_determined():
+        return None
     if nums["largest_multiplier"] is not None:
         return bool(nums["largest_multiplier"] < 1.0)
     if nums["ftle"] is not None:
@@ -335,6 +350,13 @@ def reconcile(verdict: Mapping[str, Any], behaviour: Behaviour, unit: str = "") 
     second = simulation_text(behaviour, unit)
     k = behaviour.kind
     stable_orbit = orbit_stable(verdict)
+    if orbit_numbers(verdict)["tracking_orbit"] == _not_determined():
+        first = str(verdict["orbit"]["verdict"])
+        why = (
+            "the orbit analysis decides neither way: the orbit did not settle over the "
+            "periods analysed"
+        )
+        return f"{first[:1].upper()}{first[1:]}; {second} — {why}."
     if stable_orbit is not None:  # the reconciled verdict (aiofl.analysis.orbit)
         first = str(verdict["orbit"]["verdict"])
         if stable_orbit and k == "tracks":

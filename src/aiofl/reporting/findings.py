@@ -118,7 +118,7 @@ def _verdict_vs_simulation(rep: Reproduction, recs: dict[str, dict[str, Any]]) -
             lin["verdict"] == "unstable"
             and beh in ("tracks", "bounded")
             and mu is not None
-            and mu < 1
+            and lin.get("tracking_orbit") == "stable"
         ):
             amp = lin.get("limit_cycle_amplitude_y")
             cyc = (
