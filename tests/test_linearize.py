@@ -480,6 +480,11 @@ def tank_f_numpy_abs(x: np.ndarray, p: np.ndarray) -> tuple[float]:
     return (-p[0] * np.sqrt(np.abs(x[0])),)
 
 
+def tank_f_erf(x: np.ndarray, p: np.ndarray) -> tuple[float]:
+    """The same f plus 1e-3·erf(H − 1): math.erf has no complex version (finite differences)."""
+    return (-p[0] * math.sqrt(abs(x[0])) + 1e-3 * (math.erf(x[0] - 1.0)),)
+
+
 def tank_plant(name: str, f: Any) -> Any:
     """The one-tank plant ``f`` with g = k, y = H (parameters a = 0.2, k = 0.04)."""
     from aiofl.plants.base import Plant
@@ -499,13 +504,9 @@ def test_plant_without_complex_support_falls_back_to_finite_differences() -> Non
     Jacobian comes from scipy.differentiate (noted), and agrees with the same plant written
     with abs (re-bound, exact) to ~1e-8.  A plant calling math.erf (no complex version)
     falls back the same way."""
-
-    def f_erf(x: np.ndarray, p: np.ndarray) -> tuple[float]:  # erf has no complex version
-        return (-p[0] * math.sqrt(abs(x[0])) + 1e-3 * (math.erf(x[0] - 1.0)),)
-
     cfg = load_config("tank-ladrc")
     results = {}
-    for name, f in (("builtin", tank_f_abs), ("numpy", tank_f_numpy_abs), ("erf", f_erf)):
+    for name, f in (("builtin", tank_f_abs), ("numpy", tank_f_numpy_abs), ("erf", tank_f_erf)):
         plant = tank_plant(name, f)
         results[name] = linearize_closed_loop(
             plant=plant, controller=cfg.controller, scenario=cfg.scenario

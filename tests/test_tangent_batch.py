@@ -125,26 +125,12 @@ def test_a_batch_at_different_real_points_is_each_columns_value() -> None:
         assert (y[k], u[k]) == (yk, uk)
 
 
-def _erf_plant():
-    """A tank whose f calls math.erf (no complex version: the complex step raises numpy's
-    ComplexWarning and the function is differentiated by finite differences)."""
-    from aiofl.plants.base import Plant
-
-    def f(x: np.ndarray, p: np.ndarray) -> tuple[float]:
-        return (-p[0] * math.sqrt(abs(x[0])) + 1e-3 * math.erf(x[0] - 1.0),)
-
-    def g(x: np.ndarray, p: np.ndarray) -> tuple[float]:
-        return (p[1],)
-
-    def h(x: np.ndarray, p: np.ndarray) -> float:
-        return x[0]
-
-    return Plant("erf-tank", 1, f, g, h, {"a": 0.2, "k": 0.04}, relative_degree=1)
-
-
 def test_batch_jacobian_with_the_finite_difference_fallback() -> None:
+    from test_linearize import tank_f_erf, tank_plant
+
     cfg = load_config("tank-ladrc")
-    loops = [OrbitLoop(_erf_plant(), cfg.controller, cfg.scenario) for _ in range(2)]
+    plant = tank_plant("erf-tank", tank_f_erf)  # math.erf: no complex version
+    loops = [OrbitLoop(plant, cfg.controller, cfg.scenario) for _ in range(2)]
     z = loops[0].operating_point() + 0.01
     batch = loops[0].jacobian_at(z)  # the first call meets the ComplexWarning
     assert loops[0].derivatives.method["f"] == "finite difference"

@@ -84,13 +84,13 @@ size of its terms, :math:`|F_i(z)| \le 10^{-9} \sum_j |J_{ij}|\,\max(|z_j|, s_j)
 (s: the typical magnitudes of the scaled solve)."""
 
 
-def _is_complex(v: Any) -> bool:
+def is_complex(v: Any) -> bool:
     """Whether v (a number, an array or a sequence of numbers) is complex: numpy's
     ``iscomplexobj`` without converting an array or a number."""
     if isinstance(v, complex | np.ndarray | np.generic):
         return isinstance(v, complex) or v.dtype.kind == "c"
     if isinstance(v, list | tuple):
-        return any(_is_complex(item) for item in v)
+        return any(is_complex(item) for item in v)
     return False
 
 
@@ -353,11 +353,11 @@ class ClosedLoop:
         """
         c, rho, m, n = self.controller, self.rho, self.m, self.n
         cplx = (
-            _is_complex(z)
-            or (rd is not None and _is_complex(rd))
-            or _is_complex(d)
-            or _is_complex(noise)
-            or _is_complex(u_plant)
+            is_complex(z)
+            or (rd is not None and is_complex(rd))
+            or is_complex(d)
+            or is_complex(noise)
+            or is_complex(u_plant)
         )
         if cplx and self.mode == "exact":
             raise ValueError("complex arguments need mode = 'linearise'")
@@ -408,7 +408,7 @@ class ClosedLoop:
                 rff = linear_prefilter_update.py_func(td, d_td, 0, rho, r, self.prefilter, 0)
             prof[:] = td[:rho]
         p_true = self.p_true
-        need_bd = self.plant.bd is not None and (np.any(d != 0.0) if batch else d != 0.0)
+        need_bd = self.plant.bd is not None and bool(np.any(d != 0.0))
         if batch:  # the plant's functions at x in one tangent-batch evaluation
             names = ("h", "f", "g", "bd") if need_bd else ("h", "f", "g")
             hx, *fgb = self.derivatives.evaluate_columns(names, x, p_true)

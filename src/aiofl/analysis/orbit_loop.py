@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from aiofl.analysis.closed_loop import ClosedLoop
+from aiofl.analysis.closed_loop import ClosedLoop, is_complex
 from aiofl.analysis.derivatives import COMPLEX_STEP
 from aiofl.components.differentiators import han_td_rhs
 from aiofl.components.feedback import fal, inlsef_limit, inlsef_term
@@ -61,12 +61,6 @@ SLOPE_FLOOR = 1e-12
 """|e| below which the slope of :math:`|e|^{a}`, a < 1, is taken at this value."""
 
 
-def _complex(e: Any) -> bool:
-    return isinstance(e, complex | np.complexfloating) or (
-        isinstance(e, np.ndarray) and e.dtype.kind == "c"
-    )
-
-
 def _cs(value: Callable[[float], float], slope: Callable[[float], float], e: Any) -> Any:
     r"""φ(e) on a real number, :math:`\varphi(e_r) + i h \varphi'(e_r)` on a complex step;
     on an array of complex steps (a tangent batch) the same per entry, φ and φ' taken once
@@ -80,7 +74,7 @@ def _cs(value: Callable[[float], float], slope: Callable[[float], float], e: Any
         out.real = value(e0)
         out.imag = e.imag * slope(e0)
         return out
-    if _complex(e):
+    if is_complex(e):
         er = float(e.real)
         return complex(value(er), float(e.imag) * slope(er))
     return value(float(e))
@@ -157,26 +151,15 @@ class OrbitLoop(ClosedLoop):
         """The non-smooth scalar functions, in the order their inputs are recorded: the SEF
         terms :math:`k_i\\mathrm{fal}(e_i)` or INLSEF terms (law AIOFL), then g(e) (INLESO)."""
         c, out = self.controller, []
-        if c.law == "aiofl" and c.sef == "nonlinear":
-            for i in range(1, self.m + 1):
-                k, a, d = (c.value(f"sef.{p}{i}") for p in ("k", "alpha", "delta"))
-                out.append(
-                    Nonlinearity(f"k{i}·fal(e{i})", lambda e, k=k, a=a, d=d: k * fal(e, a, d), (d,))
-                )
-        elif c.law == "aiofl" and c.sef == "improved":
-            for i in range(1, self.m + 1):
-                k, kb, mu, a = (c.value(f"sef.{p}{i}") for p in ("k", "kb", "mu", "alpha"))
-                out.append(
-                    Nonlinearity(
-                        f"INLSEF term {i}",
-                        lambda e, k=k, kb=kb, mu=mu, a=a: inlsef_term(e, k, kb, mu, a),
-                    )
-                )
+        if c.law == "aiofl" and c.sef in ("nonlinear", "improved"):
+            for i, (k, value, _, kinks) in enumerate(self._sef_functions, start=1):
+                if c.sef == "nonlinear":
+                    phi = lambda e, k=k, v=value: k * v(e)  # noqa: E731
+                    out.append(Nonlinearity(f"k{i}·fal(e{i})", phi, kinks))
+                else:
+                    out.append(Nonlinearity(f"INLSEF term {i}", value, kinks))
         if c.eso == "improved":
-            ka, kb, ga, gb = (
-                c.value(k) for k in ("eso.k_alpha", "eso.k_beta", "eso.g_alpha", "eso.g_beta")
-            )
-            out.append(Nonlinearity("g(e)", lambda e: inleso_injection(e, ka, kb, ga, gb)))
+            out.append(Nonlinearity("g(e)", self._injection_functions[0]))
         return out
 
     def _sef(self, e: NDArray[Any], rff: Any) -> Any:
@@ -190,55 +173,43 @@ class OrbitLoop(ClosedLoop):
             return s if c.sef == "nonlinear" else self._limit(s)
         total: Any = 0.0
         if c.sef == "nonlinear":
-            for i, (k, value, slope) in enumerate(self._sef_functions):
+            for i, (k, value, slope, _) in enumerate(self._sef_functions):
                 total = total + k * _cs(value, slope, e[i])
             return total
-        for i, (_, value, slope) in enumerate(self._sef_functions):
+        for i, (_, value, slope, _) in enumerate(self._sef_functions):
             total = total + _cs(value, slope, e[i])
         return self._limit(total, by_component=True)
 
     @functools.cached_property
-    def _sef_functions(self) -> list[tuple[float, Scalar, Scalar]]:
-        r"""Per fed-back error: :math:`(k, \varphi, \varphi')` of its term, :math:`k\,
-        \mathrm{fal}` (17) or the INLSEF term (20) (k = 1, unused), built once (the
-        right-hand side runs ~10⁶ times per orbit)."""
-        out: list[tuple[float, Scalar, Scalar]] = []
-        for i in range(self.m):
-            if self.controller.sef == "nonlinear":
-                k, a, d, s = self._sef_constants[i]
+    def _sef_functions(self) -> list[tuple[float, Scalar, Scalar, tuple[float, ...]]]:
+        r"""Per fed-back error: :math:`(k, \varphi, \varphi', \text{kinks})` of its term,
+        :math:`k\,\mathrm{fal}` (17) (kink at δ) or the INLSEF term (20) (k = 1, unused),
+        read from the controller once (the right-hand side runs ~10⁶ times per orbit)."""
+        c = self.controller
+        out: list[tuple[float, Scalar, Scalar, tuple[float, ...]]] = []
+        for i in range(1, self.m + 1):
+            if c.sef == "nonlinear":
+                k, a, d = (c.value(f"sef.{p}{i}") for p in ("k", "alpha", "delta"))
+                inner = d ** (a - 1.0)  # the slope of fal inside δ
                 out.append(
                     (
                         k,
                         lambda x, a=a, d=d: fal(x, a, d),
-                        lambda x, a=a, d=d, s=s: s if abs(x) <= d else _pow_slope(x, a),
+                        lambda x, a=a, d=d, s=inner: s if abs(x) <= d else _pow_slope(x, a),
+                        (d,),
                     )
                 )
             else:
-                k1, k2, mu, a = self._sef_constants[i]
+                k1, k2, mu, a = (c.value(f"sef.{p}{i}") for p in ("k", "kb", "mu", "alpha"))
                 out.append(
                     (
                         1.0,
                         lambda x, k1=k1, k2=k2, mu=mu, a=a: inlsef_term(x, k1, k2, mu, a),
                         lambda x, k1=k1, k2=k2, mu=mu, a=a: _inlsef_slope(x, k1, k2, mu, a),
+                        (),
                     )
                 )
         return out
-
-    @functools.cached_property
-    def _sef_constants(self) -> list[tuple[float, ...]]:
-        """Per fed-back error: (k, α, δ, δ^(α-1)) of fal (17) or (k, k_b, μ, α) of the
-        INLSEF (20), read once."""
-        c = self.controller
-        if c.sef == "nonlinear":
-            out = []
-            for i in range(self.m):
-                k, a, d = (c.value(f"sef.{p}{i + 1}") for p in ("k", "alpha", "delta"))
-                out.append((k, a, d, d ** (a - 1.0)))
-            return out
-        return [
-            tuple(c.value(f"sef.{p}{i + 1}") for p in ("k", "kb", "mu", "alpha"))
-            for i in range(self.m)
-        ]
 
     @functools.cached_property
     def _injection_functions(self) -> tuple[Scalar, Scalar]:
@@ -268,7 +239,7 @@ class OrbitLoop(ClosedLoop):
             q = np.empty_like(s)
             q.real, q.imag = s.real / vl, s.imag / vl
             return vl * np.tanh(q)
-        return vl * np.tanh(s / vl) if _complex(s) else inlsef_limit(float(s), vl)
+        return vl * np.tanh(s / vl) if is_complex(s) else inlsef_limit(float(s), vl)
 
     def _injection(self, e: Any) -> Any:
         c = self.controller
