@@ -39,36 +39,12 @@ from aiofl.engine.simulation import simulate, simulate_batch
 from aiofl.plants import get_plant
 from aiofl.plants.base import Plant
 from aiofl.scenario import Reference, Scenario
-
+from chain_plant import chain3, chain_h
 
 # ------------------------------------------------------------------------ test plants
-def _chain_f(x: Any, p: Any) -> tuple[float, float, float]:
-    return (x[1], x[2], 0.0)
-
-
-def _chain_g(x: Any, p: Any) -> tuple[float, float, float]:
-    return (0.0, 0.0, p[0])
-
-
-def _chain_h(x: Any, p: Any) -> float:
-    return x[0]
-
-
-def _chain_nf(x: Any, p: Any) -> tuple[float, float, float, float, float]:
-    return (x[0], x[1], x[2], 0.0, p[0])
-
-
-CHAIN3 = Plant(
-    name="chain3_api",
-    n_states=3,
-    f=_chain_f,
-    g=_chain_g,
-    h=_chain_h,
-    params={"b": 2.0},
-    relative_degree=3,
-    normal_form=_chain_nf,
-)
-"""y''' = b u: a chain of three integrators, β = b = 2 (ρ = 3)."""
+CHAIN3 = chain3(0.0, 0.0, 2.0)
+"""d³y/dt³ = b u: a chain of three integrators, β = b = 2 (ρ = 3; tests/chain_plant.py with
+a = c = 0, so it shares its kernel with test_engine's chain)."""
 
 
 def _bilinear_f(x: Any, p: Any) -> tuple[float, float]:
@@ -88,16 +64,14 @@ BILINEAR = Plant(
     n_states=2,
     f=_bilinear_f,
     g=_bilinear_g,
-    h=_chain_h,
+    h=chain_h,
     params={},
     relative_degree=2,
     normal_form=_bilinear_nf,
 )
 """y'' = y u: β(x) = x1, zero at the origin (the relative degree is not defined there)."""
 
-NO_NORMAL_FORM = Plant(
-    name="no_nf_api", n_states=3, f=_chain_f, g=_chain_g, h=_chain_h, params={"b": 2.0}
-)
+NO_NORMAL_FORM = chain3(0.0, 0.0, 2.0, name="no_nf_api", normal_form=False)
 
 NEGATIVE_PLANT = """
 name = "cooler_api"

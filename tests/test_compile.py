@@ -304,6 +304,49 @@ def test_a_damaged_plant_module_is_rebuilt(tmp_path, monkeypatch):
     assert plant_cache.plant_from_file(path).f(x, p) == plant.f(x, p)
 
 
+_SYMBOLIC = (
+    "from aiofl.plants.symbolic import SymbolicPlant\n"
+    "plant = SymbolicPlant.from_strings('dbl_sym', ['x1', 'x2'], {'k': K}, "
+    "['x2', '-k*sin(x1)'], ['0', '1'], 'x1').to_plant()\n"
+)
+
+
+def _symbolic_kernel_identity(cache_dir: Path, k: float) -> dict:
+    """In a new process: where the functions of a symbolic plant built in Python live,
+    and the fingerprint of its width-1 kernel (nothing is compiled)."""
+    code = (
+        _SYMBOLIC.replace("K", repr(k))
+        + "import json\nfrom aiofl.engine import compile, instances\n"
+        + "print(json.dumps({'file': plant.f.__code__.co_filename, "
+        + "'fp': compile.fingerprint(instances.recipe(plant, 1))}))\n"
+    )
+    env = {**os.environ, "AIOFL_CACHE_DIR": str(cache_dir)}
+    env.pop("AIOFL_NO_CACHE", None)
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def test_a_symbolic_plant_built_in_python_gets_a_cacheable_kernel(tmp_path, monkeypatch):
+    """``SymbolicPlant.to_plant()`` imports its generated functions from a module in the
+    cache, so the kernel has a fingerprint (was None: generated code executed in memory
+    was compiled in every process), the same in every process for the same model and
+    another for another model; with the cache off, the functions stay in memory."""
+    cache_dir = tmp_path / "cache"
+    first, again = (_symbolic_kernel_identity(cache_dir, 2.0) for _ in range(2))
+    assert first["fp"] is not None and first == again
+    assert Path(first["file"]).parent == cache_dir / "plants"
+    other = _symbolic_kernel_identity(cache_dir, 3.0)
+    assert other["fp"] not in (None, first["fp"]) and other["file"] != first["file"]
+    monkeypatch.setenv("AIOFL_NO_CACHE", "1")
+    space: dict = {}
+    exec(_SYMBOLIC.replace("K", "2.0"), space)
+    plant = space["plant"]
+    assert not os.path.isfile(plant.f.__code__.co_filename)
+    assert compile.fingerprint(instances.recipe(plant, 1)) is None
+
+
 def test_numba_inlining_copies_a_callee_with_one_memo():
     """The compile-time fix of :func:`aiofl.engine.compile.share_scope_when_inlining` is in
     place on the numba version the project pins (a numba whose source changed would leave

@@ -6,7 +6,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import re
-from math import sin
 
 import numba
 import numpy as np
@@ -22,6 +21,7 @@ from aiofl.engine.simulation import closed_loop_rhs, simulate, simulate_batch
 from aiofl.plants import get_plant
 from aiofl.plants.base import Plant, PlantError
 from aiofl.scenario import Reference, Scenario, noise_sequence
+from chain_plant import chain3
 from reachable import reachable_compiled
 
 BETA_SLFJM = 1.61 * 0.00767 * 70.0 / (0.0059 * 0.0021 * 2.6)  # Ks Km Kg / (Jl Jh Rm)
@@ -291,28 +291,9 @@ def test_euler_error_falls_2x_when_dt_halves(slfjm):
 
 
 # ---------------------------------------------------------- the ESO the engine integrates
-def _chain_f(x, p):
-    return (x[1], x[2], -p[0] * sin(x[0]) - p[1] * x[2])
-
-
-def _chain_g(x, p):
-    return (0.0, 0.0, p[2])
-
-
-def _chain_h(x, p):
-    return x[0]
-
-
-CHAIN = Plant(
-    name="chain3",
-    n_states=3,
-    f=_chain_f,
-    g=_chain_g,
-    h=_chain_h,
-    params={"a": 2.0, "c": 0.5, "b": 3.0},
-    relative_degree=3,
-    description="x1''' = -a sin x1 - c x1'' + b u: already a chain of 3 integrators",
-)
+CHAIN = chain3(2.0, 0.5, 3.0)
+"""d³x1/dt³ = -a sin x1 - c x1'' + b u (tests/chain_plant.py): already a chain of 3
+integrators."""
 
 
 @pytest.mark.slow  # compiles a kernel for its own plant (~6 s unless cached on disk)

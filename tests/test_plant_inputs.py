@@ -405,18 +405,21 @@ def _f_dict(x: Any, p: Any) -> tuple[float, float]:
     return (x[1], -_TABLE["k"] * x[0])
 
 
-def _f_raises(x: Any, p: Any) -> tuple[float, float]:
-    if x[0] > 0.3:
+def _f_fails(x: Any, p: Any) -> tuple[float, float]:
+    """Fails at run time as p[0] says: 1, raises once x1 > 0.3; 2, divides by x1 (finite at
+    the check point x = 0.1, inf at x0 = 0).  One function for both failures, so the two
+    tests below share one kernel."""
+    if p[0] == 1.0 and x[0] > 0.3:
         raise ValueError("x1 left the table of this model")
+    if p[0] == 2.0:
+        return (x[1], 1.0 / x[0])
     return (x[1], -x[0])
 
 
-def _f_divides(x: Any, p: Any) -> tuple[float, float]:
-    return (x[1], 1.0 / x[0])  # finite at the check point x = 0.1; inf at x0 = 0
-
-
-def _user_plant(f: Any, name: str) -> Plant:
-    return Plant(name=name, n_states=2, f=f, g=_g, h=_h, params={"k": 1.0}, relative_degree=2)
+def _user_plant(f: Any, name: str, params: dict[str, float] | None = None) -> Plant:
+    return Plant(
+        name=name, n_states=2, f=f, g=_g, h=_h, params=params or {"k": 1.0}, relative_degree=2
+    )
 
 
 def test_a_plant_function_returning_complex_numbers_is_refused_by_check() -> None:
@@ -481,25 +484,19 @@ def test_simulating_a_plant_numba_cannot_compile_is_a_plant_error(
 
 
 @pytest.mark.slow
-def test_a_plant_function_that_raises_at_run_time_names_the_function_and_the_state(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    monkeypatch.setenv("AIOFL_NO_CACHE", "1")
+def test_a_plant_function_that_raises_at_run_time_names_the_function_and_the_state() -> None:
     with pytest.raises(PlantError) as err:
-        _simulate(_user_plant(_f_raises, "raises_rt"))
+        _simulate(_user_plant(_f_fails, "fails_rt", {"mode": 1.0}))
     msg = str(err.value)
-    assert "plant 'raises_rt': plant function f failed at state x = [" in msg
+    assert "plant 'fails_rt': plant function f failed at state x = [" in msg
     assert "ValueError: x1 left the table of this model" in msg
     state = [float(v) for v in re.search(r"x = \[([^\]]*)\]", msg).group(1).split(",")]
     assert len(state) == 2 and state[0] > 0.3  # the condition that raised holds there
 
 
 @pytest.mark.slow
-def test_a_division_by_zero_at_run_time_is_a_diverged_member_with_its_time(
-    monkeypatch: pytest.MonkeyPatch,
-) -> None:
-    monkeypatch.setenv("AIOFL_NO_CACHE", "1")
-    plant = _user_plant(_f_divides, "divides")
+def test_a_division_by_zero_at_run_time_is_a_diverged_member_with_its_time() -> None:
+    plant = _user_plant(_f_fails, "fails_rt", {"mode": 2.0})
     res = _simulate(plant)
     assert res.diverged and res.diverged_at is not None and 0.0 < res.diverged_at <= 1.0
     assert res.metrics is None  # no NaN table

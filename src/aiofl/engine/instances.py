@@ -259,7 +259,9 @@ def instance_for(
     plant: Plant, width: int = loop.WIDTH, *, sampled_data: bool = False, variant: str = "lanes"
 ) -> compile_.Instance:
     """The compiled instance of ``plant`` (see :func:`recipe`), built on first use in this
-    process; the guarded variant is never cached on disk."""
+    process; the guarded variant is never cached on disk (loaded from numba's cache, its
+    plant wrappers no longer caught the plant's exception: the ValueError of a raising
+    plant escaped instead of the PlantFailure naming the function and the state)."""
     key = (id(plant), width, sampled_data, variant)
     with _LOCK:
         if key not in _INSTANCES or _INSTANCES[key][0] is not plant:

@@ -18,6 +18,13 @@ digest it carries is rebuilt.  When a plant file is edited, the entries made fro
 texts are removed, and entries unused for :data:`aiofl.cache.STALE_AFTER_DAYS` days go as
 well.  With the cache disabled (``AIOFL_NO_CACHE=1``) the plant is built in memory, as
 before.
+
+A symbolic plant built in Python (:meth:`aiofl.plants.symbolic.SymbolicPlant.to_plant`, from
+a dict, strings or a TOML file) goes through :func:`plant_from_symbolic`: sympy runs (the
+model is in hand, not a file to hash), but its generated module is written into the same
+folder, named by a hash of the module's text, so its functions have a source file and the
+kernel compiled for them is cached on disk like a plant file's.  Those entries are pruned
+by age only (no file is their origin).
 """
 
 from __future__ import annotations
@@ -33,7 +40,7 @@ from typing import Any
 from aiofl.cache import prune_older_than, subdir, touch, write_atomic
 from aiofl.plants.base import Plant
 
-__all__ = ["plant_from_file", "plant_module_path"]
+__all__ = ["plant_from_file", "plant_from_symbolic", "plant_module_path"]
 
 _FORMAT = 1
 """Version of the cached module's layout (part of every key)."""
@@ -100,7 +107,7 @@ def plant_from_file(path: str | Path) -> Plant:
     text = p.read_bytes()
     folder = subdir("plants")
     if folder is None:
-        return _build(p).to_plant()
+        return _build(p).to_plant(cache=False)
     key = _key(p, text)
     module_path = folder / f"plant_{key}.py"
     plant = _load(module_path, key)
@@ -108,11 +115,35 @@ def plant_from_file(path: str | Path) -> Plant:
         touch(module_path)
         return plant
     symbolic = _build(p)
-    built = symbolic.to_plant()
+    built = symbolic.to_plant(cache=False)
     source = _module_source(symbolic, built, key, str(p.resolve()))
     write_atomic(module_path, source.encode())
     _prune(folder, str(p.resolve()), module_path)
     plant = _load(module_path, key)
+    return plant if plant is not None else built
+
+
+def plant_from_symbolic(symbolic: Any, built: Plant) -> Plant:
+    """``built`` (the in-memory :class:`Plant` of the symbolic plant ``symbolic``) with its
+    functions imported from a cached module instead (see the module notes), so that its
+    kernel can be cached on disk; ``built`` itself when the cache is off or unwritable."""
+    folder = subdir("plants")
+    if folder is None:
+        return built
+    origin = f"<SymbolicPlant {built.name!r} built in Python>"
+    draft = _module_source(symbolic, built, "", origin)
+    key = hashlib.sha256(f"{_FORMAT}|{draft}".encode()).hexdigest()[:24]
+    module_path = folder / f"plant_{key}.py"
+    plant = _load(module_path, key)
+    if plant is None:
+        try:
+            write_atomic(module_path, _module_source(symbolic, built, key, origin).encode())
+        except OSError:
+            return built
+        prune_older_than(folder)
+        plant = _load(module_path, key)
+    else:
+        touch(module_path)
     return plant if plant is not None else built
 
 
@@ -127,7 +158,8 @@ def _digest_line(body: str) -> str:
 
 
 def _module_source(symbolic: Any, plant: Plant, key: str, origin: str) -> str:
-    """The cached module: the generated functions and ``PLANT``, the other fields."""
+    """The cached module: the generated functions and ``PLANT``, the other fields (the
+    module's text is a function of ``key``, ``origin`` and the plant alone)."""
     from aiofl.plants.codegen import GENERATED_FUNCTIONS  # sympy: only on a miss
 
     srcs = symbolic.function_sources(prefix="_fn_")
@@ -135,7 +167,7 @@ def _module_source(symbolic: Any, plant: Plant, key: str, origin: str) -> str:
     fields["params"] = dict(plant.params)
     body = "".join(
         [
-            f'"""aiofl plant module, generated from a plant file (key {key}); do not edit."""\n',
+            f'"""aiofl plant module, of a symbolic plant (key {key}); generated, do not edit."""\n',
             "import math\n\n",
             f"ORIGIN = {origin!r}\n",
             f"PLANT = {fields!r}\n",

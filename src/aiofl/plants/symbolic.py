@@ -425,12 +425,24 @@ class SymbolicPlant:
             self._cache["functions"] = compile_sources(self.function_sources(), self.name)
         return dict(self._cache["functions"])
 
-    def to_plant(self, name: str | None = None) -> Plant:
+    def to_plant(self, name: str | None = None, *, cache: bool = True) -> Plant:
         """Compile to an engine :class:`aiofl.plants.base.Plant` (with ``normal_form`` for IOFL).
 
         The generated functions are plain Python over ``math``, so the engine's numba kernel
-        compiles them exactly as it compiles hand-written plants.
+        compiles them exactly as it compiles hand-written plants.  With ``cache`` (and the
+        cache on, :mod:`aiofl.cache`) they are imported from a module written into the
+        cache (:func:`aiofl.plants.plant_cache.plant_from_symbolic`), so the kernel compiled
+        for them is cached on disk across processes; otherwise they live in memory only.
         """
+        built = self._plant_in_memory(name)
+        if not cache:
+            return built
+        from aiofl.plants.plant_cache import plant_from_symbolic
+
+        return plant_from_symbolic(self, built)
+
+    def _plant_in_memory(self, name: str | None) -> Plant:
+        """The :class:`Plant` with the generated functions executed in memory."""
         fns = self.compile_functions()
         return Plant(
             name=name or self.name,
