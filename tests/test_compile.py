@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import os
+import runpy
 import subprocess
 import sys
 from pathlib import Path
@@ -118,16 +119,82 @@ def test_kind_plant_and_options_are_part_of_the_fingerprint():
     assert compile.fingerprint(other) != fps["lanes w32"]
 
 
-def test_a_plant_without_source_is_never_cached():
+def _defined(source: str, name: str = "f", **space: object) -> object:
+    """Function ``name`` of ``source`` executed with the globals ``space`` (no source file,
+    as in a notebook cell)."""
+    ns: dict = dict(space)
+    exec(source, ns)
+    return ns[name]
+
+
+_F = "def f(x, p):\n    return (x[1], -K * x[0] + helper(x[0]))\n"
+_HELPER = "def helper(v):\n    return 0.5 * v\n"
+
+
+def test_a_plant_function_is_identified_by_its_code_and_what_it_reads():
+    """The plant part of a kernel's fingerprint (aiofl.engine.code_fingerprint): the same
+    code reading the same values is the same kernel wherever it is defined (a notebook cell
+    without a source file, moved within its file); a change of its code, of a constant it
+    reads, of a function it calls or of an array it reads is another kernel."""
+    fp = compile.function_fingerprint
+    helper = _defined(_HELPER, "helper")
+    base = fp(_defined(_F, K=2.0, helper=helper))
+    assert base is not None
+    assert fp(_defined(_F, K=2.0, helper=helper)) == base  # defined again: the same
+    assert fp(_defined("\n\n\n" + _F, K=2.0, helper=helper)) == base  # moved down 3 lines
+    assert fp(_defined(_F, K=2.0, helper=helper, unused=object())) == base  # not read
+    assert fp(_defined(_F, K=3.0, helper=helper)) != base  # a constant it reads
+    assert fp(_defined(_F.replace("-K", "K"), K=2.0, helper=helper)) != base  # its code
+    other = _defined(_HELPER.replace("0.5", "0.25"), "helper")
+    assert fp(_defined(_F, K=2.0, helper=other)) != base  # a function it calls
+    table = "def f(x, p):\n    return (x[1], T[0] * x[0])\n"
+    arrays = [fp(_defined(table, T=np.array([v, 1.0]))) for v in (1.0, 1.0, 2.0)]
+    assert arrays[0] == arrays[1] != arrays[2] and None not in arrays
+    # a global or a closure the fingerprint cannot describe: no fingerprint
+    assert fp(_defined(table, T={0: 1.0})) is None
+    assert (
+        fp(
+            _defined(
+                "def g():\n    d = {}\n    def f(x, p):\n        return d\n    return f", "g"
+            )()
+        )
+        is None
+    )
+
+
+def test_a_plant_defined_in_a_notebook_cell_is_cached(tmp_path, monkeypatch):
+    """A plant whose functions have no source file (``exec``, a notebook cell) has a
+    kernel fingerprint and is cached; one reading a value the fingerprint cannot describe
+    is compiled uncached."""
     from aiofl.plants.base import Plant
 
-    ns: dict = {}
-    exec("def f(x, p):\n    return (x[1], -x[0])\n", ns)  # no source file
+    monkeypatch.setenv("AIOFL_CACHE_DIR", str(tmp_path / "cache"))
     slfjm = get_plant("slfjm")
-    plant = Plant("nofile", 2, ns["f"], slfjm.g, slfjm.h, {"a": 1.0})
+    f = _defined("def f(x, p):\n    return (x[1], -x[0])\n")
+    plant = Plant("nofile", 2, f, slfjm.g, slfjm.h, {"a": 1.0})
     recipe = dataclasses.replace(_recipes()["lanes w1"], plant=plant)
+    assert compile.fingerprint(recipe) is not None
+    assert compile.build(recipe).cached
+    odd = _defined("def f(x, p):\n    return (x[1], -D[0] * x[0])\n", D={0: 1.0})
+    recipe = dataclasses.replace(recipe, plant=Plant("odd", 2, odd, slfjm.g, slfjm.h, {}))
     assert compile.fingerprint(recipe) is None
     assert not compile.build(recipe).cached
+
+
+def test_editing_a_script_elsewhere_keeps_its_plants_kernel(tmp_path):
+    """A plant defined in a script: editing the script's controller gains leaves the
+    plant's fingerprint (its kernel is reused); editing the plant's code changes it."""
+    script = tmp_path / "design.py"
+    text = (
+        "OMEGA0 = 40.0\n"
+        "def f(x, p):\n    return (x[1], -p[0] * x[0])\n"
+        "def use():\n    return OMEGA0\n"
+    )
+    prints = []
+    for edit in (text, text.replace("40.0", "80.0"), text.replace("-p[0]", "-2.0 * p[0]")):
+        script.write_text(edit)
+        prints.append(compile.function_fingerprint(runpy.run_path(str(script))["f"]))
+    assert prints[0] == prints[1] != prints[2] and None not in prints
 
 
 def test_a_source_edited_after_loading_is_not_cached(tmp_path, monkeypatch):
@@ -253,8 +320,10 @@ def test_a_plant_file_is_built_and_compiled_once_across_processes(tmp_path, monk
     """Two processes on an empty cache: the plant module is written, the kernel compiled
     once and stored (the other process waits for it and loads it).
     A third process: the plant comes from the module (no sympy import) and the kernel from
-    the disk cache (a hit, no compile); same numbers.  Editing the plant file makes a new
-    entry and removes the old one."""
+    the disk cache (a hit, no compile); same numbers.  Editing a parameter value of the
+    plant file makes a new plant module (the old one pruned) but keeps the kernel: a fourth
+    process loads it (the functions' module keeps its name) and runs the new value.
+    Editing the model itself makes a new kernel."""
     (tmp_path / "duffing.toml").write_text(PLANT_TOML)
     cfg = tmp_path / "sim.toml"
     cfg.write_text(CONFIG_TOML)
@@ -271,15 +340,23 @@ def test_a_plant_file_is_built_and_compiled_once_across_processes(tmp_path, monk
     assert not second["sympy"], "a cached plant file must not need sympy"
     assert second["hits"] == 1 and second["misses"] == 0
     assert second["itae"] == first["itae"]
-    # an edited plant file: a new module, the old one pruned
+    # a parameter value edited: a new module, the old one pruned, the same kernel
+    (tmp_path / "duffing.toml").write_text(PLANT_TOML.replace("k = 4.0", "k = 5.0"))
+    stiffer = _probe(cfg, cache_dir)
+    assert stiffer["hits"] == 1 and stiffer["misses"] == 0
+    assert stiffer["itae"] != first["itae"]
+    now = sorted((cache_dir / "plants").glob("plant_*.py"))
+    assert len(now) == 1 and now != modules
+    # the model edited: another kernel (its fingerprint; compiled on its first run)
     monkeypatch.setenv("AIOFL_CACHE_DIR", str(cache_dir))
     from aiofl.plants import plant_cache
 
-    (tmp_path / "duffing.toml").write_text(PLANT_TOML.replace("k = 4.0", "k = 5.0"))
+    kernel = compile.fingerprint(
+        instances.recipe(plant_cache.plant_from_file(tmp_path / "duffing.toml"), 1)
+    )
+    (tmp_path / "duffing.toml").write_text(PLANT_TOML.replace("0.5*k*x**3", "0.4*k*x**3"))
     edited = plant_cache.plant_from_file(tmp_path / "duffing.toml")
-    assert edited.params["k"] == 5.0
-    now = sorted((cache_dir / "plants").glob("plant_*.py"))
-    assert len(now) == 1 and now != modules
+    assert compile.fingerprint(instances.recipe(edited, 1)) not in (None, kernel)
 
 
 def test_a_damaged_plant_module_is_rebuilt(tmp_path, monkeypatch):
@@ -307,15 +384,15 @@ def test_a_damaged_plant_module_is_rebuilt(tmp_path, monkeypatch):
 _SYMBOLIC = (
     "from aiofl.plants.symbolic import SymbolicPlant\n"
     "plant = SymbolicPlant.from_strings('dbl_sym', ['x1', 'x2'], {'k': K}, "
-    "['x2', '-k*sin(x1)'], ['0', '1'], 'x1').to_plant()\n"
+    "['x2', 'F'], ['0', '1'], 'x1').to_plant()\n"
 )
 
 
-def _symbolic_kernel_identity(cache_dir: Path, k: float) -> dict:
+def _symbolic_kernel_identity(cache_dir: Path, k: float, f2: str = "-k*sin(x1)") -> dict:
     """In a new process: where the functions of a symbolic plant built in Python live,
     and the fingerprint of its width-1 kernel (nothing is compiled)."""
     code = (
-        _SYMBOLIC.replace("K", repr(k))
+        _SYMBOLIC.replace("K", repr(k)).replace("F", f2)
         + "import json\nfrom aiofl.engine import compile, instances\n"
         + "print(json.dumps({'file': plant.f.__code__.co_filename, "
         + "'fp': compile.fingerprint(instances.recipe(plant, 1))}))\n"
@@ -329,22 +406,24 @@ def _symbolic_kernel_identity(cache_dir: Path, k: float) -> dict:
 
 
 def test_a_symbolic_plant_built_in_python_gets_a_cacheable_kernel(tmp_path, monkeypatch):
-    """``SymbolicPlant.to_plant()`` imports its generated functions from a module in the
-    cache, so the kernel has a fingerprint (was None: generated code executed in memory
-    was compiled in every process), the same in every process for the same model and
-    another for another model; with the cache off, the functions stay in memory."""
+    """``SymbolicPlant.to_plant()`` imports its generated functions from a module written
+    into the cache: a real source file, the same module and kernel fingerprint in every
+    process for the same model; another parameter value is another module but the same
+    kernel (parameters reach it at run time), another model another kernel; with the
+    cache off, the functions stay in memory (no file)."""
     cache_dir = tmp_path / "cache"
     first, again = (_symbolic_kernel_identity(cache_dir, 2.0) for _ in range(2))
     assert first["fp"] is not None and first == again
     assert Path(first["file"]).parent == cache_dir / "plants"
-    other = _symbolic_kernel_identity(cache_dir, 3.0)
+    stiffer = _symbolic_kernel_identity(cache_dir, 3.0)
+    assert stiffer["fp"] == first["fp"] and stiffer["file"] != first["file"]
+    other = _symbolic_kernel_identity(cache_dir, 2.0, "-k*x1")
     assert other["fp"] not in (None, first["fp"]) and other["file"] != first["file"]
     monkeypatch.setenv("AIOFL_NO_CACHE", "1")
     space: dict = {}
-    exec(_SYMBOLIC.replace("K", "2.0"), space)
+    exec(_SYMBOLIC.replace("K", "2.0").replace("F", "-k*sin(x1)"), space)
     plant = space["plant"]
     assert not os.path.isfile(plant.f.__code__.co_filename)
-    assert compile.fingerprint(instances.recipe(plant, 1)) is None
 
 
 def test_numba_inlining_copies_a_callee_with_one_memo():

@@ -15,16 +15,17 @@ width; the one-member kernels; the diagnostic kernel) is described by a :class:`
 
 :func:`build` compiles a recipe.  The entry is cached under a **fingerprint** of everything
 the compiled code depends on (:func:`fingerprint`: Python, numba and llvmlite versions, the
-recipe's kind, every template's options, the text of every source file and of the plant's
-functions), in ``<cache root>/kernels`` (:mod:`aiofl.cache`): numba's index and data files
-of a kernel carry the plant's key and the fingerprint in their name, and the fingerprint is
-also numba's freshness stamp of the entry, so a kernel is loaded only if it was compiled
-from exactly this code.  When a plant's kernel is stored under a new fingerprint, the
-entries of its older fingerprints are deleted (:func:`prune_kernels`).  A plant function
-that cannot be fingerprinted (no source file, a closure over an array) makes the kernel
-uncacheable: it is compiled in every process.  A source file edited on disk after this
-process loaded it would make the fingerprint describe code numba is not compiling, so such
-a kernel is not cached either (:func:`sources_changed`).
+recipe's kind, every template's options, the text of every source file, and the plant's
+functions by their code and the values they read, :mod:`aiofl.engine.code_fingerprint`),
+in ``<cache root>/kernels`` (:mod:`aiofl.cache`): numba's index and data files of a kernel
+carry the plant's key and the fingerprint in their name, and the fingerprint is also
+numba's freshness stamp of the entry, so a kernel is loaded only if it was compiled from
+exactly this code.  When a plant's kernel is stored under a new fingerprint, the entries of
+its older fingerprints are deleted (:func:`prune_kernels`).  A plant function that cannot
+be fingerprinted (it reads a global, or closes over a value, of a type the fingerprint
+cannot describe) makes the kernel uncacheable: it is compiled in every process.  A source
+file edited on disk after this process loaded it would make the fingerprint describe code
+numba is not compiling, so such a kernel is not cached either (:func:`sources_changed`).
 
 :func:`rejit` is the one helper that re-compiles a compiled function's Python code with
 other globals or options (private, uncached copies of the component functions; the plant
@@ -37,7 +38,6 @@ import contextlib
 import hashlib
 import os
 import sys
-import threading
 import types
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
@@ -47,6 +47,7 @@ from typing import Any
 from numba.core.caching import CompileResultCacheImpl, FunctionCache, _CacheLocator
 
 from aiofl.cache import subdir
+from aiofl.engine.code_fingerprint import file_digest, function_fingerprint, source_digest
 from aiofl.plants.base import Plant
 
 __all__ = [
@@ -135,24 +136,6 @@ class Instance:
 
 
 # ------------------------------------------------------------------------ fingerprints
-_DIGESTS: dict[str, str] = {}  # path -> digest of the text this process first read
-_DIGESTS_LOCK = threading.Lock()
-
-
-def _file_digest(path: str) -> str:
-    with open(path, "rb") as fh:
-        return hashlib.sha256(fh.read()).hexdigest()
-
-
-def source_digest(path: str) -> str:
-    """The SHA-256 of ``path``'s text as this process first read it (memoized, so that a
-    fingerprint describes the code loaded, see :func:`sources_changed`)."""
-    with _DIGESTS_LOCK:
-        if path not in _DIGESTS:
-            _DIGESTS[path] = _file_digest(path)
-        return _DIGESTS[path]
-
-
 def sources_changed(paths: tuple[str, ...] | list[str]) -> bool:
     """Whether a file of ``paths`` changed on disk since this process first digested it
     (another process editing the tree): a kernel compiled now must not be cached under a
@@ -160,32 +143,11 @@ def sources_changed(paths: tuple[str, ...] | list[str]) -> bool:
     for path in paths:
         first = source_digest(path)
         try:
-            if _file_digest(path) != first:
+            if file_digest(path) != first:
                 return True
         except OSError:
             return True
     return False
-
-
-def function_fingerprint(fn: Any) -> str | None:
-    """What identifies a plant function's code, or None if it cannot be identified (no
-    source file, or a closure over a value that is not a plain scalar or string)."""
-    fn = getattr(fn, "py_func", fn)
-    code = getattr(fn, "__code__", None)
-    if code is None:
-        return None
-    path = code.co_filename
-    if not os.path.isfile(path):
-        return None
-    extra: list[str] = []
-    for cell in fn.__closure__ or ():
-        val = cell.cell_contents
-        if not isinstance(val, (int, float, str, bool, tuple)):
-            return None
-        extra.append(repr(val))
-    if fn.__defaults__:
-        extra.append(repr(fn.__defaults__))
-    return "|".join([os.path.basename(path), fn.__qualname__, source_digest(path), *extra])
 
 
 def plant_key(plant: Plant) -> str:

@@ -19,51 +19,30 @@ texts are removed, and entries unused for :data:`aiofl.cache.STALE_AFTER_DAYS` d
 well.  With the cache disabled (``AIOFL_NO_CACHE=1``) the plant is built in memory, as
 before.
 
-A symbolic plant built in Python (:meth:`aiofl.plants.symbolic.SymbolicPlant.to_plant`, from
-a dict, strings or a TOML file) goes through :func:`plant_from_symbolic`: sympy runs (the
-model is in hand, not a file to hash), but its generated module is written into the same
-folder, named by a hash of the module's text, so its functions have a source file and the
-kernel compiled for them is cached on disk like a plant file's.  Those entries are pruned
-by age only (no file is their origin).
+The module files themselves (their text, loading, atomic writing) are
+:mod:`aiofl.plants.plant_modules`, shared with symbolic plants built in Python.
 """
 
 from __future__ import annotations
 
 import contextlib
 import hashlib
-import importlib.util
 import os
-import sys
 from pathlib import Path
 from typing import Any
 
-from aiofl.cache import prune_older_than, subdir, touch, write_atomic
+from aiofl.cache import prune_older_than, subdir, touch
 from aiofl.plants.base import Plant
+from aiofl.plants.plant_modules import FORMAT, load_module, module_source, store_module
 
-__all__ = ["plant_from_file", "plant_from_symbolic", "plant_module_path"]
-
-_FORMAT = 1
-"""Version of the cached module's layout (part of every key)."""
-_FIELDS = (
-    "name",
-    "n_states",
-    "params",
-    "relative_degree",
-    "state_names",
-    "description",
-    "output_unit",
-    "input_unit",
-    "state_units",
-    "disturbance_unit",
-)
-"""The Plant fields a cached module records besides its functions."""
+__all__ = ["plant_from_file", "plant_module_path"]
 
 
 def _generator_digest() -> str:
     """A digest of the modules whose code turns a plant file into a Plant (read as files:
     importing them would import sympy, which a cached plant does not need)."""
     here = Path(__file__).parent
-    h = hashlib.sha256(f"{_FORMAT}".encode())
+    h = hashlib.sha256(f"{FORMAT}".encode())
     for name in (
         "base",
         "codegen",
@@ -72,6 +51,7 @@ def _generator_digest() -> str:
         "normal_form",
         "symbolic",
         "plant_cache",
+        "plant_modules",
     ):
         h.update(hashlib.sha256((here / f"{name}.py").read_bytes()).digest())
     return h.hexdigest()
@@ -110,40 +90,15 @@ def plant_from_file(path: str | Path) -> Plant:
         return _build(p).to_plant(cache=False)
     key = _key(p, text)
     module_path = folder / f"plant_{key}.py"
-    plant = _load(module_path, key)
+    plant = load_module(module_path)
     if plant is not None:
         touch(module_path)
         return plant
     symbolic = _build(p)
     built = symbolic.to_plant(cache=False)
-    source = _module_source(symbolic, built, key, str(p.resolve()))
-    write_atomic(module_path, source.encode())
+    source = module_source(symbolic.module_functions(), built, key, str(p.resolve()))
+    plant = store_module(module_path, source)
     _prune(folder, str(p.resolve()), module_path)
-    plant = _load(module_path, key)
-    return plant if plant is not None else built
-
-
-def plant_from_symbolic(symbolic: Any, built: Plant) -> Plant:
-    """``built`` (the in-memory :class:`Plant` of the symbolic plant ``symbolic``) with its
-    functions imported from a cached module instead (see the module notes), so that its
-    kernel can be cached on disk; ``built`` itself when the cache is off or unwritable."""
-    folder = subdir("plants")
-    if folder is None:
-        return built
-    origin = f"<SymbolicPlant {built.name!r} built in Python>"
-    draft = _module_source(symbolic, built, "", origin)
-    key = hashlib.sha256(f"{_FORMAT}|{draft}".encode()).hexdigest()[:24]
-    module_path = folder / f"plant_{key}.py"
-    plant = _load(module_path, key)
-    if plant is None:
-        try:
-            write_atomic(module_path, _module_source(symbolic, built, key, origin).encode())
-        except OSError:
-            return built
-        prune_older_than(folder)
-        plant = _load(module_path, key)
-    else:
-        touch(module_path)
     return plant if plant is not None else built
 
 
@@ -151,66 +106,6 @@ def _build(path: Path) -> Any:
     from aiofl.plants.symbolic import SymbolicPlant
 
     return SymbolicPlant.from_toml(path)
-
-
-def _digest_line(body: str) -> str:
-    return f"# aiofl-digest: {hashlib.sha256(body.encode()).hexdigest()}\n"
-
-
-def _module_source(symbolic: Any, plant: Plant, key: str, origin: str) -> str:
-    """The cached module: the generated functions and ``PLANT``, the other fields (the
-    module's text is a function of ``key``, ``origin`` and the plant alone)."""
-    from aiofl.plants.codegen import GENERATED_FUNCTIONS  # sympy: only on a miss
-
-    srcs = symbolic.function_sources(prefix="_fn_")
-    fields = {name: getattr(plant, name) for name in _FIELDS}
-    fields["params"] = dict(plant.params)
-    body = "".join(
-        [
-            f'"""aiofl plant module, of a symbolic plant (key {key}); generated, do not edit."""\n',
-            "import math\n\n",
-            f"ORIGIN = {origin!r}\n",
-            f"PLANT = {fields!r}\n",
-            *(f"\n\n{srcs[k]}" for k in GENERATED_FUNCTIONS if k in srcs),
-        ]
-    )
-    return body + _digest_line(body)
-
-
-def _load(module_path: Path, key: str) -> Plant | None:
-    """The plant of a cached module, or None if it is missing or not intact."""
-    try:
-        source = module_path.read_text(encoding="utf-8")
-    except OSError:
-        return None
-    body, _, last = source.rpartition("# aiofl-digest: ")
-    if not body or _digest_line(body) != f"# aiofl-digest: {last}":
-        return None  # damaged or partial: rebuilt by the caller
-    name = f"aiofl_plant_{key}"
-    module = sys.modules.get(name)
-    if module is None:
-        spec = importlib.util.spec_from_file_location(name, module_path)
-        if spec is None or spec.loader is None:
-            return None
-        module = importlib.util.module_from_spec(spec)
-        try:
-            spec.loader.exec_module(module)
-        except Exception:  # an entry of another format: rebuilt by the caller
-            return None
-        # registered, so numba can name the functions' module in a cached kernel (it
-        # imports it by name when the kernel is loaded)
-        sys.modules[name] = module
-    fields = dict(module.PLANT)
-    return Plant(
-        f=module._fn_f,
-        g=module._fn_g,
-        h=module._fn_h,
-        bd=getattr(module, "_fn_bd", None),
-        normal_form=module._fn_normal_form,
-        alpha_beta_of_xi=getattr(module, "_fn_alpha_beta_of_xi", None),
-        state_of_xi=getattr(module, "_fn_state_of_xi", None),
-        **fields,
-    )
 
 
 def _prune(folder: Path, origin: str, keep: Path) -> None:

@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 from sympy.core.function import AppliedUndef
 
 from aiofl.plants.base import Plant, unit_from_label
-from aiofl.plants.codegen import compile_sources, plant_sources
+from aiofl.plants.codegen import GENERATED_FUNCTIONS, compile_sources, plant_sources
 from aiofl.plants.expressions import (
     CONSTANTS,
     FUNCTIONS,
@@ -47,6 +47,7 @@ from aiofl.plants.expressions import (
     parse_expression,
 )
 from aiofl.plants.normal_form import Analysis, RelativeDegreeError, analyze, drop_delta
+from aiofl.plants.plant_modules import plant_from_sources
 
 __all__ = ["SymbolicPlant", "read_plant_toml"]
 
@@ -431,15 +432,18 @@ class SymbolicPlant:
         The generated functions are plain Python over ``math``, so the engine's numba kernel
         compiles them exactly as it compiles hand-written plants.  With ``cache`` (and the
         cache on, :mod:`aiofl.cache`) they are imported from a module written into the
-        cache (:func:`aiofl.plants.plant_cache.plant_from_symbolic`), so the kernel compiled
-        for them is cached on disk across processes; otherwise they live in memory only.
+        cache (:func:`aiofl.plants.plant_modules.plant_from_sources`), so the kernel
+        compiled for them is cached on disk across processes; otherwise they live in memory
+        only.
         """
         built = self._plant_in_memory(name)
-        if not cache:
-            return built
-        from aiofl.plants.plant_cache import plant_from_symbolic
+        return plant_from_sources(self.module_functions(), built) if cache else built
 
-        return plant_from_symbolic(self, built)
+    def module_functions(self) -> list[str]:
+        """The generated functions as a plant module holds them (``def _fn_f(x, p)``, ...,
+        in the order of :data:`aiofl.plants.codegen.GENERATED_FUNCTIONS`)."""
+        srcs = self.function_sources(prefix="_fn_")
+        return [srcs[k] for k in GENERATED_FUNCTIONS if k in srcs]
 
     def _plant_in_memory(self, name: str | None) -> Plant:
         """The :class:`Plant` with the generated functions executed in memory."""

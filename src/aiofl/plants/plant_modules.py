@@ -1,0 +1,145 @@
+"""Generated plant modules on disk: the store shared by plant files and symbolic plants.
+
+A symbolic plant's functions are generated Python source (:mod:`aiofl.plants.codegen`).
+Executed in memory they have no source file; written as a **module file** into
+``<cache root>/plants`` (:mod:`aiofl.cache`) and imported from there, they are plain
+functions of a real module, and the engine's kernel compiled for them is cached on disk
+(:mod:`aiofl.engine.compile`).  This module writes, reads and prunes those files:
+
+- :func:`module_source`: the text of a module, the generated functions and ``PLANT`` (the
+  :class:`~aiofl.plants.base.Plant`'s other fields), with a digest of its text on its last
+  line (a damaged or partial file is detected and rebuilt by the caller) and, on its first
+  line, the name it is imported as: ``aiofl_plant_`` and a digest of the functions alone.
+  A kernel loaded from numba's disk cache imports its plant functions' module by that name,
+  so a plant whose parameter values changed (another file, the same functions, the same
+  kernel: :mod:`aiofl.engine.code_fingerprint`) keeps it;
+- :func:`load_module`: the plant of a module file (executed afresh, so its ``PLANT`` is the
+  file's; registered in ``sys.modules`` under its name), or None;
+- :func:`store_module`: write a module under a temporary name and rename it into place, so
+  concurrent processes never import half a file;
+- :func:`plant_from_sources`: the content-keyed entry of a plant built in Python
+  (:meth:`aiofl.plants.symbolic.SymbolicPlant.to_plant`), pruned by age only (no file is its
+  origin).  Plant files have their own keys and pruning (:mod:`aiofl.plants.plant_cache`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from aiofl.cache import prune_older_than, subdir, touch, write_atomic
+from aiofl.plants.base import Plant
+
+__all__ = ["FORMAT", "load_module", "module_source", "plant_from_sources", "store_module"]
+
+FORMAT = 2
+"""Version of a module's layout (part of every key)."""
+_MODULE_LINE = "# aiofl-module: "
+"""How a module's first line starts: the name it is imported as follows."""
+_FIELDS = (
+    "name",
+    "n_states",
+    "params",
+    "relative_degree",
+    "state_names",
+    "description",
+    "output_unit",
+    "input_unit",
+    "state_units",
+    "disturbance_unit",
+)
+"""The Plant fields a module records besides its functions."""
+
+
+def module_source(functions: Sequence[str], plant: Plant, key: str, origin: str) -> str:
+    """The module of the generated ``functions`` (sources of ``_fn_f``, ``_fn_g``, ...) and
+    ``plant``'s other fields; ``key`` names the entry, ``origin`` what it was made from."""
+    code = hashlib.sha256(f"{FORMAT}|{'|'.join(functions)}".encode()).hexdigest()[:24]
+    fields = {name: getattr(plant, name) for name in _FIELDS}
+    fields["params"] = dict(plant.params)
+    body = "".join(
+        [
+            f"{_MODULE_LINE}aiofl_plant_{code}\n",
+            f'"""aiofl plant module of a symbolic plant (key {key}); generated, do not edit."""\n',
+            "import math\n\n",
+            f"ORIGIN = {origin!r}\n",
+            f"PLANT = {fields!r}\n",
+            *(f"\n\n{src}" for src in functions),
+        ]
+    )
+    return body + _digest_line(body)
+
+
+def _digest_line(body: str) -> str:
+    return f"# aiofl-digest: {hashlib.sha256(body.encode()).hexdigest()}\n"
+
+
+def load_module(module_path: Path) -> Plant | None:
+    """The plant of a module file, or None if it is missing or not intact.  The module is
+    executed afresh (its ``PLANT`` is this file's) and registered under the name on its
+    first line, replacing a module of the same functions loaded before."""
+    try:
+        source = module_path.read_text(encoding="utf-8")
+    except OSError:
+        return None
+    body, _, last = source.rpartition("# aiofl-digest: ")
+    if not body or _digest_line(body) != f"# aiofl-digest: {last}":
+        return None  # damaged or partial: rebuilt by the caller
+    first = body.split("\n", 1)[0]
+    name = first[len(_MODULE_LINE) :]
+    if not first.startswith(_MODULE_LINE) or not name.isidentifier():
+        return None  # an entry of another format: rebuilt by the caller
+    spec = importlib.util.spec_from_file_location(name, module_path)
+    if spec is None or spec.loader is None:
+        return None
+    module = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(module)
+    except Exception:  # an entry of another format: rebuilt by the caller
+        return None
+    # registered, so numba can import the functions' module by name when it loads a
+    # cached kernel of them
+    sys.modules[name] = module
+    fields = dict(module.PLANT)
+    return Plant(
+        f=module._fn_f,
+        g=module._fn_g,
+        h=module._fn_h,
+        bd=getattr(module, "_fn_bd", None),
+        normal_form=module._fn_normal_form,
+        alpha_beta_of_xi=getattr(module, "_fn_alpha_beta_of_xi", None),
+        state_of_xi=getattr(module, "_fn_state_of_xi", None),
+        **fields,
+    )
+
+
+def store_module(module_path: Path, source: str) -> Plant | None:
+    """Write ``source`` to ``module_path`` as a whole and load it (None if either fails)."""
+    try:
+        write_atomic(module_path, source.encode())
+    except OSError:
+        return None
+    return load_module(module_path)
+
+
+def plant_from_sources(functions: Sequence[str], built: Plant) -> Plant:
+    """``built`` (a plant whose generated ``functions`` run in memory) with its functions
+    imported from a module in the cache, keyed by the module's text; ``built`` itself when
+    the cache is off or unwritable."""
+    folder = subdir("plants")
+    if folder is None:
+        return built
+    origin = f"<SymbolicPlant {built.name!r} built in Python>"
+    draft = module_source(functions, built, "", origin)
+    key = hashlib.sha256(f"{FORMAT}|{draft}".encode()).hexdigest()[:24]
+    module_path = folder / f"plant_{key}.py"
+    plant = load_module(module_path)
+    if plant is not None:
+        touch(module_path)
+        return plant
+    plant = store_module(module_path, module_source(functions, built, key, origin))
+    prune_older_than(folder)
+    return plant if plant is not None else built
