@@ -383,8 +383,9 @@ def test_a_damaged_plant_module_is_rebuilt(tmp_path, monkeypatch):
 
 _SYMBOLIC = (
     "from aiofl.plants.symbolic import SymbolicPlant\n"
-    "plant = SymbolicPlant.from_strings('dbl_sym', ['x1', 'x2'], {'k': K}, "
-    "['x2', 'F'], ['0', '1'], 'x1').to_plant()\n"
+    "sym = SymbolicPlant.from_strings('dbl_sym', ['x1', 'x2'], {'k': K}, "
+    "['x2', 'F'], ['0', '1'], 'x1')\n"
+    "plant = sym.to_plant()\n"
 )
 
 
@@ -395,6 +396,7 @@ def _symbolic_kernel_identity(cache_dir: Path, k: float, f2: str = "-k*sin(x1)")
         _SYMBOLIC.replace("K", repr(k)).replace("F", f2)
         + "import json\nfrom aiofl.engine import compile, instances\n"
         + "print(json.dumps({'file': plant.f.__code__.co_filename, "
+        + "'analysed': 'analysis' in sym._cache, "
         + "'fp': compile.fingerprint(instances.recipe(plant, 1))}))\n"
     )
     env = {**os.environ, "AIOFL_CACHE_DIR": str(cache_dir)}
@@ -408,12 +410,14 @@ def _symbolic_kernel_identity(cache_dir: Path, k: float, f2: str = "-k*sin(x1)")
 def test_a_symbolic_plant_built_in_python_gets_a_cacheable_kernel(tmp_path, monkeypatch):
     """``SymbolicPlant.to_plant()`` imports its generated functions from a module written
     into the cache: a real source file, the same module and kernel fingerprint in every
-    process for the same model; another parameter value is another module but the same
+    process for the same model, and a later process takes the plant from the module
+    without the symbolic analysis; another parameter value is another module but the same
     kernel (parameters reach it at run time), another model another kernel; with the
     cache off, the functions stay in memory (no file)."""
     cache_dir = tmp_path / "cache"
     first, again = (_symbolic_kernel_identity(cache_dir, 2.0) for _ in range(2))
-    assert first["fp"] is not None and first == again
+    assert first["analysed"] and not again["analysed"]
+    assert first["fp"] is not None and {**first, "analysed": 0} == {**again, "analysed": 0}
     assert Path(first["file"]).parent == cache_dir / "plants"
     stiffer = _symbolic_kernel_identity(cache_dir, 3.0)
     assert stiffer["fp"] == first["fp"] and stiffer["file"] != first["file"]

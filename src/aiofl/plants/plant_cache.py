@@ -33,35 +33,16 @@ from typing import Any
 
 from aiofl.cache import prune_older_than, subdir, touch
 from aiofl.plants.base import Plant
-from aiofl.plants.plant_modules import FORMAT, load_module, module_source, store_module
+from aiofl.plants.plant_modules import generator_digest, load_module, module_source, store_module
 
 __all__ = ["plant_from_file", "plant_module_path"]
-
-
-def _generator_digest() -> str:
-    """A digest of the modules whose code turns a plant file into a Plant (read as files:
-    importing them would import sympy, which a cached plant does not need)."""
-    here = Path(__file__).parent
-    h = hashlib.sha256(f"{FORMAT}".encode())
-    for name in (
-        "base",
-        "codegen",
-        "coordinates",
-        "expressions",
-        "normal_form",
-        "symbolic",
-        "plant_cache",
-        "plant_modules",
-    ):
-        h.update(hashlib.sha256((here / f"{name}.py").read_bytes()).digest())
-    return h.hexdigest()
 
 
 def _key(path: Path, text: bytes) -> str:
     """The cache key of a plant file: its text, its stem (the default plant name) and the
     code generator's digest."""
     h = hashlib.sha256(text)
-    h.update(f"|{path.stem}|{_generator_digest()}".encode())
+    h.update(f"|{path.stem}|{generator_digest()}".encode())
     return h.hexdigest()[:24]
 
 

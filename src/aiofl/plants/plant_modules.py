@@ -17,9 +17,13 @@ functions of a real module, and the engine's kernel compiled for them is cached 
   file's; registered in ``sys.modules`` under its name), or None;
 - :func:`store_module`: write a module under a temporary name and rename it into place, so
   concurrent processes never import half a file;
-- :func:`plant_from_sources`: the content-keyed entry of a plant built in Python
-  (:meth:`aiofl.plants.symbolic.SymbolicPlant.to_plant`), pruned by age only (no file is its
-  origin).  Plant files have their own keys and pruning (:mod:`aiofl.plants.plant_cache`).
+- :func:`generator_digest`: a digest of the code that turns a symbolic model into a module
+  (part of every key, so a new aiofl version rebuilds its entries);
+- :func:`cached_plant` and :func:`plant_from_sources`: the entry of a symbolic plant built in
+  Python (:meth:`aiofl.plants.symbolic.SymbolicPlant.to_plant`), keyed by its definition
+  (:meth:`~aiofl.plants.symbolic.SymbolicPlant.definition_key`), so a later process takes
+  the plant from the module without the symbolic analysis; pruned by age only (no file is
+  its origin).  Plant files have their own keys and pruning (:mod:`aiofl.plants.plant_cache`).
 """
 
 from __future__ import annotations
@@ -33,7 +37,15 @@ from pathlib import Path
 from aiofl.cache import prune_older_than, subdir, touch, write_atomic
 from aiofl.plants.base import Plant
 
-__all__ = ["FORMAT", "load_module", "module_source", "plant_from_sources", "store_module"]
+__all__ = [
+    "FORMAT",
+    "cached_plant",
+    "generator_digest",
+    "load_module",
+    "module_source",
+    "plant_from_sources",
+    "store_module",
+]
 
 FORMAT = 2
 """Version of a module's layout (part of every key)."""
@@ -52,6 +64,25 @@ _FIELDS = (
     "disturbance_unit",
 )
 """The Plant fields a module records besides its functions."""
+
+
+def generator_digest() -> str:
+    """A digest of the modules whose code turns a symbolic model into a plant module (read
+    as files: importing them would import sympy, which a cached plant does not need)."""
+    here = Path(__file__).parent
+    h = hashlib.sha256(f"{FORMAT}".encode())
+    for name in (
+        "base",
+        "codegen",
+        "coordinates",
+        "expressions",
+        "normal_form",
+        "symbolic",
+        "plant_cache",
+        "plant_modules",
+    ):
+        h.update(hashlib.sha256((here / f"{name}.py").read_bytes()).digest())
+    return h.hexdigest()
 
 
 def module_source(functions: Sequence[str], plant: Plant, key: str, origin: str) -> str:
@@ -125,21 +156,27 @@ def store_module(module_path: Path, source: str) -> Plant | None:
     return load_module(module_path)
 
 
-def plant_from_sources(functions: Sequence[str], built: Plant) -> Plant:
-    """``built`` (a plant whose generated ``functions`` run in memory) with its functions
-    imported from a module in the cache, keyed by the module's text; ``built`` itself when
-    the cache is off or unwritable."""
+def cached_plant(key: str) -> Plant | None:
+    """The plant of the entry ``key`` of a symbolic plant built in Python, or None (not
+    cached, damaged, or the cache off)."""
     folder = subdir("plants")
     if folder is None:
-        return built
-    origin = f"<SymbolicPlant {built.name!r} built in Python>"
-    draft = module_source(functions, built, "", origin)
-    key = hashlib.sha256(f"{FORMAT}|{draft}".encode()).hexdigest()[:24]
+        return None
     module_path = folder / f"plant_{key}.py"
     plant = load_module(module_path)
     if plant is not None:
         touch(module_path)
-        return plant
-    plant = store_module(module_path, module_source(functions, built, key, origin))
+    return plant
+
+
+def plant_from_sources(functions: Sequence[str], built: Plant, key: str) -> Plant:
+    """``built`` (a plant whose generated ``functions`` run in memory) with its functions
+    imported from the module entry ``key``, written now; ``built`` itself when the cache is
+    off or unwritable."""
+    folder = subdir("plants")
+    if folder is None:
+        return built
+    origin = f"<SymbolicPlant {built.name!r} built in Python>"
+    plant = store_module(folder / f"plant_{key}.py", module_source(functions, built, key, origin))
     prune_older_than(folder)
     return plant if plant is not None else built

@@ -21,6 +21,7 @@ This module imports sympy; nothing in the engine imports it.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import tomllib
 from collections.abc import Mapping, Sequence
@@ -47,7 +48,7 @@ from aiofl.plants.expressions import (
     parse_expression,
 )
 from aiofl.plants.normal_form import Analysis, RelativeDegreeError, analyze, drop_delta
-from aiofl.plants.plant_modules import plant_from_sources
+from aiofl.plants.plant_modules import cached_plant, generator_digest, plant_from_sources
 
 __all__ = ["SymbolicPlant", "read_plant_toml"]
 
@@ -431,13 +432,45 @@ class SymbolicPlant:
 
         The generated functions are plain Python over ``math``, so the engine's numba kernel
         compiles them exactly as it compiles hand-written plants.  With ``cache`` (and the
-        cache on, :mod:`aiofl.cache`) they are imported from a module written into the
-        cache (:func:`aiofl.plants.plant_modules.plant_from_sources`), so the kernel
-        compiled for them is cached on disk across processes; otherwise they live in memory
-        only.
+        cache on, :mod:`aiofl.cache`) the plant is built once: its module is written into
+        the cache under :meth:`definition_key` (:mod:`aiofl.plants.plant_modules`), and a
+        later process imports it from there without the symbolic analysis, with the kernel
+        compiled for its functions cached on disk too; otherwise the functions live in
+        memory only.
         """
-        built = self._plant_in_memory(name)
-        return plant_from_sources(self.module_functions(), built) if cache else built
+        if not cache:
+            return self._plant_in_memory(name)
+        key = self.definition_key(name)
+        hit = cached_plant(key)
+        if hit is not None:
+            return hit
+        return plant_from_sources(self.module_functions(), self._plant_in_memory(name), key)
+
+    def definition_key(self, name: str | None = None) -> str:
+        """A digest of everything the plant built by :meth:`to_plant` (with ``name``) follows
+        from: this definition (expressions by ``sympy.srepr``, parameter values, units,
+        labels, ...) and the code that analyses it and generates its functions."""
+        srepr = sp.srepr
+        eta = None if self.eta is None else tuple(srepr(e) for e in self.eta)
+        parts = (
+            name or self.name,
+            tuple(srepr(s) for s in self.states),
+            tuple((srepr(s), float(v)) for s, v in self.params),
+            srepr(self.f),
+            srepr(self.g),
+            srepr(self.h),
+            None if self.bd is None else srepr(self.bd),
+            eta,
+            self.equilibrium,
+            self.state_labels,
+            self.description,
+            self.output_unit,
+            self.input_unit,
+            self.disturbance_unit,
+            self.state_units,
+        )
+        text = f"{generator_digest()}|{parts!r}"
+        return "py_" + hashlib.sha256(text.encode()).hexdigest()[:24]
 
     def module_functions(self) -> list[str]:
         """The generated functions as a plant module holds them (``def _fn_f(x, p)``, ...,
