@@ -8,6 +8,8 @@ sources) and "warm" the same command again in a new process:
 
 * ``simulate`` of a config on a plant file (a 2-state Duffing oscillator, 5-s step, LADRC,
   dt = 1e-3): cold, then warm (the plant module and its kernel are loaded from the cache);
+  then once more after editing a parameter value in the plant file (a new plant module,
+  sympy runs again, the kernel is the same: :mod:`aiofl.engine.code_fingerprint`);
 * ``simulate frontier-s1-ladrc`` (a built-in plant): cold, then warm;
 * with ``--reproduce``: ``aiofl reproduce`` cold, then warm.
 
@@ -105,6 +107,12 @@ def main() -> None:
             note = "" if codes == {0} else f"  (exit {sorted(codes)})"
             warm_text = " / ".join(f"{w:.2f}" for w, _ in warm)
             print(f"{label:36s} {cold:9.2f} {warm_text:>18s}{note}")
+            if i == 0:  # a parameter value of the plant file edited
+                (work / "duffing.toml").write_text(PLANT.replace("k = 4.0", "k = 5.0"))
+                edited, rc = timed(args, cache, work / "out")
+                note = "" if rc == 0 else f"  (exit {rc})"
+                edit_label = "  the same, k edited in the plant file"
+                print(f"{edit_label:36s} {'':9s} {edited:18.2f}{note}")
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
