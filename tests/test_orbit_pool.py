@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 from aiofl.config import load_config
-from aiofl.reporting.cases import closed_loop_verdict
-from aiofl.reporting.orbit_pool import orbit_verdicts
+from aiofl.reporting.orbit_pool import case_verdicts, closed_loop_verdict, orbit_verdicts
 
 # two designs whose equilibrium is unstable (so the tracking orbit is analysed) and whose
 # analysis is among the cheapest (~1.5 s each)
@@ -33,7 +32,7 @@ def _same(a, b, path=""):
         assert a == b, (path, a, b)
 
 
-@pytest.mark.slow  # two worker processes start and import aiofl (~5 s)
+@pytest.mark.slow  # worker processes start and import aiofl (~5 s each time)
 def test_orbit_verdicts_in_two_workers_equal_the_sequential_loop():
     jobs = {p: closed_loop_verdict(load_config(p), orbit=False) for p in PRESETS}
     assert all(v["verdict"] == "unstable" for v in jobs.values())
@@ -43,6 +42,12 @@ def test_orbit_verdicts_in_two_workers_equal_the_sequential_loop():
     for p in PRESETS:
         assert pooled[p]["floquet"] is not None, pooled[p]
         _same(alone[p], pooled[p], p)
+    # the whole verdict (linearisation and orbit) computed in the workers, started in the
+    # order given, equals the two computed here
+    whole = case_verdicts(PRESETS[::-1], workers=2)
+    assert list(whole) == list(PRESETS[::-1])
+    for p in PRESETS:
+        _same({**jobs[p], "orbit": alone[p]}, whole[p], p)
 
 
 def test_one_blas_thread_limits_numpy_and_scipy_in_a_fresh_process() -> None:

@@ -203,9 +203,12 @@ def test_an_extra_preset_becomes_an_extra_row_everywhere(monkeypatch) -> None:
         rp, "load_config", lambda n: real("paper-s1-inleso" if n == "retuned-s1-inleso" else n)
     )
     # the rows are the subject here, not the orbit verdicts (test_report checks those on
-    # the session's reproduction): skip their ~25 s of variational integration
-    monkeypatch.setattr(rp, "orbit_verdicts", lambda jobs, ts=None: {})
+    # the session's reproduction): skip their ~25 s of variational integration (and the
+    # worker processes, which load each preset by its name); each design then has its
+    # linearisation verdict alone, computed here from its case's config
+    monkeypatch.setattr(rp, "case_verdicts", lambda presets, ts=None: {})
     rep = rp.compute(available=["retuned-s1-inleso", "not-an-extra"])
+    assert all("orbit" not in v and "verdict" in v for v in rep.verdicts.values())
     (extra,) = [r for r in rep.records if r["source"] == "retuned"]
     printed = _one(rep.records, 1, "INLESO", "printed")
     assert (extra["scenario"], extra["structure"]) == (1, "INLESO")

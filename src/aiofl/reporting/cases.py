@@ -42,14 +42,13 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from aiofl.analysis.linearize import closed_loop_verdict as _linearized_verdict
 from aiofl.components.differentiators import itd_steady_state
 from aiofl.components.metrics import itae
 from aiofl.components.observers import eso_gains
 from aiofl.config import RunConfig, list_presets, load_config
 from aiofl.engine.simulation import SimulationResult, simulate_batch
 from aiofl.reporting.behaviour import TOLERANCE, Behaviour, analysis_numbers, measure_result
-from aiofl.reporting.orbit_pool import orbit_verdict, orbit_verdicts
+from aiofl.reporting.orbit_pool import case_verdicts, closed_loop_verdict
 from aiofl.reporting.paper import PAPER_PRESETS, PAPER_TABLES, SCENARIOS
 
 __all__ = [
@@ -436,24 +435,6 @@ def model_assistance(cfg: RunConfig) -> str | None:
     return text
 
 
-def closed_loop_verdict(cfg: RunConfig, *, orbit: bool = True) -> dict[str, Any]:
-    """Closed-loop linearisation verdict of a case, with its reconciled verdict.
-
-    Uses :func:`aiofl.analysis.linearize.closed_loop_verdict` (``{"verdict": str, "eigenvalues":
-    [[re, im], ...]}``) and adds ``"orbit"`` (:func:`orbit_verdict`: equilibrium, limit
-    cycle, tracking orbit).  A failure of the analysis is reported in the verdict, not raised.
-    ``orbit = False`` (the report, for a run that diverged: the simulation and an unstable
-    linearisation agree, nothing to reconcile) leaves the orbit out.
-    """
-    try:
-        out = dict(_linearized_verdict(cfg))
-    except Exception as exc:  # the report must not fail because one analysis did
-        out = {"verdict": f"analysis failed: {type(exc).__name__}: {exc}", "eigenvalues": []}
-    if orbit:
-        out["orbit"] = orbit_verdict(cfg, out)
-    return out
-
-
 # ----------------------------------------------------------------------- orchestration
 @dataclass(frozen=True)
 class Reproduction:
@@ -531,21 +512,21 @@ def orbit_cost_rank(cfg: RunConfig) -> int:
     return 2 * (c.eso == "improved") + (c.sef != "linear") + (c.td in ("han", "improved"))
 
 
-class _OrbitPool:
-    """:func:`aiofl.reporting.orbit_pool.orbit_verdicts` of ``jobs`` on a background thread
+class _VerdictPool:
+    """:func:`aiofl.reporting.orbit_pool.case_verdicts` of ``presets`` on a background thread
     (its workers are processes); :meth:`join` returns the records, re-raising what the
     thread raised, and ``finished`` is when it ended (``time.perf_counter``)."""
 
-    def __init__(self, jobs: dict[str, dict[str, Any]], ts: float | None) -> None:
+    def __init__(self, presets: list[str], ts: float | None) -> None:
         self._out: dict[str, Any] = {}
         self._error: BaseException | None = None
         self.finished = 0.0
-        self._thread = threading.Thread(target=self._run, args=(jobs, ts), daemon=True)
+        self._thread = threading.Thread(target=self._run, args=(presets, ts), daemon=True)
         self._thread.start()
 
-    def _run(self, jobs: dict[str, dict[str, Any]], ts: float | None) -> None:
+    def _run(self, presets: list[str], ts: float | None) -> None:
         try:
-            self._out.update(orbit_verdicts(jobs, ts))
+            self._out.update(case_verdicts(presets, ts))
         except BaseException as exc:  # re-raised in the caller's thread by join()
             self._error = exc
         finally:
@@ -581,7 +562,12 @@ def compute(
     on_stage: Callable[[str], None] | None = None,
     ts: float | None = None,
 ) -> Reproduction:
-    """Discover and simulate all cases and derive the facts the report needs."""
+    """Discover and simulate all cases and derive the facts the report needs.
+
+    The closed-loop verdicts of the runs that did not diverge (linearisation and orbit:
+    :func:`aiofl.reporting.orbit_pool.case_verdicts`) are computed in worker processes,
+    which load each design's preset by its name (and apply ``ts``), while this process
+    computes the sampling limits."""
     stage = on_stage or (lambda _msg: None)
     t0 = time.perf_counter()
     stage("loading presets")
@@ -596,22 +582,32 @@ def compute(
     t2 = time.perf_counter()
     trivial = {s: trivial_itae(next(c for c in cases if c.scenario == s).config) for s in SCENARIOS}
     stage("closed-loop analysis")
-    verdicts = {r.case.preset: closed_loop_verdict(r.case.config, orbit=False) for r in runs}
-    # the orbit verdicts (Python-level variational integration) in worker processes, the
-    # likely slowest first, while this process computes the sampling limits (engine
-    # threads): a core that an orbit worker leaves idle at the end has work meanwhile
-    need = {r.case.preset: verdicts[r.case.preset] for r in runs if not r.result.diverged}
+    # each design's linearisation and orbit verdicts (Python-level variational integration)
+    # in worker processes, the likely slowest first, while this process computes the
+    # sampling limits (engine threads): a core an orbit worker leaves idle has work meanwhile
     configs = {c.preset: c.config for c in cases}
-    order = sorted(need, key=lambda name: -orbit_cost_rank(configs[name]))
-    orbits = _OrbitPool({name: need[name] for name in order}, ts)
+    live = [r.case.preset for r in runs if not r.result.diverged]
+    orbits = _VerdictPool(sorted(live, key=lambda name: -orbit_cost_rank(configs[name])), ts)
+    # a run that diverged: its linearisation alone (the simulation and an unstable
+    # linearisation agree, nothing to reconcile)
+    verdicts = {
+        r.case.preset: closed_loop_verdict(r.case.config, orbit=False)
+        for r in runs
+        if r.result.diverged
+    }
     stage("sampling limits (largest Ts per design, batched)")
     from aiofl.reporting.sampling_note import case_limits
 
     t3 = time.perf_counter()
     sampling = case_limits(configs)
     t4 = time.perf_counter()
-    for name, orbit in orbits.join().items():
-        verdicts[name]["orbit"] = orbit
+    verdicts.update(orbits.join())
+    # in the runs' order; a design without a worker's record: its linearisation alone
+    verdicts = {
+        r.case.preset: verdicts.get(r.case.preset)
+        or closed_loop_verdict(r.case.config, orbit=False)
+        for r in runs
+    }
     return Reproduction(
         runs=runs,
         records=build_records(runs, verdicts),

@@ -1,16 +1,20 @@
-"""The report's reconciled orbit verdicts, computed on every core.
+"""The report's closed-loop verdicts, reconciled with the orbit analysis, on every core.
 
-:func:`aiofl.analysis.orbit.orbit_analysis` integrates the variational equation of a
-design's closed loop with scipy's BDF and a complex-step Jacobian: pure Python on one core,
-up to tens of seconds for an INLESO design, and independent from design to design.
-:func:`orbit_verdicts` hands them to worker processes (one per core, at most
+:func:`closed_loop_verdict` is a report case's verdict: the linearisation
+(:func:`aiofl.analysis.linearize.closed_loop_verdict`) and the reconciled orbit verdict
+(:func:`orbit_verdict`: :func:`aiofl.analysis.orbit.orbit_analysis` integrates the
+variational equation of the closed loop with scipy's BDF and a complex-step Jacobian: pure
+Python on one core, up to tens of seconds for an INLESO design, and independent from design
+to design).  :func:`case_verdicts` (both) and :func:`orbit_verdicts` (the orbit verdict of
+a given linearisation) hand them to worker processes (one per core, at most
 :data:`MAX_WORKERS`), each a fresh ``python -m aiofl.reporting.orbit_pool`` (not a fork of
 a process whose numba threads run, and not a re-import of the caller's ``__main__``, so a
 script without a ``__main__`` guard may call it).  A worker reads jobs (a preset's name,
-the report's sample time and the linearisation verdict) as length-prefixed pickles on its
-stdin, loads the config itself and writes each record back on stdout; the parent gives the
-next job to whichever worker is free.  The same function on the same inputs: the records
-equal those of the sequential loop (``workers=1``, also used for a single design or core).
+the report's sample time and the linearisation verdict, or None to compute it) as
+length-prefixed pickles on its stdin, loads the config itself and writes each record back
+on stdout; the parent gives the next job to whichever worker is free, in the order given.
+The same function on the same inputs: the records equal those of the sequential loop
+(``workers=1``, also used for a single design or core).
 """
 
 from __future__ import annotations
@@ -22,10 +26,10 @@ import struct
 import subprocess
 import sys
 import threading
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import IO, Any
 
-__all__ = ["MAX_WORKERS", "orbit_verdict", "orbit_verdicts"]
+__all__ = ["MAX_WORKERS", "case_verdicts", "closed_loop_verdict", "orbit_verdict", "orbit_verdicts"]
 
 MAX_WORKERS = 4
 """At most this many worker processes (each holds a Python interpreter with aiofl)."""
@@ -42,14 +46,36 @@ def orbit_verdict(cfg: Any, verdict: dict[str, Any]) -> dict[str, Any]:
         return {"verdict": f"orbit analysis failed: {type(exc).__name__}: {exc}", "short": "—"}
 
 
-def _verdict(preset: str, ts: float | None, verdict: dict[str, Any]) -> dict[str, Any]:
-    """One design's :func:`orbit_verdict`, its config loaded by name: a worker's job."""
+def closed_loop_verdict(cfg: Any, *, orbit: bool = True) -> dict[str, Any]:
+    """Closed-loop linearisation verdict of a report case, with its reconciled verdict.
+
+    Uses :func:`aiofl.analysis.linearize.closed_loop_verdict` (``{"verdict": str,
+    "eigenvalues": [[re, im], ...]}``) and adds ``"orbit"`` (:func:`orbit_verdict`:
+    equilibrium, limit cycle, tracking orbit).  A failure of the analysis is reported in the
+    verdict, not raised.  ``orbit = False`` (the report, for a run that diverged: the
+    simulation and an unstable linearisation agree, nothing to reconcile) leaves the orbit
+    out.
+    """
+    from aiofl.analysis.linearize import closed_loop_verdict as linearized_verdict
+
+    try:
+        out = dict(linearized_verdict(cfg))
+    except Exception as exc:  # the report must not fail because one analysis did
+        out = {"verdict": f"analysis failed: {type(exc).__name__}: {exc}", "eigenvalues": []}
+    if orbit:
+        out["orbit"] = orbit_verdict(cfg, out)
+    return out
+
+
+def _verdict(preset: str, ts: float | None, verdict: dict[str, Any] | None) -> dict[str, Any]:
+    """A worker's job, the config loaded by name: :func:`orbit_verdict` of the given
+    linearisation verdict, or (None) the whole :func:`closed_loop_verdict`."""
     from aiofl.config import load_config
 
     cfg = load_config(preset)
     if ts is not None:
         cfg = cfg.with_sample_time(ts)
-    return orbit_verdict(cfg, verdict)
+    return closed_loop_verdict(cfg) if verdict is None else orbit_verdict(cfg, verdict)
 
 
 def _send(stream: IO[bytes], obj: Any) -> None:
@@ -66,8 +92,8 @@ def _receive(stream: IO[bytes]) -> Any:
     return pickle.loads(stream.read(size))  # our own worker's records
 
 
-Job = tuple[str, float | None, dict[str, Any]]
-"""A worker's job: preset name, sample time, linearisation verdict."""
+Job = tuple[str, float | None, dict[str, Any] | None]
+"""A worker's job: preset name, sample time, linearisation verdict (None: computed too)."""
 
 
 def _serve(jobs: queue.Queue[Job], out: dict[str, Any]) -> None:
@@ -110,22 +136,35 @@ def orbit_verdicts(
         Preset name → the record of :func:`aiofl.analysis.orbit.orbit_analysis`, in the
         order of ``jobs``.  A design whose worker died is analysed here instead.
     """
+    return _pool([(name, ts, v) for name, v in jobs.items()], workers)
+
+
+def case_verdicts(
+    presets: Sequence[str], ts: float | None = None, workers: int | None = None
+) -> dict[str, dict[str, Any]]:
+    """:func:`closed_loop_verdict` (linearisation and orbit) of each preset, started in the
+    order given (the report starts the likely slowest first), on ``workers`` processes as
+    :func:`orbit_verdicts`; preset name → record, in the order of ``presets``."""
+    return _pool([(name, ts, None) for name in presets], workers)
+
+
+def _pool(jobs: list[Job], workers: int | None) -> dict[str, dict[str, Any]]:
     if workers is None:  # the cores this process may use (sched_getaffinity: Linux only)
         usable = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else None
         workers = min(len(usable) if usable else (os.cpu_count() or 1), MAX_WORKERS)
     n = max(1, min(workers, len(jobs)))
     if n == 1:
-        return {name: _verdict(name, ts, v) for name, v in jobs.items()}
+        return {name: _verdict(name, ts, v) for name, ts, v in jobs}
     todo: queue.Queue[Job] = queue.Queue()
-    for name, v in jobs.items():
-        todo.put((name, ts, v))
+    for job in jobs:
+        todo.put(job)
     done: dict[str, Any] = {}
     threads = [threading.Thread(target=_serve, args=(todo, done)) for _ in range(n)]
     for t in threads:
         t.start()
     for t in threads:
         t.join()
-    return {name: done[name] if name in done else _verdict(name, ts, v) for name, v in jobs.items()}
+    return {name: done[name] if name in done else _verdict(name, ts, v) for name, ts, v in jobs}
 
 
 def _worker() -> None:
