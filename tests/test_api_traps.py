@@ -167,7 +167,7 @@ def test_default_linear_feedback_places_every_tracking_pole_at_minus_omega_c(rho
     np.testing.assert_allclose(poly, np.poly(np.full(rho, -wc)), rtol=1e-12)
 
 
-@pytest.mark.slow  # compiles a kernel for CHAIN3 (~6 s unless cached on disk)
+@pytest.mark.slow  # the chain plant's kernel (shared with test_engine), unless cached
 def test_default_ladrc_converges_where_the_old_defaults_did_not():
     """ρ = 3 chain, initial error 0.3, b0 20 % low.  The default controller (n_feedback = ρ,
     binomial α) drives y onto the differentiator's profile r1; the old defaults, n_feedback
@@ -382,7 +382,7 @@ def test_toml_eso_init():
         Controller(eso_init="measured")
 
 
-@pytest.mark.slow  # compiles a kernel for CHAIN3 (~6 s unless cached on disk)
+@pytest.mark.slow  # the chain plant's kernel (shared with test_engine), unless cached
 def test_eso_starts_at_the_first_measurement_in_the_engine_and_the_reference():
     c = Controller.from_structure("LADRC", rho=3, values=LADRC_VALUES, eso_init="output")
     sc = Scenario(t_final=1.0, reference=Reference(amplitude=0.5, omega=1.0), x0=(0.3, 0, 0))
@@ -460,7 +460,7 @@ def test_toml_actuator_range():
     assert c.u_range() == (-4.0, 4.0) and "law.u_min" not in c.values
 
 
-@pytest.mark.slow  # compiles a kernel for CHAIN3 (~6 s unless cached on disk)
+@pytest.mark.slow  # the chain plant's kernel (shared with test_engine), unless cached
 def test_asymmetric_saturation_in_the_engine_and_the_reference():
     base = Controller.from_structure("LADRC", rho=3, values=LADRC_VALUES)
     sc = Scenario(t_final=2.0, reference=Reference(amplitude=0.5, omega=1.0), x0=(0.3, 0, 0))

@@ -296,7 +296,7 @@ CHAIN = chain3(2.0, 0.5, 3.0)
 integrators."""
 
 
-@pytest.mark.slow  # compiles a kernel for its own plant (~6 s unless cached on disk)
+@pytest.mark.slow  # the chain plant's kernel (shared with test_api_traps), unless cached
 def test_eso_estimates_states_and_total_disturbance():
     """On a plant that *is* a chain of ρ = 3 integrators, ξ̂_i → x_i and ξ̂_4 → the total
     disturbance f_T = -a sin x1 - c x3 + (b - b0) u, with errors shrinking like
