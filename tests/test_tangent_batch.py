@@ -145,6 +145,26 @@ def test_batch_jacobian_with_the_finite_difference_fallback() -> None:
     assert batch[0, 0] == pytest.approx(slope, rel=1e-7)
 
 
+def test_the_finite_difference_cache_is_bounded_and_changes_no_value() -> None:
+    """The finite-difference Jacobians a plant's derivatives keep: at most
+    ``FD_CACHE_SIZE`` (an orbit visits ~10⁵ states; the cache grew with each), the most
+    recently used kept, and an evicted one computed again is the same to the last bit."""
+    from aiofl.analysis.derivatives import FD_CACHE_SIZE, PlantDerivatives
+    from test_linearize import tank_f_erf, tank_plant
+
+    plant = tank_plant("erf-tank", tank_f_erf)
+    der = PlantDerivatives(plant)
+    p = np.array(list(plant.params.values()))
+    first = der.fd_jacobian("f", np.array([0.5]), p).copy()
+    for k in range(FD_CACHE_SIZE + 40):
+        der.fd_jacobian("f", np.array([0.6 + 1e-3 * k]), p)
+        der.fd_jacobian("f", np.array([0.6]), p)  # used again and again: stays
+    assert len(der._fd_cache) == FD_CACHE_SIZE
+    assert ("f", np.array([0.6]).tobytes(), p.tobytes()) in der._fd_cache
+    assert ("f", np.array([0.5]).tobytes(), p.tobytes()) not in der._fd_cache  # evicted
+    assert np.array_equal(der.fd_jacobian("f", np.array([0.5]), p), first)
+
+
 def test_reads_first_argument_only_where_the_code_never_touches_x() -> None:
     """A plant function that never reads x is evaluated once per batch (constant in x);
     anything that might read it is not."""

@@ -33,16 +33,22 @@ import dis
 import math
 import types
 import warnings
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["COMPLEX_STEP", "PlantDerivatives", "complex_safe"]
+__all__ = ["COMPLEX_STEP", "FD_CACHE_SIZE", "PlantDerivatives", "complex_safe"]
 
 COMPLEX_STEP = 1e-30
 """Imaginary step h of the complex-step derivative (no cancellation, so any tiny h works)."""
+
+FD_CACHE_SIZE = 256
+"""Finite-difference Jacobians a :class:`PlantDerivatives` keeps (the most recently used).
+A tangent batch asks for the Jacobian at one real state once per column, so a few entries
+serve it; an orbit integration visits ~10⁵ states, and an unbounded cache grew with each."""
 
 _ANALYTIC = (
     "sin", "cos", "tan", "asin", "acos", "atan", "sinh", "cosh", "tanh",
@@ -207,7 +213,7 @@ class PlantDerivatives:
         self.method: dict[str, str] = dict.fromkeys(self.functions, "complex step")
         self._verified: set[tuple[bytes, bytes]] = set()
         self.notes: list[str] = []
-        self._fd_cache: dict[tuple[str, bytes, bytes], NDArray[np.float64]] = {}
+        self._fd_cache: OrderedDict[tuple[str, bytes, bytes], NDArray[np.float64]] = OrderedDict()
 
     # ---------------------------------------------------------------- evaluation
     def _real(self, name: str, x: NDArray[np.float64], p: NDArray[np.float64]) -> NDArray[Any]:
@@ -237,11 +243,15 @@ class PlantDerivatives:
         """Jacobian of function ``name`` at real x by :func:`scipy.differentiate.jacobian`
         (adaptive central differences with Richardson extrapolation)."""
         key = (name, x.tobytes(), p.tobytes())
-        if key in self._fd_cache:
-            return self._fd_cache[key]
-        jac = self._fd_result(name, x, p).df
-        self._fd_cache[key] = np.asarray(jac, dtype=np.float64).reshape(-1, x.size)
-        return self._fd_cache[key]
+        cache = self._fd_cache
+        if key in cache:
+            cache.move_to_end(key)
+            return cache[key]
+        jac = np.asarray(self._fd_result(name, x, p).df, dtype=np.float64).reshape(-1, x.size)
+        cache[key] = jac
+        if len(cache) > FD_CACHE_SIZE:
+            cache.popitem(last=False)  # the least recently used
+        return jac
 
     def _fd_result(self, name: str, x: NDArray[np.float64], p: NDArray[np.float64]) -> Any:
         from scipy.differentiate import jacobian
