@@ -252,6 +252,9 @@ def recipe(
         templates=tuple(templates),
         entry=tpl("loop", loop._tpl_loop, {"nogil": True, **opts}),
         sources=_sources(sampled_data),
+        # the stage right-hand side at one state (engine.simulation.closed_loop_rhs): a
+        # kernel of its own, cached like the loop (it was compiled in every process)
+        also_cached=() if sampled_data else ("_EVAL",),
     )
 
 
