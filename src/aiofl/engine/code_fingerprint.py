@@ -180,6 +180,11 @@ def _value(value: Any, h: Any, seen: set[int]) -> None:
 def _own(value: Any) -> bool:
     """Whether a builtin, ufunc or class comes from a module identified by name alone."""
     module = getattr(value, "__module__", None) or ("numpy" if isinstance(value, np.ufunc) else "")
+    return _named_only(module)
+
+
+def _named_only(module: str) -> bool:
+    """Whether the module ``module`` is identified by its name alone (see the module notes)."""
     root = module.split(".", 1)[0]
     return root in _OWN_MODULES or root in sys.stdlib_module_names
 
@@ -187,7 +192,7 @@ def _own(value: Any) -> bool:
 def _module(module: types.ModuleType, h: Any) -> None:
     name = module.__name__
     h.update(f"module {name}|".encode())
-    if name.split(".", 1)[0] in _OWN_MODULES or name in sys.stdlib_module_names:
+    if _named_only(name):
         return
     path = getattr(module, "__file__", None)
     if not path:

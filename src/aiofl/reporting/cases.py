@@ -32,9 +32,9 @@ from __future__ import annotations
 import math
 import platform
 import re
-import threading
 import time
 from collections.abc import Callable, Iterable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
@@ -512,31 +512,10 @@ def orbit_cost_rank(cfg: RunConfig) -> int:
     return 2 * (c.eso == "improved") + (c.sef != "linear") + (c.td in ("han", "improved"))
 
 
-class _VerdictPool:
-    """:func:`aiofl.reporting.orbit_pool.case_verdicts` of ``presets`` on a background thread
-    (its workers are processes); :meth:`join` returns the records, re-raising what the
-    thread raised, and ``finished`` is when it ended (``time.perf_counter``)."""
-
-    def __init__(self, presets: list[str], ts: float | None) -> None:
-        self._out: dict[str, Any] = {}
-        self._error: BaseException | None = None
-        self.finished = 0.0
-        self._thread = threading.Thread(target=self._run, args=(presets, ts), daemon=True)
-        self._thread.start()
-
-    def _run(self, presets: list[str], ts: float | None) -> None:
-        try:
-            self._out.update(case_verdicts(presets, ts))
-        except BaseException as exc:  # re-raised in the caller's thread by join()
-            self._error = exc
-        finally:
-            self.finished = time.perf_counter()
-
-    def join(self) -> dict[str, Any]:
-        self._thread.join()
-        if self._error is not None:
-            raise self._error
-        return self._out
+def _timed_case_verdicts(presets: list[str], ts: float | None) -> tuple[dict[str, Any], float]:
+    """:func:`aiofl.reporting.orbit_pool.case_verdicts` and when it ended
+    (``time.perf_counter``): what :func:`compute` runs on a background thread."""
+    return case_verdicts(presets, ts), time.perf_counter()
 
 
 def _prepare_later_instances(cases: list[Case], *, sampled: bool) -> None:
@@ -587,7 +566,10 @@ def compute(
     # sampling limits (engine threads): a core an orbit worker leaves idle has work meanwhile
     configs = {c.preset: c.config for c in cases}
     live = [r.case.preset for r in runs if not r.result.diverged]
-    orbits = _VerdictPool(sorted(live, key=lambda name: -orbit_cost_rank(configs[name])), ts)
+    order = sorted(live, key=lambda name: -orbit_cost_rank(configs[name]))
+    pool = ThreadPoolExecutor(max_workers=1)  # its workers are processes
+    orbits = pool.submit(_timed_case_verdicts, order, ts)
+    pool.shutdown(wait=False)
     # a run that diverged: its linearisation alone (the simulation and an unstable
     # linearisation agree, nothing to reconcile)
     verdicts = {
@@ -601,7 +583,8 @@ def compute(
     t3 = time.perf_counter()
     sampling = case_limits(configs)
     t4 = time.perf_counter()
-    verdicts.update(orbits.join())
+    records, orbits_done = orbits.result()  # re-raises what the thread raised
+    verdicts.update(records)
     # in the runs' order; a design without a worker's record: its linearisation alone
     verdicts = {
         r.case.preset: verdicts.get(r.case.preset)
@@ -618,7 +601,7 @@ def compute(
         timings={
             "load": t1 - t0,
             "simulate": t2 - t1,
-            "analysis": orbits.finished - t2,
+            "analysis": orbits_done - t2,
             "sampling": t4 - t3,
         },
         sampling=sampling,
