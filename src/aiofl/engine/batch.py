@@ -44,6 +44,11 @@ class Batch(NamedTuple):
     disc
         (B, :data:`aiofl.engine.discrete.N_DISC`) the discrete controller's rows (zeros for
         a continuous member).
+    plant_table
+        (:data:`aiofl.engine.plant_table.N_TABLE`,) the addresses of the plant's functions
+        a plant-independent instance calls (:mod:`aiofl.engine.plant_table`; set by
+        :func:`aiofl.engine.instances.run` before such an instance runs, unread by the
+        others).
     dt, n_steps, method, decimation, store, threshold
         The step [s], the number of steps, the method (:data:`aiofl.layout.METHODS`), the
         trajectory's decimation, whether to store it, the divergence threshold.
@@ -61,6 +66,7 @@ class Batch(NamedTuple):
     noise_table: NDArray[np.float64]
     noise_row: NDArray[np.int64]
     disc: NDArray[np.float64]
+    plant_table: NDArray[np.int64]
     dt: float
     n_steps: int
     method: int

@@ -25,7 +25,7 @@ import types
 from typing import Any
 
 from aiofl import layout as L
-from aiofl.engine import batch, member, views
+from aiofl.engine import batch, member, plant_table, views
 from aiofl.engine import compile as compile_
 from aiofl.engine.compile import PLANT_FUNCTIONS
 from aiofl.plants.base import Plant
@@ -36,6 +36,7 @@ __all__ = [
     "component_functions",
     "engine_sources",
     "guarded",
+    "plant_function",
     "private_components",
     "user_functions",
     "vector_math_globals",
@@ -44,7 +45,7 @@ __all__ = [
 
 class PlantFailure(Exception):
     """Raised inside a diagnostic kernel by a plant function that raised:
-    ``(index into PLANT_FUNCTIONS, x_1, ..., x_n)``."""
+    ``(index into PLANT_FUNCTIONS, x_1, ..., x_n, p_1, ..., p_np)``."""
 
 
 _PRIVATE_LOCK = threading.Lock()
@@ -63,10 +64,11 @@ def user_functions(plant: Plant) -> bool:
 def engine_sources() -> tuple[str, ...]:
     """The files every kernel's code comes from besides the plant's: the layout, the
     per-member setup and law, this module, the compile factory, the array views, the batch
-    record, the plant interface (its functions' compile flags) and the component modules."""
+    record, the plant table (how a kernel calls the plant's functions), the plant interface
+    (its functions' compile flags) and the component modules."""
     base = sys.modules[Plant.__module__]
     here = sys.modules[__name__]
-    mods = (L, member, here, compile_, views, batch, base, *_component_modules())
+    mods = (L, member, here, compile_, views, batch, plant_table, base, *_component_modules())
     return tuple(m.__file__ for m in mods)
 
 
@@ -161,6 +163,19 @@ def private_components(variant: str = "scalar") -> dict[str, types.ModuleType]:
         return out
 
 
+def plant_function(fn: Any, variant: str, *, inline: bool = True) -> Any:
+    """A plant function as an instance of ``variant`` binds it: a private copy, with vector
+    math and inlined where called (``"lanes"``; ``inline=False``: called, as the entries
+    of a plant table call it inside their ``try``), else as written (``"scalar"``: libm,
+    called)."""
+    py = getattr(fn, "py_func", fn)
+    if variant == "lanes":
+        space = vector_math_globals(py.__globals__)
+        extra = {"inline": "always"} if inline else {}
+        return compile_.rejit(py, space, error_model="numpy", **extra)
+    return compile_.rejit(py, error_model="numpy")
+
+
 def vector_math_globals(space: dict[str, Any]) -> dict[str, Any]:
     """A copy of a function's globals ``space`` in which ``exp``, ``log``, ``sin`` and
     ``cos`` (bound by name, or reached as attributes of the ``math`` or ``numpy`` module)
@@ -201,12 +216,13 @@ def bind_private(ns: dict[str, Any], variant: str = "scalar") -> None:
             ns[name] = compile_.rejit(obj, ns)
 
 
-def guarded(fn: Any, index: int, n: int) -> Any:
+def guarded(fn: Any, index: int, n: int, n_p: int) -> Any:
     """``fn`` wrapped so that an exception it raises becomes
-    ``PlantFailure(index, x_1, ..., x_n)`` (numba cannot bind the exception itself)."""
+    ``PlantFailure(index, x_1, ..., x_n, p_1, ..., p_np)`` (numba cannot bind the exception
+    itself; the host calls ``fn`` again at that state to learn it)."""
     from numba import njit
 
-    state = "".join(f", x[{i}]" for i in range(n))
+    state = "".join(f", x[{i}]" for i in range(n)) + "".join(f", p[{j}]" for j in range(n_p))
     src = (
         "def guarded(x, p):\n"
         "    try:\n"

@@ -84,11 +84,16 @@ class Template:
         The Python function whose code is compiled.
     options
         numba ``njit`` options (``inline``, ``fastmath``, ``error_model``, ``nogil``...).
+    bindings
+        Globals of this template alone, over the recipe's (a template compiled several
+        times with different collaborators, such as one entry per plant function); it
+        sees the recipe's templates compiled before it.
     """
 
     name: str
     function: Callable[..., Any]
     options: Mapping[str, Any] = field(default_factory=dict)
+    bindings: Mapping[str, Any] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -225,10 +230,15 @@ def fingerprint(recipe: Recipe) -> str | None:
 
 # ---------------------------------------------------------------------------- compiling
 def copy_function(
-    fn: Callable[..., Any], space: dict[str, Any], qualname: str | None = None
+    fn: Callable[..., Any],
+    space: dict[str, Any],
+    qualname: str | None = None,
+    name: str | None = None,
 ) -> types.FunctionType:
-    """A copy of the Python function ``fn`` whose globals are ``space``."""
-    py = types.FunctionType(fn.__code__, space, fn.__name__, fn.__defaults__, fn.__closure__)
+    """A copy of the Python function ``fn`` whose globals are ``space`` (named ``name``,
+    default ``fn``'s)."""
+    name = name or fn.__name__
+    py = types.FunctionType(fn.__code__, space, name, fn.__defaults__, fn.__closure__)
     py.__qualname__ = qualname or fn.__qualname__
     py.__doc__ = fn.__doc__
     return py
@@ -272,8 +282,10 @@ def build(recipe: Recipe, *, cache: bool = True) -> Instance:
         raise ValueError(f"also_cached names no template of the recipe: {sorted(unknown)}")
     ns = dict(recipe.bindings)
     for tpl in recipe.templates:
-        ns[tpl.name] = instantiate(tpl.function, ns, suffix, **tpl.options)
-    entry = instantiate(recipe.entry.function, ns, suffix, **recipe.entry.options)
+        space = {**ns, **tpl.bindings} if tpl.bindings else ns
+        ns[tpl.name] = instantiate(tpl.function, space, suffix, **tpl.options)
+    e = recipe.entry
+    entry = instantiate(e.function, {**ns, **e.bindings} if e.bindings else ns, suffix, **e.options)
     ns[recipe.entry.name] = entry
     if folder is not None:
         cached = [recipe.entry, *(t for t in recipe.templates if t.name in recipe.also_cached)]

@@ -59,7 +59,6 @@ from aiofl.engine.member import (
 # Placeholders for what an instance binds (see aiofl.engine.instances).
 _W = 32
 _N = 1
-_N_P = 1
 _NZ = 1
 _MEMBER_SETUP = _SETUP = _LEADING_ROWS = _REFERENCE = _RHS = None
 _BLK_HAN = _BLK_ITD = _BLK_PREFILTER_START = _BLK_PREFILTER_TERM = _BLK_COPY = None
@@ -69,7 +68,7 @@ _BLK_INLESO_ERROR = _BLK_ESO_ROW = _BLK_ESO_INPUT = _BLK_ESO_LAST = _BLK_PLANT =
 _BLK_DISTURBANCE = _BLK_METRICS = _BLK_MODEL = _BLK_MODEL_LAW = _BLK_MODEL_INPUT = None
 
 
-def _tpl_deriv(t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - compiled
+def _tpl_deriv(fns, t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - compiled
     r"""F(t, z) of every lane: ``dz[:nz, l]`` and the signals y, y_meas, u in ``s``.
 
     In order: the differentiator's profile :math:`r_1..r_\rho` (Han's TD, eq. 18; the ITD,
@@ -108,7 +107,7 @@ def _tpl_deriv(t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - c
     else:
         _BLK_COPY(rr[ri, rho], rff)
 
-    _BLK_OUTPUT(z, p, s[S_NOISE], s[S_Y], s[S_YM])
+    _BLK_OUTPUT(fns, z, p, s[S_NOISE], s[S_Y], s[S_YM])
 
     # state error feedback and law (kernel._aiofl_command), e_i = r_i - ξ̂_i
     if iq[IQ_LAW] == L.LAW_AIOFL:
@@ -129,14 +128,14 @@ def _tpl_deriv(t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - c
         elif sef_kind == L.SEF_LINEAR:
             _BLK_LINEAR_SEF(q[L.F_B0], rff, v)
         if model:  # the nominal normal form at x̂ = Φ⁻¹(ξ̂), then its law
-            _BLK_MODEL(z, o_eso, rho, pn, s[S_AHAT], s[S_BHAT])
+            _BLK_MODEL(fns, z, o_eso, rho, pn, s[S_AHAT], s[S_BHAT])
             _BLK_MODEL_LAW(
                 v, z[o_eso + rho], q[L.F_B0], s[S_AHAT], s[S_BHAT], q[L.F_UMIN], q[L.F_UMAX], u
             )
         else:
             _BLK_LAW(v, z[o_eso + rho], q[L.F_B0], q[L.F_UMIN], q[L.F_UMAX], u)
     else:
-        _BLK_IOFL(z, iq, q, pn, rr, ri, o_td, rff, u)
+        _BLK_IOFL(fns, z, iq, q, pn, rr, ri, o_td, rff, u)
 
     # observer, eqs. (5)/(16) or (19)
     if iq[IQ_ESO] == L.ESO_IMPROVED:
@@ -160,9 +159,9 @@ def _tpl_deriv(t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - c
     _BLK_ESO_LAST(q[Q_BETA + rho], e, dz[o_eso + rho])
 
     dx = _LEADING_ROWS(dz, _N)
-    _BLK_PLANT(z, p, u, dx)
+    _BLK_PLANT(fns, z, p, u, dx)
     if dany:
-        _BLK_DISTURBANCE(z, p, s[S_D], dx)
+        _BLK_DISTURBANCE(fns, z, p, s[S_D], dx)
     m0 = _N
     _BLK_METRICS(t, s[S_Y], r, u, dz[m0], dz[m0 + 1], dz[m0 + 2], dz[m0 + 3], dz[m0 + 4])
 
@@ -213,15 +212,16 @@ def _tpl_evaluate(batch, t, zin, noise_val, dz_out, sig):  # pragma: no cover - 
     dz = np.zeros((_NZ, 1))
     for i in range(_NZ):
         z[i, 0] = zin[i]
-    p = np.zeros((_N_P, 1))
-    pn = np.zeros((_N_P, 1))
-    for j in range(_N_P):
+    n_p = batch.p_after.shape[1]
+    p = np.zeros((n_p, 1))
+    pn = np.zeros((n_p, 1))
+    for j in range(n_p):
         p[j, 0] = batch.p_after[0, j]
         pn[j, 0] = batch.p_nom[0, j]
     s[S_NOISE, 0] = noise_val
     on = t >= sc[L.S_DIST_TIME, 0] * (1.0 - SWITCH_RTOL)
     s[S_D, 0] = sc[L.S_DIST_AMP, 0] if on else 0.0
-    _RHS(t, z, dz, iq, q, p, pn, rr, 0, s, s[S_D, 0] != 0.0)
+    _RHS(batch.plant_table, t, z, dz, iq, q, p, pn, rr, 0, s, s[S_D, 0] != 0.0)
     for i in range(_NZ):
         dz_out[i] = dz[i, 0]
     sig[0] = rr[0, 0, 0]

@@ -56,30 +56,37 @@ from numpy.typing import NDArray
 
 from aiofl import layout as L
 from aiofl.cache import cache_enabled
-from aiofl.engine import bindings, continuous, lane_blocks, loop, member, sampled, views
+from aiofl.engine import (
+    bindings,
+    continuous,
+    lane_blocks,
+    loop,
+    member,
+    plant_table,
+    sampled,
+    views,
+)
 from aiofl.engine import compile as compile_
 from aiofl.engine.bindings import PLANT_FUNCTIONS, PlantFailure
 from aiofl.engine.sampled import N_CS
 from aiofl.plants.base import Plant, PlantError
 
-__all__ = ["VARIANTS", "instance_for", "plan_groups", "recipe", "run_groups"]
+__all__ = [
+    "VARIANTS",
+    "instance_for",
+    "plan_groups",
+    "plant_independent",
+    "recipe",
+    "run",
+    "run_groups",
+    "set_plant_table",
+]
 
 VARIANTS = ("lanes", "scalar", "guarded")
 """The ways an instance's code is compiled (see the module notes)."""
 
-_INSTANCES: dict[tuple[int, int, bool, str], tuple[Plant, compile_.Instance]] = {}
+_INSTANCES: dict[tuple[int, bool, int, bool, str], tuple[Plant | None, compile_.Instance]] = {}
 _LOCK = threading.Lock()
-_PLANT_OF_ENTRY: dict[int, tuple[Plant, bool]] = {}  # id(entry) -> (plant, sampled)
-
-
-def _plant_function(fn: Any, variant: str) -> Any:
-    """A plant function as an instance binds it: a private copy, with vector math and
-    inlined where called (``"lanes"``), else as written (libm, called)."""
-    py = getattr(fn, "py_func", fn)
-    if variant == "lanes":
-        space = bindings.vector_math_globals(py.__globals__)
-        return compile_.rejit(py, space, inline="always", error_model="numpy")
-    return compile_.rejit(py, error_model="numpy")
 
 
 def _noalias_option() -> dict[str, Any]:
@@ -146,6 +153,15 @@ def _imported(obj: Any) -> bool:
     return isinstance(obj, Dispatcher)
 
 
+def plant_independent(width: int, variant: str) -> bool:
+    """Whether the instance of ``width`` and ``variant`` calls the plant's functions through
+    the batch's plant table (:mod:`aiofl.engine.plant_table`): every width-1 instance but the
+    diagnostic one.  Such an instance is compiled once per number of plant states and
+    serves every plant; the width-32 lane instances inline the plant's functions into their
+    lane loops, which vectorize only so."""
+    return width == 1 and variant != "guarded"
+
+
 def recipe(
     plant: Plant, width: int, *, sampled_data: bool = False, variant: str = "lanes"
 ) -> compile_.Recipe:
@@ -165,37 +181,38 @@ def recipe(
     # variant's private components (nothing shared with another variant's instances)
     ns_member = dict(vars(member))
     bindings.bind_private(ns_member, private)
-    ns_member.update(_N=plant.n_states, **bindings.component_functions(private))
-    tag = f"{variant}_{compile_.plant_tag(plant)}"  # plant-specific names (see plant_tag)
+    n, n_p = plant.n_states, len(plant.params)
+    independent = plant_independent(width, variant)
+    ns_member.update(_N=n, **bindings.component_functions(private))
+    # names unique to the plant's code, or to the number of states (see plant_tag)
+    tag = f"{variant}_n{n}" if independent else f"{variant}_{compile_.plant_tag(plant)}"
     member_setup = compile_.instantiate(member._tpl_setup, ns_member, tag, **opts)
 
-    fns = plant.compiled
-    if variant == "guarded":
-        n = plant.n_states
-        f, g, h, bd, nf, ab = (bindings.guarded(fn, k, n) for k, fn in enumerate(fns))
+    if independent:  # the plant's functions called through the batch's plant table
+        plant_fns = plant_table.call_bindings(n, tag)
     else:
-        f, g, h, bd = (_plant_function(fn, variant) for fn in (plant.f, plant.g, plant.h, fns[3]))
-        nf = _plant_function(fns[4], "scalar")
-        ab = _plant_function(fns[5], variant)  # the model-assisted ESO's, lane by lane
+        fns = plant.compiled
+        if variant == "guarded":
+            own = tuple(bindings.guarded(fn, k, n, n_p) for k, fn in enumerate(fns))
+        else:
+            own = tuple(
+                bindings.plant_function(fn, "scalar" if k == 4 else variant)  # nf: called
+                for k, fn in enumerate(fns)
+            )
+        plant_fns = plant_table.direct_bindings(own, tag)
     # the templates' modules' globals (layout constants, placeholders), without the modules
     # and compiled functions they import: an instance calls only what is bound below
     merged = {**vars(lane_blocks), **vars(continuous), **vars(sampled), **vars(loop)}
     ns = {k: v for k, v in merged.items() if not _imported(v)}
     sin, cos = (vecmath.vsin, vecmath.vcos) if lanes else (np.sin, np.cos)
-    nza = plant.n_states + L.N_METRIC
+    nza = n + L.N_METRIC
     ns.update(
         _W=width,
         _SAMPLED=sampled_data,
-        _N=plant.n_states,
-        _N_P=len(plant.params),
+        _N=n,
         _NZ=nza if sampled_data else nza + 2 * L.RHO_MAX + 1,
         _CONTROLLER_SIZE=max(N_CS, sampled.N_DISC) if sampled_data else 1,
-        _PF=f,
-        _PG=g,
-        _PH=h,
-        _PBD=bd,
-        _PNF=nf,
-        _PAB=ab,
+        **plant_fns,
         _MEMBER_SETUP=member_setup,
         _IOFL_COMMAND=ns_member["_iofl_command"],
         _UNMANAGED=views.unmanaged_intrinsic(),
@@ -224,7 +241,7 @@ def recipe(
     if sampled_data:
         # the controller's update, compiled as the blocks are, in the members' namespace
         ns_ctrl = dict(ns_member)
-        ns_ctrl["_PAB"] = ab
+        ns_ctrl["_PAB"] = plant_fns["_PAB"]
         sampled._bind(ns_ctrl, bindings.private_components(private)["discrete"])
         ns["_CTRL_INIT"] = compile_.instantiate(sampled._tpl_ctrl_init, ns_ctrl, tag, **opts)
         ns["_CTRL_STEP"] = compile_.instantiate(sampled._tpl_ctrl_step, ns_ctrl, tag, **opts)
@@ -245,9 +262,10 @@ def recipe(
             tpl("_STORE_CONTROLLER", continuous._tpl_store_controller, inline),
             tpl("_EVAL", continuous._tpl_evaluate, opts),
         ]
+    kind = f"{variant[0]}{'s' if sampled_data else 'c'}{width}"
     return compile_.Recipe(
-        kind=f"{variant[0]}{'s' if sampled_data else 'c'}{width}",
-        plant=plant,
+        kind=f"{kind}n{n}" if independent else kind,
+        plant=None if independent else plant,
         bindings=ns,
         templates=tuple(templates),
         entry=tpl("loop", loop._tpl_loop, {"nogil": True, **opts}),
@@ -262,19 +280,56 @@ def instance_for(
     plant: Plant, width: int = loop.WIDTH, *, sampled_data: bool = False, variant: str = "lanes"
 ) -> compile_.Instance:
     """The compiled instance of ``plant`` (see :func:`recipe`), built on first use in this
-    process; the guarded variant is never cached on disk (loaded from numba's cache, its
-    plant wrappers no longer caught the plant's exception: the ValueError of a raising
-    plant escaped instead of the PlantFailure naming the function and the state)."""
-    key = (id(plant), width, sampled_data, variant)
+    process; a plant-independent one (:func:`plant_independent`) is shared by every plant of
+    its number of states.  The guarded variant is never cached on disk (loaded from numba's
+    cache, its plant wrappers no longer caught the plant's exception: the ValueError of a
+    raising plant escaped instead of the PlantFailure naming the function and the state)."""
+    independent = plant_independent(width, variant)
+    owner = None if independent else plant
+    key = (plant.n_states if independent else id(plant), independent, width, sampled_data, variant)
     with _LOCK:
-        if key not in _INSTANCES or _INSTANCES[key][0] is not plant:
+        if key not in _INSTANCES or _INSTANCES[key][0] is not owner:
             rec = recipe(plant, width, sampled_data=sampled_data, variant=variant)
             inst = compile_.build(rec, cache=cache_enabled() and variant != "guarded")
-            if not inst.cached and bindings.user_functions(plant):
+            if not independent and not inst.cached and bindings.user_functions(plant):
                 plant.typecheck()  # numba compiles them now rather than inside the kernel
-            _PLANT_OF_ENTRY[id(inst.entry)] = (plant, sampled_data)
-            _INSTANCES[key] = (plant, inst)
+            _INSTANCES[key] = (owner, inst)
         return _INSTANCES[key][1]
+
+
+def set_plant_table(plant: Plant, batch: Any, variant: str = "lanes") -> None:
+    """Write the addresses of ``plant``'s functions, compiled for the instances of
+    ``variant``, into ``batch.plant_table`` (:func:`aiofl.engine.plant_table.plant_table`)."""
+    batch.plant_table[:] = plant_table.plant_table(plant, variant, cache=cache_enabled())
+
+
+def run(
+    plant: Plant,
+    width: int,
+    groups: NDArray[np.int64],
+    batch: Any,
+    out: Any,
+    *,
+    sampled_data: bool = False,
+    variant: str = "lanes",
+    compile_only: bool = False,
+) -> None:
+    """Run ``groups`` of ``batch`` (a batch of ``plant``) on the instance of ``width``,
+    ``sampled_data`` and ``variant`` (:func:`instance_for`), writing ``out``: the plant's
+    table into the batch first when the instance is plant-independent (its entries compiled
+    or loaded now).  ``compile_only``: compile (or load) and return."""
+    inst = instance_for(plant, width, sampled_data=sampled_data, variant=variant)
+    if plant_independent(width, variant):
+        set_plant_table(plant, batch, variant)
+    run_groups(
+        inst.entry,
+        groups,
+        batch,
+        out,
+        plant=plant,
+        sampled_data=sampled_data,
+        compile_only=compile_only,
+    )
 
 
 def _by_kind(
@@ -352,9 +407,18 @@ def plan_groups(
 
 
 def run_groups(
-    loop_fn: Any, groups: NDArray[np.int64], batch: Any, out: Any, *, compile_only: bool = False
+    loop_fn: Any,
+    groups: NDArray[np.int64],
+    batch: Any,
+    out: Any,
+    *,
+    plant: Plant | None = None,
+    sampled_data: bool = False,
+    compile_only: bool = False,
 ) -> None:
-    """Run ``loop_fn(g, groups, batch, out)`` for every group, on all threads.
+    """Run ``loop_fn(g, groups, batch, out)`` for every group, on all threads (``plant``,
+    ``sampled_data``: what the loop runs, to name a failing plant function; see
+    :func:`_explain_failure`).
 
     The loop is compiled (or loaded from the disk cache) here, in the calling thread,
     before any worker starts: with LLVM's SLP vectorizer on (:func:`_slp_on`).  Each
@@ -370,7 +434,6 @@ def run_groups(
             with compile_.compile_lock(loop_fn), _slp_on():
                 loop_fn.compile(sig)
         except NumbaError:  # a user plant function numba cannot compile: say which
-            plant, _ = _PLANT_OF_ENTRY.get(id(loop_fn), (None, False))
             if plant is not None and bindings.user_functions(plant):
                 plant.typecheck()
             raise
@@ -400,17 +463,21 @@ def run_groups(
         th.join()
     if errors:
         g, exc = errors[0]
-        if isinstance(exc, Exception):
-            _explain_failure(loop_fn, groups[g], exc, batch, out)
+        if isinstance(exc, Exception) and plant is not None:
+            _explain_failure(plant, sampled_data, groups[g], exc, batch, out)
         raise exc
 
 
-def _explain_failure(loop_fn: Any, group: Any, exc: Exception, batch: Any, out: Any) -> None:
+def _explain_failure(
+    plant: Plant, sampled_data: bool, group: Any, exc: Exception, batch: Any, out: Any
+) -> None:
     """Raise a PlantError if a user plant's function caused ``exc`` (see the module notes):
-    the group's members are replayed one by one in the guarded instance; return otherwise,
+    the group's members are replayed one by one in the guarded instance, which reports the
+    function and the state (and parameters) it raised at; the function is then called there
+    once more from Python for its exception (a plant-independent instance knows only that
+    one raised, :class:`~aiofl.engine.plant_table.PlantCallFailed`).  Returns otherwise,
     so the caller re-raises ``exc`` with its traceback."""
-    plant, sampled_data = _PLANT_OF_ENTRY.get(id(loop_fn), (None, False))
-    if plant is None or not bindings.user_functions(plant):
+    if not bindings.user_functions(plant):
         return
     guarded = instance_for(plant, 1, sampled_data=sampled_data, variant="guarded").entry
     for m in (int(v) for v in group if v >= 0):
@@ -419,13 +486,28 @@ def _explain_failure(loop_fn: Any, group: Any, exc: Exception, batch: Any, out: 
         try:  # replay the member with every plant function reporting where it raised
             guarded(0, one, batch, out)
         except PlantFailure as failure:
-            index, *state = failure.args
+            index, *values = failure.args
+            state = [float(v) for v in values[: plant.n_states]]
+            cause = _plant_exception(plant, index, values) or exc
             raise PlantError(
                 f"plant {plant.name!r}: plant function {PLANT_FUNCTIONS[index]} failed at "
-                f"state x = {[float(v) for v in state]}: {type(exc).__name__}: {exc}"
+                f"state x = {state}: {type(cause).__name__}: {cause}"
             ) from None
         except Exception:  # not a plant function: the caller re-raises the original
             return
+
+
+def _plant_exception(plant: Plant, index: int, values: list[float]) -> Exception | None:
+    """The exception plant function ``index`` raises at the state and parameters ``values``
+    (a diagnostic replay's report), or None if it does not raise there."""
+    n = plant.n_states
+    x = np.array(values[:n], dtype=np.float64)
+    p = np.array(values[n:], dtype=np.float64)
+    try:
+        plant.compiled[index](x, p)
+    except Exception as err:
+        return err
+    return None
 
 
 @contextlib.contextmanager

@@ -119,18 +119,18 @@ def _blk_fill(dst, value):  # pragma: no cover - compiled
         dst[l] = value
 
 
-def _blk_output(z, p, noise, y, ym):  # pragma: no cover - compiled
+def _blk_output(fns, z, p, noise, y, ym):  # pragma: no cover - compiled
     """y = h(x) and y_meas = y + noise, every lane."""
     for l in range(_W):
-        yl = _PH(_COLUMN(z, l), _COLUMN(p, l))
+        yl = _PH(fns, _COLUMN(z, l), _COLUMN(p, l))
         y[l] = yl
         ym[l] = yl + noise[l]
 
 
-def _blk_plant_output(z, p, y):  # pragma: no cover - compiled
+def _blk_plant_output(fns, z, p, y):  # pragma: no cover - compiled
     """y = h(x), every lane."""
     for l in range(_W):
-        y[l] = _PH(_COLUMN(z, l), _COLUMN(p, l))
+        y[l] = _PH(fns, _COLUMN(z, l), _COLUMN(p, l))
 
 
 def _blk_error(ri, xi, e):  # pragma: no cover - compiled
@@ -183,12 +183,12 @@ def _blk_law(v, xi_ext, b0, u_min, u_max, u):  # pragma: no cover - compiled
         u[l] = _SATURATE(_AIOFL_LAW(v[l], xi_ext[l], b0[l]), u_min[l], u_max[l])
 
 
-def _blk_model(z, o_eso, rho, pn, a_hat, b_hat):  # pragma: no cover - compiled
+def _blk_model(fns, z, o_eso, rho, pn, a_hat, b_hat):  # pragma: no cover - compiled
     """The nominal normal form at the observer's state, :math:`(\\hat\\alpha, \\hat\\beta)
     = (\\alpha_0, \\beta_0)(\\Phi^{-1}(\\hat\\xi))` (the plant's ``alpha_beta_of_xi`` with the
     nominal parameters), lane by lane."""
     for l in range(_W):
-        ab = _PAB(_COLUMN(z, l)[o_eso : o_eso + rho], _COLUMN(pn, l))
+        ab = _PAB(fns, _COLUMN(z, l)[o_eso : o_eso + rho], _COLUMN(pn, l))
         a_hat[l] = ab[0]
         b_hat[l] = ab[1]
 
@@ -206,10 +206,10 @@ def _blk_model_input(a_hat, b_hat, u, dxi):  # pragma: no cover - compiled
         dxi[l] += a_hat[l] + b_hat[l] * u[l]
 
 
-def _blk_iofl(z, iq, q, pn, rr, ri, o_td, rff, u):  # pragma: no cover - compiled
+def _blk_iofl(fns, z, iq, q, pn, rr, ri, o_td, rff, u):  # pragma: no cover - compiled
     """The classical IOFL law on the nominal model, lane by lane (not vectorized)."""
     for l in range(_W):
-        nfx = _PNF(_COLUMN(z, l), _COLUMN(pn, l))  # views: no allocation per lane
+        nfx = _PNF(fns, _COLUMN(z, l), _COLUMN(pn, l))  # views: no allocation per lane
         ul = _IOFL_COMMAND(iq, q[:, l], rr[:, :, l], ri, z[:, l], o_td, nfx, rff[l])
         u[l] = _SATURATE(ul, q[L.F_UMIN, l], q[L.F_UMAX, l])
 
@@ -244,20 +244,20 @@ def _blk_eso_last(beta, e, dxi):  # pragma: no cover - compiled
         dxi[l] = beta[l] * e[l]
 
 
-def _blk_plant(z, p, u, dx):  # pragma: no cover - compiled
+def _blk_plant(fns, z, p, u, dx):  # pragma: no cover - compiled
     """dx = f(x) + g(x) u, every lane (``dx`` flat: state i of lane l at i W + l, so LLVM
     sees that the rows do not overlap)."""
     for l in range(_W):
-        fx = _PF(_COLUMN(z, l), _COLUMN(p, l))
-        gx = _PG(_COLUMN(z, l), _COLUMN(p, l))
+        fx = _PF(fns, _COLUMN(z, l), _COLUMN(p, l))
+        gx = _PG(fns, _COLUMN(z, l), _COLUMN(p, l))
         for i in range(_N):
             dx[i * _W + l] = fx[i] + gx[i] * u[l]
 
 
-def _blk_disturbance(z, p, d, dx):  # pragma: no cover - compiled
+def _blk_disturbance(fns, z, p, d, dx):  # pragma: no cover - compiled
     """dx += b_d(x) d where the lane's disturbance is on (``dx`` flat, as in _blk_plant)."""
     for l in range(_W):
-        bdx = _PBD(_COLUMN(z, l), _COLUMN(p, l))
+        bdx = _PBD(fns, _COLUMN(z, l), _COLUMN(p, l))
         for i in range(_N):
             k = i * _W + l
             dx[k] = dx[k] + bdx[i] * d[l] if d[l] != 0.0 else dx[k]

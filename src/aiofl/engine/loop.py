@@ -107,7 +107,6 @@ N_S = 17
 _W = WIDTH
 _SAMPLED = False
 _N = 1
-_N_P = 1
 _NZ = 1
 _CONTROLLER_SIZE = 1  # row length of the discrete controller's state (sampled instances)
 _PH = None
@@ -137,7 +136,8 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
     ctrl_owner = np.zeros((3, nsw, _CONTROLLER_SIZE))  # sampled: coefficients, state, scratch
     rl_owner = np.zeros((1, nr))  # sampled: one lane's reference and derivatives at t_k
     z_owner = np.zeros((4, _NZ, _W))  # z, the stage state, F at the stage, the weighted sum
-    p_owner = np.zeros((4, _N_P, _W))  # parameters before, after, nominal, now
+    n_p = batch.p_before.shape[1]  # the plant's parameters (read at run time)
+    p_owner = np.zeros((4, n_p, _W))  # parameters before, after, nominal, now
     sc_owner = np.zeros((L.N_SCEN, _W))
     s_owner = np.zeros((N_S, _W))
     rr_owner = np.zeros((4, nr, _W))  # r and derivatives at t, t + dt/2, t + dt; at t_k
@@ -169,6 +169,7 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
     acc = zz[3]
     pn = pp[2]
     p = pp[3]
+    fns = batch.plant_table  # the plant's functions (plant-independent instances)
     dt = batch.dt
     n_steps = batch.n_steps
     threshold = batch.threshold
@@ -211,10 +212,10 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
         if _SAMPLED:
             sample = k % n_per == 0 and k < n_steps
             if delayed:  # y(t_k) into the ring, y(t_k - τ_out) into s[S_YD]
-                _DELAY_OUTPUT(k, z, p, s, ring, dsteps)
+                _DELAY_OUTPUT(fns, k, z, p, s, ring, dsteps)
             if sample:  # a sample: ADC, controller, DAC
                 _REFERENCE(t, t, sc, ref_t, rrow, rrs, 3, nd, ref_kind, s)
-                _SAMPLE(k, z, p, pn, s, rrs, rl, iq, q, ctrl)
+                _SAMPLE(fns, k, z, p, pn, s, rrs, rl, iq, q, ctrl)
             if delayed:  # the plant's command u(t_k - τ_in) into s[S_U]
                 _DELAY_INPUT(k, sample, s, ring, dsteps)
         elif k == 0 and init_output:
@@ -223,7 +224,7 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
             o_eso = iq[IQ_OESO]
             o_td = iq[IQ_OTD]
             for l in range(_W):
-                z[o_eso, l] = _PH(z[:, l], p[:, l]) + s[S_NOISE, l]
+                z[o_eso, l] = _PH(fns, z[:, l], p[:, l]) + s[S_NOISE, l]
                 zt[o_eso, l] = z[o_eso, l]
                 if init_td:
                     z[o_td, l] = z[o_eso, l]
@@ -231,7 +232,7 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
         for st in range(n_stages):
             c = STAGE_TIME[method, st]
             ri = int(2.0 * c)  # the reference slot of t_k + c dt: 0, 1 (mid-step), 2 (end)
-            _RHS((k + c) * dt, zt, kd, iq, q, p, pn, rrs, ri, s, dany)
+            _RHS(fns, (k + c) * dt, zt, kd, iq, q, p, pn, rrs, ri, s, dany)
             if st == 0:
                 if store and save_in == 0:
                     _STORE_ROW(row, t, lanes, live, rows, z, s, rrs, iq, ctrl, tr)
@@ -354,7 +355,7 @@ def _tpl_step_inputs(t, sc, noise_t, nrow, s, switched, pp):  # pragma: no cover
         dany = dany or s[S_D, l] != 0.0
         if not switched[l] and t >= sc[L.S_PCHANGE_TIME, l] * (1.0 - SWITCH_RTOL):
             switched[l] = True
-            for j in range(_N_P):
+            for j in range(pp.shape[1]):
                 pp[3, j, l] = pp[1, j, l]
     return dany
 
@@ -379,7 +380,7 @@ def _tpl_load_lanes(lanes, batch, pp, sc, rrow, nrow, zz):  # pragma: no cover -
     the initial plant state (``zz[0]`` and the stage state ``zz[1]``)."""
     for l in range(_W):
         mi = lanes[l]
-        for j in range(_N_P):
+        for j in range(pp.shape[1]):
             pp[0, j, l] = batch.p_before[mi, j]
             pp[1, j, l] = batch.p_after[mi, j]
             pp[2, j, l] = batch.p_nom[mi, j]

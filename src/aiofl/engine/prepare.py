@@ -38,7 +38,8 @@ from aiofl import layout as L
 from aiofl.cache import cache_enabled
 from aiofl.engine.batch import Batch, Outputs
 from aiofl.engine.discrete import N_DISC
-from aiofl.engine.instances import instance_for, run_groups
+from aiofl.engine.instances import run
+from aiofl.engine.plant_table import N_TABLE
 from aiofl.plants.base import Plant
 
 __all__ = ["parse_spec", "prepare", "prepare_in_background", "probe"]
@@ -72,6 +73,7 @@ def probe(plant: Plant) -> tuple[NDArray[np.int64], Batch, Outputs]:
         noise_table=np.zeros((1, 1)),
         noise_row=one.copy(),
         disc=np.zeros((1, N_DISC)),
+        plant_table=np.zeros(N_TABLE, dtype=np.int64),
         dt=1e-3,
         n_steps=1,
         method=L.METHOD_RK4,
@@ -117,8 +119,7 @@ def prepare(plant: Plant, specs: Sequence[tuple[int, bool]], *, controller: bool
         prepare_controller()
     groups, batch, out = probe(plant)
     for width, sampled_data in specs:
-        inst = instance_for(plant, width, sampled_data=sampled_data)
-        run_groups(inst.entry, groups, batch, out, compile_only=True)
+        run(plant, width, groups, batch, out, sampled_data=sampled_data, compile_only=True)
 
 
 def prepare_in_background(

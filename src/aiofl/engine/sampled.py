@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 from aiofl import layout as L
 from aiofl.cache import cache_enabled
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine import bindings, member
+from aiofl.engine import bindings, member, plant_table
 from aiofl.engine import compile as compile_
 from aiofl.engine import discrete as DS
 from aiofl.engine.discrete import (
@@ -102,7 +102,7 @@ N_CS = C_SCR + L.RHO_MAX
 
 # placeholders bound per instance (see _bind and aiofl.engine.instances)
 _W = 32
-_N = _N_P = 1
+_N = 1
 _PNF = _PAB = _MEMBER_SETUP = _LEADING_ROWS = _IOFL_COMMAND = _COLUMN = None
 _CTRL_INIT = _CTRL_STEP = None
 _SATURATE = None
@@ -136,7 +136,7 @@ def _tpl_ctrl_init(iq, cs, y0):  # pragma: no cover - compiled
             cs[C_TD] = y0  # the ITD's / prefilter's r_1 at rest at y0
 
 
-def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri, pn):  # pragma: no cover - compiled
+def _tpl_ctrl_step(fns, iq, q, dsc, cs, scr, y, rr, ri, pn):  # pragma: no cover - compiled
     """One sample of the discrete AIOFL controller: returns u_k, updates ``cs``.
 
     ESO correction :math:`\\hat\\xi = p + L\\phi(y - p_1)`; errors
@@ -186,7 +186,7 @@ def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri, pn):  # pragma: no cover - co
     b_hat = q[L.F_B0]
     model = iq[IQ_MODEL] == L.ESO_MODEL_NOMINAL
     if model:  # the nominal normal form at x̂ = Φ⁻¹(ξ̂)
-        ab = _PAB(cs[C_X : C_X + rho], pn)
+        ab = _PAB(fns, cs[C_X : C_X + rho], pn)
         a_hat = ab[0]
         b_hat = ab[1]
 
@@ -222,22 +222,22 @@ def _tpl_ctrl_step(iq, q, dsc, cs, scr, y, rr, ri, pn):  # pragma: no cover - co
     return u
 
 
-def _tpl_ctrl_run(iq, q, dsc, cs, scr, y, rr, ri, pn, n):  # pragma: no cover - compiled
+def _tpl_ctrl_run(fns, iq, q, dsc, cs, scr, y, rr, ri, pn, n):  # pragma: no cover - compiled
     """``n`` samples of :func:`_tpl_ctrl_step` with the same measurement ``y`` and
     reference ``rr[ri]`` (a controller settling at an operating point); returns the last
     u, ``cs`` updated."""
     u = 0.0
     for _ in range(n):
-        u = _CTRL_STEP(iq, q, dsc, cs, scr, y, rr, ri, pn)
+        u = _CTRL_STEP(fns, iq, q, dsc, cs, scr, y, rr, ri, pn)
     return u
 
 
-def _tpl_ctrl_step_each(iq, q, dsc, states, scr, ys, rr, ri, pn, us):  # pragma: no cover
+def _tpl_ctrl_step_each(fns, iq, q, dsc, states, scr, ys, rr, ri, pn, us):  # pragma: no cover
     """One sample of :func:`_tpl_ctrl_step` from each row of ``states`` (updated in place)
     with measurement ``ys[k]``, its command into ``us[k]``: the perturbed states of a
     finite-difference Jacobian in one call."""
     for k in range(states.shape[0]):
-        us[k] = _CTRL_STEP(iq, q, dsc, states[k], scr, ys[k], rr, ri, pn)
+        us[k] = _CTRL_STEP(fns, iq, q, dsc, states[k], scr, ys[k], rr, ri, pn)
 
 
 # ---------------------------------------------------- in the time loop, lane by lane
@@ -254,7 +254,7 @@ def _tpl_setup(lanes, batch, q, qt, iq, ctrl):  # pragma: no cover - compiled
     return int(ctrl[0, 0, D_STEPS])
 
 
-def _tpl_sample(k, z, p, pn, s, rrs, rl, iq, q, ctrl):  # pragma: no cover - compiled
+def _tpl_sample(fns, k, z, p, pn, s, rrs, rl, iq, q, ctrl):  # pragma: no cover - compiled
     """A sample at t_k of every lane: the ADC (``s[S_YM]`` = y + noise, quantised), the
     discrete controller's update (:func:`_tpl_ctrl_step`, or the classical IOFL law from
     the true state and the nominal model) with the reference and its derivatives at t_k
@@ -263,7 +263,7 @@ def _tpl_sample(k, z, p, pn, s, rrs, rl, iq, q, ctrl):  # pragma: no cover - com
     rho = iq[IQ_RHO]
     nr = L.RHO_MAX + 2
     iofl = iq[IQ_LAW] == L.LAW_IOFL
-    _BLK_OUTPUT(z, p, s[S_NOISE], s[S_Y], s[S_YM])
+    _BLK_OUTPUT(fns, z, p, s[S_NOISE], s[S_Y], s[S_YM])
     for l in range(_W):
         if s[S_YDON, l] != 0.0:  # a sensor delay: y(t_k - τ_out) + n(t_k)
             s[S_YM, l] = s[S_YD, l] + s[S_NOISE, l]
@@ -278,12 +278,12 @@ def _tpl_sample(k, z, p, pn, s, rrs, rl, iq, q, ctrl):  # pragma: no cover - com
             _CTRL_INIT(iq, cs, yl)
         u_before = cs[C_UPREV]
         if iofl:
-            nfx = _PNF(_COLUMN(z, l), _COLUMN(pn, l))
+            nfx = _PNF(fns, _COLUMN(z, l), _COLUMN(pn, l))
             uc = _IOFL_COMMAND(iq, q[l], rl, 0, cs, C_PROF, nfx, rl[0, rho])
             uc = _SATURATE(uc, q[l, L.F_UMIN], q[l, L.F_UMAX])
             cs[C_UPREV] = uc
         else:
-            uc = _CTRL_STEP(iq, q[l], dsc, cs, ctrl[2, l], yl, rl, 0, _COLUMN(pn, l))
+            uc = _CTRL_STEP(fns, iq, q[l], dsc, cs, ctrl[2, l], yl, rl, 0, _COLUMN(pn, l))
         ua = u_before if dsc[D_DELAY] > 0.0 else uc
         uq = dsc[D_UQ]
         s[S_U, l] = uq * np.floor(ua / uq + 0.5) if uq > 0.0 else ua
@@ -303,12 +303,12 @@ def _tpl_delay_setup(sc, dt, dsteps, s):  # pragma: no cover - compiled
     return most
 
 
-def _tpl_delay_output(k, z, p, s, ring, dsteps):  # pragma: no cover - compiled
+def _tpl_delay_output(fns, k, z, p, s, ring, dsteps):  # pragma: no cover - compiled
     r"""Step k's output :math:`y(t_k)` into the ring (slot k mod its length) and the
     delayed :math:`y(t_k - m\,dt)` into ``s[S_YD]`` (:math:`y(0)` while
     :math:`t_k < m\,dt`); the ADC reads it (:func:`_tpl_sample`)."""
     nb = ring.shape[1]
-    _BLK_PLANT_OUTPUT(z, p, ring[1, k % nb])
+    _BLK_PLANT_OUTPUT(fns, z, p, ring[1, k % nb])
     for l in range(_W):
         m = dsteps[1, l]
         s[S_YD, l] = ring[1, (k - m) % nb, l] if k >= m else ring[1, 0, l]
@@ -330,14 +330,14 @@ def _tpl_delay_input(k, sample, s, ring, dsteps):  # pragma: no cover - compiled
             s[S_U, l] = ring[0, (k - m) % nb, l] if k >= m else 0.0
 
 
-def _tpl_plant_deriv(t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - compiled
+def _tpl_plant_deriv(fns, t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - compiled
     """The plant under the held command ``s[S_U]`` and the integrands of eq. (22), every
     lane (the time loop's right-hand side between samples); y into ``s[S_Y]``."""
-    _BLK_PLANT_OUTPUT(z, p, s[S_Y])
+    _BLK_PLANT_OUTPUT(fns, z, p, s[S_Y])
     dx = _LEADING_ROWS(dz, _N)
-    _BLK_PLANT(z, p, s[S_U], dx)
+    _BLK_PLANT(fns, z, p, s[S_U], dx)
     if dany:
-        _BLK_DISTURBANCE(z, p, s[S_D], dx)
+        _BLK_DISTURBANCE(fns, z, p, s[S_D], dx)
     m0 = _N
     r = rr[ri, 0]
     _BLK_METRICS(t, s[S_Y], r, s[S_U], dz[m0], dz[m0 + 1], dz[m0 + 2], dz[m0 + 3], dz[m0 + 4])
@@ -405,6 +405,8 @@ _LOCK = threading.Lock()
 
 
 _STANDALONE: dict[int, tuple[Any, SimpleNamespace]] = {}
+_NO_TABLE = np.zeros(plant_table.N_TABLE, dtype=np.int64)
+"""The plant table DiscreteController passes: unread (its update calls α, β directly)."""
 
 
 def standalone_recipe(plant: Any = None) -> compile_.Recipe:
@@ -416,10 +418,14 @@ def standalone_recipe(plant: Any = None) -> compile_.Recipe:
     from aiofl.plants.base import _no_alpha_beta
 
     ns = dict(vars(member))
-    ns.update(_N=1, _N_P=1, _NZ=1, **bindings.component_functions())
+    ns.update(_N=1, _NZ=1, **bindings.component_functions())
     _bind(ns)
     ab = plant.compiled[5] if plant is not None else _no_alpha_beta
-    ns["_PAB"] = compile_.rejit(getattr(ab, "py_func", ab), error_model="numpy")
+    # the plant's α, β called directly (its table argument unread: DiscreteController
+    # passes an empty one)
+    own_ab = compile_.rejit(getattr(ab, "py_func", ab), error_model="numpy")
+    tag = f"standalone_{compile_.plant_tag(plant)}" if plant is not None else "standalone"
+    ns["_PAB"] = plant_table.direct_binding(own_ab, tag)
     opts = _opts()
     tpl = compile_.Template
     return compile_.Recipe(
@@ -546,7 +552,16 @@ class DiscreteController:
         self._reference(r)
         return float(
             self._fn.step(
-                self._iq, self._q, self.row, self._cs, self._scr, y, self._rr, 0, self._pn
+                _NO_TABLE,
+                self._iq,
+                self._q,
+                self.row,
+                self._cs,
+                self._scr,
+                y,
+                self._rr,
+                0,
+                self._pn,
             )
         )
 
@@ -558,7 +573,17 @@ class DiscreteController:
         self._reference(r)
         return float(
             self._fn.run(
-                self._iq, self._q, self.row, self._cs, self._scr, y, self._rr, 0, self._pn, n
+                _NO_TABLE,
+                self._iq,
+                self._q,
+                self.row,
+                self._cs,
+                self._scr,
+                y,
+                self._rr,
+                0,
+                self._pn,
+                n,
             )
         )
 
@@ -582,7 +607,7 @@ class DiscreteController:
         self._reference(r)
         us = np.empty(st.shape[0])
         self._fn.step_each(
-            self._iq, self._q, self.row, st, self._scr, yv, self._rr, 0, self._pn, us
+            _NO_TABLE, self._iq, self._q, self.row, st, self._scr, yv, self._rr, 0, self._pn, us
         )
         return st, us
 

@@ -29,8 +29,9 @@ from aiofl.components.metrics import OPIWeights, opi
 from aiofl.controller import Controller, ControllerBatch, controller_batch
 from aiofl.engine.batch import Batch, Outputs
 from aiofl.engine.discrete import D_STEPS, N_DISC, Sampling, check_delays, sampling_rows
-from aiofl.engine.instances import instance_for, plan_groups, run_groups
+from aiofl.engine.instances import instance_for, plan_groups, run, set_plant_table
 from aiofl.engine.observer_gains import model_jacobians, with_model_gains
+from aiofl.engine.plant_table import N_TABLE
 from aiofl.limits import DT_MAX, MAX_STEPS, MAX_TRAJECTORY_BYTES, check_run_size
 from aiofl.plants.base import Plant
 from aiofl.scenario import Scenario, noise_sequence
@@ -371,6 +372,7 @@ def pack(
         noise_table=noise_d,
         noise_row=rows,
         disc=disc if disc is not None else np.zeros((b, N_DISC)),
+        plant_table=np.zeros(N_TABLE, dtype=np.int64),
         dt=float(dt),
         n_steps=int(n_steps),
         method=int(L.METHODS[method]),
@@ -418,8 +420,7 @@ def run_plan(
     """Run every planned group on its instance (compiled on first use)."""
     variant = "scalar" if engine == "scalar" else "lanes"
     for (width, is_sampled), groups in groups_by_instance.items():
-        inst = instance_for(plant, width, sampled_data=is_sampled, variant=variant)
-        run_groups(inst.entry, groups, batch, out)
+        run(plant, width, groups, batch, out, sampled_data=is_sampled, variant=variant)
 
 
 ENGINES = ("lanes", "scalar")
@@ -532,6 +533,7 @@ def closed_loop_rhs(
         divergence_threshold=1.0,
     )
     rec = rec._replace(p_after=p[None, :])  # the parameters the right-hand side sees
+    set_plant_table(plant, rec)
     evaluate(rec, float(t), z, float(noise), dz, sig)
     return {
         "dx": dz[:n].copy(),
