@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aiofl.engine import compile, instances, sampled
+from aiofl.engine import compile, instances, plant_table, sampled
 from aiofl.plants import get_plant
 from reachable import reachable_compiled
 
@@ -38,6 +38,8 @@ def _recipes() -> dict[str, compile.Recipe]:
         "guarded": rec(plant, 1, variant="guarded"),
         "discrete controller": sampled.standalone_recipe(),
         "model-assisted discrete controller": sampled.standalone_recipe(plant),
+        "plant table, lanes": plant_table.table_recipe(plant, "lanes"),
+        "plant table, scalar": plant_table.table_recipe(plant, "scalar"),
     }
 
 
@@ -45,8 +47,10 @@ def _code_files(recipe: compile.Recipe) -> set[str]:
     """The aiofl source files whose code a recipe's kernel can run: its templates' and
     every compiled function's and intrinsic's reachable from its bindings and their
     globals."""
-    templates = [tpl.function for tpl in (*recipe.templates, recipe.entry)]
-    found = reachable_compiled(dict(recipe.bindings), *(fn.__globals__ for fn in templates))
+    tpls = (*recipe.templates, recipe.entry)
+    templates = [tpl.function for tpl in tpls]
+    spaces = [fn.__globals__ for fn in templates] + [dict(tpl.bindings) for tpl in tpls]
+    found = reachable_compiled(dict(recipe.bindings), *spaces)
     funcs = [*templates, *(getattr(obj, "py_func", None) or obj._defn for obj in found)]
     return {f.__code__.co_filename for f in funcs if f.__code__.co_filename.startswith(str(SRC))}
 
@@ -59,7 +63,8 @@ def test_fingerprint_covers_every_source_a_kernel_runs(name):
     recipe = _recipes()[name]
     reached = _code_files(recipe)
     assert recipe.entry.function.__code__.co_filename in reached  # the walk sees the templates
-    assert str(SRC / "components" / "fastmath.py") in reached  # and the components'
+    if not name.startswith("plant table"):  # (a table calls only the plant's functions)
+        assert str(SRC / "components" / "fastmath.py") in reached  # and the components'
     plant_files = {  # covered by the plant's part of the fingerprint
         getattr(fn, "py_func", fn).__code__.co_filename
         for fn in (getattr(recipe.plant, k, None) for k in compile.PLANT_FUNCTIONS)
@@ -172,7 +177,7 @@ def test_a_plant_defined_in_a_notebook_cell_is_cached(tmp_path, monkeypatch):
     slfjm = get_plant("slfjm")
     f = _defined("def f(x, p):\n    return (x[1], -x[0])\n")
     plant = Plant("nofile", 2, f, slfjm.g, slfjm.h, {"a": 1.0})
-    recipe = dataclasses.replace(_recipes()["lanes w1"], plant=plant)
+    recipe = dataclasses.replace(_recipes()["lanes w32"], plant=plant)
     assert compile.fingerprint(recipe) is not None
     assert compile.build(recipe).cached
     odd = _defined("def f(x, p):\n    return (x[1], -D[0] * x[0])\n", D={0: 1.0})
@@ -229,17 +234,44 @@ def test_cache_folder_environment(tmp_path, monkeypatch):
 
 def test_entries_of_an_older_fingerprint_are_pruned(tmp_path, monkeypatch):
     monkeypatch.setenv("AIOFL_CACHE_DIR", str(tmp_path))
-    recipe = _recipes()["lanes w1"]
+    recipe = _recipes()["lanes w32"]
     key = compile.plant_key(recipe.plant)
     folder = tmp_path / "kernels"
     folder.mkdir()
-    stale = folder / f"loop._tpl_loop_lc1_{key}_0123456789abcdef0123-k.py311.nbi"
-    other_kind = folder / f"loop._tpl_loop_lc32_{key}_0123456789abcdef0123-k.py311.nbi"
-    other_plant = folder / "loop._tpl_loop_lc1_ffffffff_0123456789abcdef0123-k.py311.nbi"
-    for p in (stale, other_kind, other_plant):
+    stale = folder / f"loop._tpl_loop_lc32_{key}_0123456789abcdef0123-k.py311.nbi"
+    other_kind = folder / f"loop._tpl_loop_ls32_{key}_0123456789abcdef0123-k.py311.nbi"
+    other_plant = folder / "loop._tpl_loop_lc32_ffffffff_0123456789abcdef0123-k.py311.nbi"
+    independent = folder / "loop._tpl_loop_lc1n4_noplant_0123456789abcdef0123-k.py311.nbi"
+    for p in (stale, other_kind, other_plant, independent):
         p.write_bytes(b"")
     compile.build(recipe)
     assert not stale.exists() and other_kind.exists() and other_plant.exists()
+    assert independent.exists()
+    # a plant-independent instance prunes its own kind's older entries only
+    compile.build(_recipes()["lanes w1"])
+    assert not independent.exists() and other_kind.exists() and other_plant.exists()
+
+
+def test_width_one_instances_are_plant_independent():
+    """Every width-1 instance but the diagnostic one is compiled without the plant (its
+    recipe has none, its kind names the number of states): one fingerprint for two plants
+    of the same size, another for another size; the lane and diagnostic instances keep
+    the plant, and the plant's own compiled code is its table's recipe."""
+    slfjm, pendulum = get_plant("slfjm"), get_plant("pendulum")
+    from aiofl.plants.base import Plant
+
+    other4 = Plant("other4", 4, slfjm.f, slfjm.g, slfjm.h, dict(slfjm.params))
+    for variant in ("lanes", "scalar"):
+        for sampled_data in (False, True):
+            a = instances.recipe(slfjm, 1, sampled_data=sampled_data, variant=variant)
+            b = instances.recipe(other4, 1, sampled_data=sampled_data, variant=variant)
+            c = instances.recipe(pendulum, 1, sampled_data=sampled_data, variant=variant)
+            assert a.plant is None and a.kind.endswith("n4") and c.kind.endswith("n2")
+            assert compile.fingerprint(a) == compile.fingerprint(b) != compile.fingerprint(c)
+    for width, variant in ((32, "lanes"), (1, "guarded")):
+        assert instances.recipe(slfjm, width, variant=variant).plant is slfjm
+    tables = [plant_table.table_recipe(p, "lanes") for p in (slfjm, pendulum)]
+    assert compile.fingerprint(tables[0]) != compile.fingerprint(tables[1])
 
 
 # ------------------------------------------------------------------ plant files, cached
@@ -279,16 +311,19 @@ dt = 1e-3
 _PROBE = """\
 import json, sys
 from aiofl.config import load_config
-from aiofl.engine import instances
+from aiofl.engine import instances, plant_table
 cfg = load_config(sys.argv[1])
 res = cfg.simulate(store=False)
 kernel = instances.instance_for(cfg.plant, 1).entry
+entries = plant_table.table_entries(cfg.plant, "lanes")
 print(json.dumps({
     "itae": res.metrics["itae"],
     "sympy": "sympy" in sys.modules,
     "compiled": [str(s) for s in kernel.signatures],
     "hits": sum(kernel.stats.cache_hits.values()),
     "misses": sum(kernel.stats.cache_misses.values()),
+    "entry_hits": sum(sum(e.stats.cache_hits.values()) for e in entries),
+    "entry_misses": sum(sum(e.stats.cache_misses.values()) for e in entries),
 }))
 """
 
@@ -323,7 +358,8 @@ def test_a_plant_file_is_built_and_compiled_once_across_processes(tmp_path, monk
     the disk cache (a hit, no compile); same numbers.  Editing a parameter value of the
     plant file makes a new plant module (the old one pruned) but keeps the kernel: a fourth
     process loads it (the functions' module keeps its name) and runs the new value.
-    Editing the model itself makes a new kernel."""
+    Editing the model itself makes new table entries (the plant's compiled code); the time
+    loop, compiled without the plant, is the one every 2-state plant runs."""
     (tmp_path / "duffing.toml").write_text(PLANT_TOML)
     cfg = tmp_path / "sim.toml"
     cfg.write_text(CONFIG_TOML)
@@ -332,6 +368,9 @@ def test_a_plant_file_is_built_and_compiled_once_across_processes(tmp_path, monk
     # (compile.compile_lock) and loads the kernel it stored
     both = [_result(p) for p in [_start_probe(cfg, cache_dir), _start_probe(cfg, cache_dir)]]
     assert sorted((r["misses"], r["hits"]) for r in both) == [(0, 1), (1, 0)]
+    # the plant's 6 table entries: each compiled once, by either process
+    assert sum(r["entry_misses"] for r in both) == 6
+    assert all(r["entry_misses"] + r["entry_hits"] == 6 for r in both)
     first = both[0]
     assert both[1]["itae"] == first["itae"]
     modules = sorted((cache_dir / "plants").glob("plant_*.py"))
@@ -339,11 +378,13 @@ def test_a_plant_file_is_built_and_compiled_once_across_processes(tmp_path, monk
     second = _probe(cfg, cache_dir)
     assert not second["sympy"], "a cached plant file must not need sympy"
     assert second["hits"] == 1 and second["misses"] == 0
+    assert (second["entry_hits"], second["entry_misses"]) == (6, 0)
     assert second["itae"] == first["itae"]
     # a parameter value edited: a new module, the old one pruned, the same kernel
     (tmp_path / "duffing.toml").write_text(PLANT_TOML.replace("k = 4.0", "k = 5.0"))
     stiffer = _probe(cfg, cache_dir)
     assert stiffer["hits"] == 1 and stiffer["misses"] == 0
+    assert (stiffer["entry_hits"], stiffer["entry_misses"]) == (6, 0)
     assert stiffer["itae"] != first["itae"]
     now = sorted((cache_dir / "plants").glob("plant_*.py"))
     assert len(now) == 1 and now != modules
@@ -351,12 +392,13 @@ def test_a_plant_file_is_built_and_compiled_once_across_processes(tmp_path, monk
     monkeypatch.setenv("AIOFL_CACHE_DIR", str(cache_dir))
     from aiofl.plants import plant_cache
 
-    kernel = compile.fingerprint(
-        instances.recipe(plant_cache.plant_from_file(tmp_path / "duffing.toml"), 1)
-    )
+    before = plant_cache.plant_from_file(tmp_path / "duffing.toml")
+    entries = compile.fingerprint(plant_table.table_recipe(before, "lanes"))
+    loop = compile.fingerprint(instances.recipe(before, 1))
     (tmp_path / "duffing.toml").write_text(PLANT_TOML.replace("0.5*k*x**3", "0.4*k*x**3"))
     edited = plant_cache.plant_from_file(tmp_path / "duffing.toml")
-    assert compile.fingerprint(instances.recipe(edited, 1)) not in (None, kernel)
+    assert compile.fingerprint(plant_table.table_recipe(edited, "lanes")) not in (None, entries)
+    assert compile.fingerprint(instances.recipe(edited, 1)) == loop
 
 
 def test_a_damaged_plant_module_is_rebuilt(tmp_path, monkeypatch):
@@ -391,13 +433,13 @@ _SYMBOLIC = (
 
 def _symbolic_kernel_identity(cache_dir: Path, k: float, f2: str = "-k*sin(x1)") -> dict:
     """In a new process: where the functions of a symbolic plant built in Python live,
-    and the fingerprint of its width-1 kernel (nothing is compiled)."""
+    and the fingerprint of its compiled code, its table's entries (nothing is compiled)."""
     code = (
         _SYMBOLIC.replace("K", repr(k)).replace("F", f2)
-        + "import json\nfrom aiofl.engine import compile, instances\n"
+        + "import json\nfrom aiofl.engine import compile, plant_table\n"
         + "print(json.dumps({'file': plant.f.__code__.co_filename, "
         + "'analysed': 'analysis' in sym._cache, "
-        + "'fp': compile.fingerprint(instances.recipe(plant, 1))}))\n"
+        + "'fp': compile.fingerprint(plant_table.table_recipe(plant, 'lanes'))}))\n"
     )
     env = {**os.environ, "AIOFL_CACHE_DIR": str(cache_dir)}
     env.pop("AIOFL_NO_CACHE", None)

@@ -47,6 +47,7 @@ __all__ = [
     "direct_bindings",
     "entry_sizes",
     "plant_table",
+    "table_entries",
     "table_recipe",
 ]
 
@@ -108,6 +109,7 @@ def table_recipe(plant: Plant, variant: str) -> compile_.Recipe:
     per plant function (``_ENTRY_0`` ... in table order, the first the recipe's entry)."""
     import numba
 
+    from aiofl.components import vecmath, vecmath_tables
     from aiofl.engine import bindings
 
     sizes = entry_sizes(plant.n_states)
@@ -125,15 +127,16 @@ def table_recipe(plant: Plant, variant: str) -> compile_.Recipe:
     return compile_.Recipe(
         kind=f"table_{variant}",
         plant=plant,
-        bindings={"_CARRAY": numba.carray},
+        # __name__: numba names the module of a cached function's globals by it
+        bindings={"__name__": __name__, "_CARRAY": numba.carray},
         templates=tuple(others),
         entry=first,
-        sources=bindings.engine_sources(),
+        sources=(*bindings.engine_sources(), vecmath.__file__, vecmath_tables.__file__),
         also_cached=tuple(t.name for t in others),
     )
 
 
-_TABLES: dict[tuple[int, str], tuple[Plant, NDArray[np.int64], Any]] = {}
+_TABLES: dict[tuple[int, str], tuple[Plant, NDArray[np.int64], tuple[Any, ...]]] = {}
 _LOCK = threading.Lock()
 
 
@@ -141,22 +144,31 @@ def plant_table(plant: Plant, variant: str, *, cache: bool = True) -> NDArray[np
     """The addresses of ``plant``'s entries for ``variant`` (see the module notes),
     compiled (or loaded from the disk cache) on first use in this process; the compiled
     entries live as long as the process."""
+    return _table(plant, variant, cache)[0]
+
+
+def table_entries(plant: Plant, variant: str, *, cache: bool = True) -> tuple[Any, ...]:
+    """The compiled entries of ``plant``'s table for ``variant`` (numba dispatchers, in
+    table order; their ``stats`` tell whether they came from the disk cache)."""
+    return _table(plant, variant, cache)[1]
+
+
+def _table(plant: Plant, variant: str, cache: bool) -> tuple[NDArray[np.int64], tuple[Any, ...]]:
     from aiofl.engine import bindings
 
     key = (id(plant), variant)
     with _LOCK:
         if key in _TABLES and _TABLES[key][0] is plant:
-            return _TABLES[key][1]
+            return _TABLES[key][1], _TABLES[key][2]
         inst = compile_.build(table_recipe(plant, variant), cache=cache)
         if not inst.cached and bindings.user_functions(plant):
             plant.typecheck()  # a function numba cannot compile: a PlantError naming it
         sig = entry_signature()
-        addresses = np.zeros(N_TABLE, dtype=np.int64)
-        for k in range(N_TABLE):
-            addresses[k] = _entry_address(plant, inst.namespace[f"_ENTRY_{k}"], sig)
+        entries = tuple(inst.namespace[f"_ENTRY_{k}"] for k in range(N_TABLE))
+        addresses = np.array([_entry_address(plant, e, sig) for e in entries], dtype=np.int64)
         addresses.flags.writeable = False
-        _TABLES[key] = (plant, addresses, inst)
-        return addresses
+        _TABLES[key] = (plant, addresses, entries)
+        return addresses, entries
 
 
 def _entry_address(plant: Plant, dispatcher: Any, sig: Any) -> int:
@@ -167,7 +179,8 @@ def _entry_address(plant: Plant, dispatcher: Any, sig: Any) -> int:
     from aiofl.engine import bindings
 
     try:
-        dispatcher.compile(sig.args)
+        with compile_.compile_lock(dispatcher):  # processes at once: one compiles
+            dispatcher.compile(sig.args)
     except NumbaError:
         if bindings.user_functions(plant):
             plant.typecheck()
@@ -215,7 +228,12 @@ def call_bindings(n_states: int, tag: str) -> dict[str, Any]:
     out = {}
     for k, name in enumerate(BOUND_NAMES):
         body = _tpl_call_value if PLANT_FUNCTIONS[k] == "h" else _tpl_call_values
-        ns = {"_INDEX": k, "_CALL": call_intrinsic(sizes[k]), "PlantCallFailed": PlantCallFailed}
+        ns = {
+            "__name__": __name__,
+            "_INDEX": k,
+            "_CALL": call_intrinsic(sizes[k]),
+            "PlantCallFailed": PlantCallFailed,
+        }
         fn = compile_.copy_function(body, ns, f"{body.__name__}_{k}_{tag}")
         out[name] = njit(inline="always", error_model="numpy")(fn)
     return out
@@ -232,7 +250,8 @@ def direct_binding(function: Any, tag: str) -> Any:
     ``tag`` makes its name unique to the instance."""
     from numba import njit
 
-    fn = compile_.copy_function(_tpl_direct, {"_PLANT_FN": function}, f"_direct_{tag}")
+    space = {"__name__": __name__, "_PLANT_FN": function}
+    fn = compile_.copy_function(_tpl_direct, space, f"_direct_{tag}")
     return njit(inline="always", error_model="numpy")(fn)
 
 
