@@ -25,7 +25,7 @@ import types
 from typing import Any
 
 from aiofl import layout as L
-from aiofl.engine import batch, member, plant_table, views
+from aiofl.engine import batch, member, views
 from aiofl.engine import compile as compile_
 from aiofl.engine.compile import PLANT_FUNCTIONS
 from aiofl.plants.base import Plant
@@ -64,11 +64,10 @@ def user_functions(plant: Plant) -> bool:
 def engine_sources() -> tuple[str, ...]:
     """The files every kernel's code comes from besides the plant's: the layout, the
     per-member setup and law, this module, the compile factory, the array views, the batch
-    record, the plant table (how a kernel calls the plant's functions), the plant interface
-    (its functions' compile flags) and the component modules."""
+    record, the plant interface (its functions' compile flags) and the component modules."""
     base = sys.modules[Plant.__module__]
     here = sys.modules[__name__]
-    mods = (L, member, here, compile_, views, batch, plant_table, base, *_component_modules())
+    mods = (L, member, here, compile_, views, batch, base, *_component_modules())
     return tuple(m.__file__ for m in mods)
 
 

@@ -131,13 +131,13 @@ _LIGHT = {"inline": "always"}
 
 def _sources(sampled_data: bool) -> tuple[str, ...]:
     """Source files of an instance: every kernel's, the loop, the lane blocks, the
-    controller's module, this module and the vector math (and, sampled, the discrete
-    components and coefficient rows)."""
+    controller's module, this module, the plant table (how it calls the plant) and the
+    vector math (and, sampled, the discrete components and coefficient rows)."""
     from aiofl.components import vecmath, vecmath_tables
     from aiofl.engine import discrete
 
     here = sys.modules[__name__]
-    mods = [loop, lane_blocks, continuous, here, vecmath, vecmath_tables]
+    mods = [loop, lane_blocks, continuous, here, plant_table, vecmath, vecmath_tables]
     if sampled_data:
         mods += [sampled, discrete]
     return (*bindings.engine_sources(), *(m.__file__ for m in mods))

@@ -131,7 +131,7 @@ def table_recipe(plant: Plant, variant: str) -> compile_.Recipe:
         bindings={"__name__": __name__, "_CARRAY": numba.carray},
         templates=tuple(others),
         entry=first,
-        sources=(*bindings.engine_sources(), vecmath.__file__, vecmath_tables.__file__),
+        sources=(*bindings.engine_sources(), __file__, vecmath.__file__, vecmath_tables.__file__),
         also_cached=tuple(t.name for t in others),
     )
 

@@ -397,8 +397,10 @@ def _opts() -> dict[str, Any]:
 
 
 def _sources() -> tuple[str, ...]:
-    """Every kernel's sources, this module's and the discrete coefficient rows'."""
-    return (*bindings.engine_sources(), sys.modules[__name__].__file__, DS.__file__)
+    """Every kernel's sources, this module's, the plant table's (its α, β binding) and the
+    discrete coefficient rows'."""
+    here = sys.modules[__name__].__file__
+    return (*bindings.engine_sources(), here, plant_table.__file__, DS.__file__)
 
 
 _LOCK = threading.Lock()
