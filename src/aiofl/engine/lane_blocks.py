@@ -27,7 +27,7 @@ from aiofl.engine.member import (
 # Placeholders for what an instance binds (see aiofl.engine.instances).
 _W = 32
 _N = 1
-_PF = _PG = _PH = _PBD = _PNF = _PAB = None  # the plant's functions, inlined, vector math
+_PFG = _PH = _PBD = _PNF = _PAB = None  # the plant's functions, inlined, vector math
 _IOFL_COMMAND = _UNMANAGED = _COLUMN = _SIN = _COS = None
 _HAN_TD = _ITD = _FAL = _FAL_POWER_NEEDED = _FAL_LINEAR = None
 _INLSEF_TERM = _INLSEF_LIMIT = _LINEAR_SEF = _INLESO = _AIOFL_LAW = _SATURATE = None
@@ -248,8 +248,7 @@ def _blk_plant(fns, z, p, u, dx):  # pragma: no cover - compiled
     """dx = f(x) + g(x) u, every lane (``dx`` flat: state i of lane l at i W + l, so LLVM
     sees that the rows do not overlap)."""
     for l in range(_W):
-        fx = _PF(fns, _COLUMN(z, l), _COLUMN(p, l))
-        gx = _PG(fns, _COLUMN(z, l), _COLUMN(p, l))
+        fx, gx = _PFG(fns, _COLUMN(z, l), _COLUMN(p, l))
         for i in range(_N):
             dx[i * _W + l] = fx[i] + gx[i] * u[l]
 

@@ -427,7 +427,7 @@ def standalone_recipe(plant: Any = None) -> compile_.Recipe:
     # passes an empty one)
     own_ab = compile_.rejit(getattr(ab, "py_func", ab), error_model="numpy")
     tag = f"standalone_{compile_.plant_tag(plant)}" if plant is not None else "standalone"
-    ns["_PAB"] = plant_table.direct_binding(own_ab, tag)
+    ns["_PAB"] = plant_table.direct_binding(own_ab, tag=tag)
     opts = _opts()
     tpl = compile_.Template
     return compile_.Recipe(
