@@ -209,12 +209,14 @@ def _entry_address(plant: Plant, dispatcher: Any, sig: Any) -> int:
 
     try:
         with compile_.compile_lock(dispatcher):  # processes at once: one compiles
-            dispatcher.compile(sig.args)
+            dispatcher.compile(sig)  # the return type too: the caller's result slot is int32
     except NumbaError:
         if bindings.user_functions(plant):
             plant.typecheck()
         raise
     cres = dispatcher.overloads[sig.args]
+    if cres.signature != sig:  # pragma: no cover - numba changed how it types the entry
+        raise RuntimeError(f"plant table entry compiled as {cres.signature}, expected {sig}")
     return int(cres.library.get_pointer_to_function(cres.fndesc.llvm_func_name))
 
 
