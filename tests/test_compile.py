@@ -241,37 +241,45 @@ def test_entries_of_an_older_fingerprint_are_pruned(tmp_path, monkeypatch):
     stale = folder / f"loop._tpl_loop_lc32_{key}_0123456789abcdef0123-k.py311.nbi"
     other_kind = folder / f"loop._tpl_loop_ls32_{key}_0123456789abcdef0123-k.py311.nbi"
     other_plant = folder / "loop._tpl_loop_lc32_ffffffff_0123456789abcdef0123-k.py311.nbi"
-    independent = folder / "loop._tpl_loop_lc1n4_noplant_0123456789abcdef0123-k.py311.nbi"
+    independent = folder / "loop._tpl_loop_sc1n4_noplant_0123456789abcdef0123-k.py311.nbi"
     for p in (stale, other_kind, other_plant, independent):
         p.write_bytes(b"")
     compile.build(recipe)
     assert not stale.exists() and other_kind.exists() and other_plant.exists()
     assert independent.exists()
     # a plant-independent instance prunes its own kind's older entries only
-    compile.build(_recipes()["lanes w1"])
+    compile.build(_recipes()["scalar"])
     assert not independent.exists() and other_kind.exists() and other_plant.exists()
 
 
-def test_width_one_instances_are_plant_independent():
-    """Every width-1 instance but the diagnostic one is compiled without the plant (its
-    recipe has none, its kind names the number of states): one fingerprint for two plants
-    of the same size, another for another size; the lane and diagnostic instances keep
-    the plant, and the plant's own compiled code is its table's recipe."""
-    slfjm, pendulum = get_plant("slfjm"), get_plant("pendulum")
+def test_width_one_instances_of_user_plants_are_plant_independent():
+    """The width-1 instances of a plant defined outside aiofl, and every scalar instance,
+    are compiled without the plant (the recipe has none, its kind names the number of
+    states): one fingerprint for two plants of the same size, another for another size.
+    The lane instances of width 32, the diagnostic instance and the width-1 lane instance
+    of aiofl's own plants keep the plant; a plant's own compiled code is its table."""
     from aiofl.plants.base import Plant
 
-    other4 = Plant("other4", 4, slfjm.f, slfjm.g, slfjm.h, dict(slfjm.params))
+    slfjm, pendulum = get_plant("slfjm"), get_plant("pendulum")
+    user4 = Plant("user4", 4, _defined(_F4), slfjm.g, slfjm.h, dict(slfjm.params))
+    user2 = Plant("user2", 2, _defined(_F2), pendulum.g, pendulum.h, {"a": 1.0})
     for variant in ("lanes", "scalar"):
         for sampled_data in (False, True):
-            a = instances.recipe(slfjm, 1, sampled_data=sampled_data, variant=variant)
-            b = instances.recipe(other4, 1, sampled_data=sampled_data, variant=variant)
-            c = instances.recipe(pendulum, 1, sampled_data=sampled_data, variant=variant)
+            a, b, c = (
+                instances.recipe(p, 1, sampled_data=sampled_data, variant=variant)
+                for p in (user4, slfjm if variant == "scalar" else user4, user2)
+            )
             assert a.plant is None and a.kind.endswith("n4") and c.kind.endswith("n2")
             assert compile.fingerprint(a) == compile.fingerprint(b) != compile.fingerprint(c)
     for width, variant in ((32, "lanes"), (1, "guarded")):
-        assert instances.recipe(slfjm, width, variant=variant).plant is slfjm
-    tables = [plant_table.table_recipe(p, "lanes") for p in (slfjm, pendulum)]
-    assert compile.fingerprint(tables[0]) != compile.fingerprint(tables[1])
+        assert instances.recipe(user4, width, variant=variant).plant is user4
+    assert instances.recipe(slfjm, 1).plant is slfjm  # aiofl's own: plant-specific lanes
+    tables = [plant_table.table_recipe(p, "lanes") for p in (user4, slfjm, pendulum)]
+    assert len({compile.fingerprint(t) for t in tables}) == 3
+
+
+_F4 = "def f(x, p):\n    return (x[2], x[3], -p[0] * x[1], p[0] * x[1])\n"
+_F2 = "def f(x, p):\n    return (x[1], -p[0] * x[0])\n"
 
 
 # ------------------------------------------------------------------ plant files, cached
@@ -368,9 +376,10 @@ def test_a_plant_file_is_built_and_compiled_once_across_processes(tmp_path, monk
     # (compile.compile_lock) and loads the kernel it stored
     both = [_result(p) for p in [_start_probe(cfg, cache_dir), _start_probe(cfg, cache_dir)]]
     assert sorted((r["misses"], r["hits"]) for r in both) == [(0, 1), (1, 0)]
-    # the plant's 6 table entries: each compiled once, by either process
-    assert sum(r["entry_misses"] for r in both) == 6
-    assert all(r["entry_misses"] + r["entry_hits"] == 6 for r in both)
+    # the plant's table entries: each compiled once, by either process
+    n_table = plant_table.N_TABLE
+    assert sum(r["entry_misses"] for r in both) == n_table
+    assert all(r["entry_misses"] + r["entry_hits"] == n_table for r in both)
     first = both[0]
     assert both[1]["itae"] == first["itae"]
     modules = sorted((cache_dir / "plants").glob("plant_*.py"))
@@ -378,13 +387,13 @@ def test_a_plant_file_is_built_and_compiled_once_across_processes(tmp_path, monk
     second = _probe(cfg, cache_dir)
     assert not second["sympy"], "a cached plant file must not need sympy"
     assert second["hits"] == 1 and second["misses"] == 0
-    assert (second["entry_hits"], second["entry_misses"]) == (6, 0)
+    assert (second["entry_hits"], second["entry_misses"]) == (n_table, 0)
     assert second["itae"] == first["itae"]
     # a parameter value edited: a new module, the old one pruned, the same kernel
     (tmp_path / "duffing.toml").write_text(PLANT_TOML.replace("k = 4.0", "k = 5.0"))
     stiffer = _probe(cfg, cache_dir)
     assert stiffer["hits"] == 1 and stiffer["misses"] == 0
-    assert (stiffer["entry_hits"], stiffer["entry_misses"]) == (6, 0)
+    assert (stiffer["entry_hits"], stiffer["entry_misses"]) == (n_table, 0)
     assert stiffer["itae"] != first["itae"]
     now = sorted((cache_dir / "plants").glob("plant_*.py"))
     assert len(now) == 1 and now != modules

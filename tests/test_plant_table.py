@@ -92,15 +92,17 @@ def test_plants_of_one_size_share_one_width_one_instance_with_their_own_numbers(
 
 
 def test_a_plant_independent_instance_has_no_plant_in_its_recipe():
-    """The recipe of a width-1 instance binds calls through the table, not the plant's
-    functions; the lane and diagnostic instances bind the plant's functions directly."""
+    """The recipe of a user plant's width-1 instance binds calls through the table, not
+    the plant's functions; its lane and diagnostic instances, and aiofl's own plant's
+    width-1 lane instance, bind the plant's functions directly."""
     slfjm = get_plant("slfjm")
-    generic = instances.recipe(slfjm, 1)
+    user = chain3(0.5, 0.1, 1.0)
+    generic = instances.recipe(user, 1)
     assert generic.plant is None
     for name in plant_table.BOUND_NAMES:
         assert generic.bindings[name].py_func.__name__.startswith("_tpl_call")
-    for width, variant in ((32, "lanes"), (1, "guarded")):
-        own = instances.recipe(slfjm, width, variant=variant)
+    for plant, width, variant in ((user, 32, "lanes"), (user, 1, "guarded"), (slfjm, 1, "lanes")):
+        own = instances.recipe(plant, width, variant=variant)
         assert own.bindings["_PFG"].py_func.__name__.startswith("_tpl_direct_pair")
 
 
@@ -110,3 +112,36 @@ def test_the_table_of_a_plant_is_built_once_per_process(variant):
     first = plant_table.plant_table(plant, variant)
     assert plant_table.plant_table(plant, variant) is first
     assert np.all(first != 0)
+
+
+@pytest.mark.parametrize("ts", [0.0, 2e-3], ids=["continuous", "sampled"])
+def test_a_user_plant_gives_the_same_bits_through_its_table_as_inlined_in_lanes(ts):
+    """A member of a user plant alone (the plant-independent width-1 loop, the plant
+    called through its table) has the numbers, bit for bit, it has in a group of 32 lanes
+    (the plant's own instance, its functions inlined and vectorized): metrics and stored
+    trajectory, with a disturbance and a parameter change on the way; continuous, and
+    sampled at 2 ms."""
+    from aiofl.engine.discrete import Sampling
+    from aiofl.engine.simulation import simulate_batch
+
+    plant = chain3(0.8, 0.3, 1.2, name="bits")
+    values = {"eso.omega0": 25.0, "sef.omega_c": 3.0, "td.omega": 6.0, "law.b0": 1.0}
+    ctrls = [
+        Controller.from_structure("LADRC", rho=3, values={**values, "eso.omega0": 20.0 + k})
+        for k in range(20)
+    ]
+    scen = Scenario(
+        t_final=0.6,
+        reference=Reference(kind="step", amplitude=0.4),
+        disturbance_amplitude=0.3,
+        disturbance_time=0.2,
+        plant_scale={"a": 1.3},
+        parameter_change_time=0.4,
+    )
+    kw = {"dt": 1e-3, "store": True, "decimation": 20, "sampling": Sampling(ts) if ts else None}
+    group = simulate_batch(plant, ctrls, scen, **kw)
+    for i in (0, 13):
+        alone = simulate_batch(plant, ctrls[i], scen, **kw)
+        np.testing.assert_array_equal(alone.metrics[0], group.metrics[i])
+        np.testing.assert_array_equal(alone.trajectories[0], group.trajectories[i])
+    assert not np.any(group.diverged)

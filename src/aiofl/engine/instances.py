@@ -153,13 +153,22 @@ def _imported(obj: Any) -> bool:
     return isinstance(obj, Dispatcher)
 
 
-def plant_independent(width: int, variant: str) -> bool:
-    """Whether the instance of ``width`` and ``variant`` calls the plant's functions through
-    the batch's plant table (:mod:`aiofl.engine.plant_table`): every width-1 instance but the
-    diagnostic one.  Such an instance is compiled once per number of plant states and
-    serves every plant; the width-32 lane instances inline the plant's functions into their
-    lane loops, which vectorize only so."""
-    return width == 1 and variant != "guarded"
+def plant_independent(plant: Plant, width: int, variant: str) -> bool:
+    """Whether the instance of ``plant``, ``width`` and ``variant`` calls the plant's
+    functions through the batch's plant table (:mod:`aiofl.engine.plant_table`), compiled
+    once per number of plant states and shared by every plant of that size.
+
+    The width-1 instances of a plant defined outside aiofl (a plant file, a symbolic plant,
+    a Python plant), and every scalar (check) instance: a new or edited plant then costs
+    its table's entries (under a second), not a time loop (12-16 s).  The width-32 lane
+    instances inline the plant's functions into their lane loops (which vectorize only so),
+    and so do the width-1 lane instances of aiofl's own plants: compiled once per
+    installation, they run the presets, the report and the benchmarks, where a lone member
+    is 10-20 % faster with the plant inlined than called (``docs/benchmarks.md``).  The
+    diagnostic instance wraps the plant's functions and is never shared."""
+    if width != 1 or variant == "guarded":
+        return False
+    return variant == "scalar" or bindings.user_functions(plant)
 
 
 def recipe(
@@ -182,7 +191,7 @@ def recipe(
     ns_member = dict(vars(member))
     bindings.bind_private(ns_member, private)
     n, n_p = plant.n_states, len(plant.params)
-    independent = plant_independent(width, variant)
+    independent = plant_independent(plant, width, variant)
     ns_member.update(_N=n, **bindings.component_functions(private))
     # names unique to the plant's code, or to the number of states (see plant_tag)
     tag = f"{variant}_n{n}" if independent else f"{variant}_{compile_.plant_tag(plant)}"
@@ -284,7 +293,7 @@ def instance_for(
     its number of states.  The guarded variant is never cached on disk (loaded from numba's
     cache, its plant wrappers no longer caught the plant's exception: the ValueError of a
     raising plant escaped instead of the PlantFailure naming the function and the state)."""
-    independent = plant_independent(width, variant)
+    independent = plant_independent(plant, width, variant)
     owner = None if independent else plant
     key = (plant.n_states if independent else id(plant), independent, width, sampled_data, variant)
     with _LOCK:
@@ -319,7 +328,7 @@ def run(
     table into the batch first when the instance is plant-independent (its entries compiled
     or loaded now).  ``compile_only``: compile (or load) and return."""
     inst = instance_for(plant, width, sampled_data=sampled_data, variant=variant)
-    if plant_independent(width, variant):
+    if plant_independent(plant, width, variant):
         set_plant_table(plant, batch, variant)
     run_groups(
         inst.entry,
