@@ -252,12 +252,12 @@ def test_entries_of_an_older_fingerprint_are_pruned(tmp_path, monkeypatch):
     assert not independent.exists() and other_kind.exists() and other_plant.exists()
 
 
-def test_width_one_instances_of_user_plants_are_plant_independent():
-    """The width-1 instances of a plant defined outside aiofl, and every scalar instance,
-    are compiled without the plant (the recipe has none, its kind names the number of
-    states): one fingerprint for two plants of the same size, another for another size.
-    The lane instances of width 32, the diagnostic instance and the width-1 lane instance
-    of aiofl's own plants keep the plant; a plant's own compiled code is its table."""
+def test_width_one_instances_are_plant_independent():
+    """Every width-1 instance but the diagnostic one is compiled without the plant (the
+    recipe has none, its kind names the number of states): one fingerprint for two plants
+    of the same size, aiofl's own or a user's, another for another size.  The lane
+    instances of width 32 and the diagnostic instance keep the plant; a plant's own
+    compiled code is its table."""
     from aiofl.plants.base import Plant
 
     slfjm, pendulum = get_plant("slfjm"), get_plant("pendulum")
@@ -267,13 +267,12 @@ def test_width_one_instances_of_user_plants_are_plant_independent():
         for sampled_data in (False, True):
             a, b, c = (
                 instances.recipe(p, 1, sampled_data=sampled_data, variant=variant)
-                for p in (user4, slfjm if variant == "scalar" else user4, user2)
+                for p in (user4, slfjm, user2)
             )
             assert a.plant is None and a.kind.endswith("n4") and c.kind.endswith("n2")
             assert compile.fingerprint(a) == compile.fingerprint(b) != compile.fingerprint(c)
     for width, variant in ((32, "lanes"), (1, "guarded")):
         assert instances.recipe(user4, width, variant=variant).plant is user4
-    assert instances.recipe(slfjm, 1).plant is slfjm  # aiofl's own: plant-specific lanes
     tables = [plant_table.table_recipe(p, "lanes") for p in (user4, slfjm, pendulum)]
     assert len({compile.fingerprint(t) for t in tables}) == 3
 

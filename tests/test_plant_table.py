@@ -92,16 +92,17 @@ def test_plants_of_one_size_share_one_width_one_instance_with_their_own_numbers(
 
 
 def test_a_plant_independent_instance_has_no_plant_in_its_recipe():
-    """The recipe of a user plant's width-1 instance binds calls through the table, not
-    the plant's functions; its lane and diagnostic instances, and aiofl's own plant's
-    width-1 lane instance, bind the plant's functions directly."""
+    """The recipe of a width-1 instance binds calls through the table, not the plant's
+    functions, for a user's plant and aiofl's own; the lane and diagnostic instances bind
+    the plant's functions directly."""
     slfjm = get_plant("slfjm")
     user = chain3(0.5, 0.1, 1.0)
-    generic = instances.recipe(user, 1)
-    assert generic.plant is None
-    for name in plant_table.BOUND_NAMES:
-        assert generic.bindings[name].py_func.__name__.startswith("_tpl_call")
-    for plant, width, variant in ((user, 32, "lanes"), (user, 1, "guarded"), (slfjm, 1, "lanes")):
+    for plant in (user, slfjm):
+        generic = instances.recipe(plant, 1)
+        assert generic.plant is None
+        for name in plant_table.BOUND_NAMES:
+            assert generic.bindings[name].py_func.__name__.startswith("_tpl_call")
+    for plant, width, variant in ((user, 32, "lanes"), (user, 1, "guarded"), (slfjm, 32, "lanes")):
         own = instances.recipe(plant, width, variant=variant)
         assert own.bindings["_PFG"].py_func.__name__.startswith("_tpl_direct_pair")
 

@@ -153,22 +153,17 @@ def _imported(obj: Any) -> bool:
     return isinstance(obj, Dispatcher)
 
 
-def plant_independent(plant: Plant, width: int, variant: str) -> bool:
-    """Whether the instance of ``plant``, ``width`` and ``variant`` calls the plant's
-    functions through the batch's plant table (:mod:`aiofl.engine.plant_table`), compiled
-    once per number of plant states and shared by every plant of that size.
-
-    The width-1 instances of a plant defined outside aiofl (a plant file, a symbolic plant,
-    a Python plant), and every scalar (check) instance: a new or edited plant then costs
-    its table's entries (under a second), not a time loop (12-16 s).  The width-32 lane
-    instances inline the plant's functions into their lane loops (which vectorize only so),
-    and so do the width-1 lane instances of aiofl's own plants: compiled once per
-    installation, they run the presets, the report and the benchmarks, where a lone member
-    is 10-20 % faster with the plant inlined than called (``docs/benchmarks.md``).  The
-    diagnostic instance wraps the plant's functions and is never shared."""
-    if width != 1 or variant == "guarded":
-        return False
-    return variant == "scalar" or bindings.user_functions(plant)
+def plant_independent(width: int, variant: str) -> bool:
+    """Whether the instance of ``width`` and ``variant`` calls the plant's functions through
+    the batch's plant table (:mod:`aiofl.engine.plant_table`), compiled once per number of
+    plant states and shared by every plant of that size: every width-1 instance but the
+    diagnostic one.  A new or edited plant then costs its table's entries (under a
+    second), not a time loop (12-16 s), and a plant of a size the cache has seen runs
+    without a compile.  A lone member pays for the calls (0.8-0.95 of its speed with the
+    plant inlined, ``docs/benchmarks.md``).  The width-32 lane instances inline the plant's
+    functions into their lane loops, which vectorize only so; the diagnostic instance wraps
+    them and is never shared."""
+    return width == 1 and variant != "guarded"
 
 
 def recipe(
@@ -191,7 +186,7 @@ def recipe(
     ns_member = dict(vars(member))
     bindings.bind_private(ns_member, private)
     n, n_p = plant.n_states, len(plant.params)
-    independent = plant_independent(plant, width, variant)
+    independent = plant_independent(width, variant)
     ns_member.update(_N=n, **bindings.component_functions(private))
     # names unique to the plant's code, or to the number of states (see plant_tag)
     tag = f"{variant}_n{n}" if independent else f"{variant}_{compile_.plant_tag(plant)}"
@@ -293,7 +288,7 @@ def instance_for(
     its number of states.  The guarded variant is never cached on disk (loaded from numba's
     cache, its plant wrappers no longer caught the plant's exception: the ValueError of a
     raising plant escaped instead of the PlantFailure naming the function and the state)."""
-    independent = plant_independent(plant, width, variant)
+    independent = plant_independent(width, variant)
     owner = None if independent else plant
     key = (plant.n_states if independent else id(plant), independent, width, sampled_data, variant)
     with _LOCK:
@@ -328,7 +323,7 @@ def run(
     table into the batch first when the instance is plant-independent (its entries compiled
     or loaded now).  ``compile_only``: compile (or load) and return."""
     inst = instance_for(plant, width, sampled_data=sampled_data, variant=variant)
-    if plant_independent(plant, width, variant):
+    if plant_independent(width, variant):
         set_plant_table(plant, batch, variant)
     run_groups(
         inst.entry,

@@ -29,13 +29,7 @@ from aiofl.components.metrics import OPIWeights, opi
 from aiofl.controller import Controller, ControllerBatch, controller_batch
 from aiofl.engine.batch import Batch, Outputs
 from aiofl.engine.discrete import D_STEPS, N_DISC, Sampling, check_delays, sampling_rows
-from aiofl.engine.instances import (
-    instance_for,
-    plan_groups,
-    plant_independent,
-    run,
-    set_plant_table,
-)
+from aiofl.engine.instances import instance_for, plan_groups, run, set_plant_table
 from aiofl.engine.observer_gains import model_jacobians, with_model_gains
 from aiofl.engine.plant_table import N_TABLE
 from aiofl.limits import DT_MAX, MAX_STEPS, MAX_TRAJECTORY_BYTES, check_run_size
@@ -539,8 +533,7 @@ def closed_loop_rhs(
         divergence_threshold=1.0,
     )
     rec = rec._replace(p_after=p[None, :])  # the parameters the right-hand side sees
-    if plant_independent(plant, 1, "lanes"):
-        set_plant_table(plant, rec)
+    set_plant_table(plant, rec)
     evaluate(rec, float(t), z, float(noise), dz, sig)
     return {
         "dx": dz[:n].copy(),
