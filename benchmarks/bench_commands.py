@@ -9,7 +9,9 @@ sources) and "warm" the same command again in a new process:
 * ``simulate`` of a config on a plant file (a 2-state Duffing oscillator, 5-s step, LADRC,
   dt = 1e-3): cold, then warm (the plant module and its kernel are loaded from the cache);
   then once more after editing a parameter value in the plant file (a new plant module,
-  sympy runs again, the kernel is the same: :mod:`aiofl.engine.code_fingerprint`);
+  sympy runs again, the kernel is the same: :mod:`aiofl.engine.code_fingerprint`); then a
+  plant file of another model, never seen, in the same cache (sympy and its table entries;
+  the width-1 loop of 2-state plants is cached: :mod:`aiofl.engine.plant_table`);
 * ``simulate frontier-s1-ladrc`` (a built-in plant): cold, then warm;
 * with ``--reproduce``: ``aiofl reproduce`` cold, then warm.
 
@@ -40,6 +42,17 @@ h = "x"
 k = 4.0
 c = 0.3
 m = 1.0
+"""
+
+OTHER_PLANT = """\
+name = "vdp"
+description = "Van der Pol oscillator, forced"
+states = ["x", "v"]
+f = ["v", "mu*(1 - x**2)*v - x"]
+g = ["0", "1"]
+h = "x"
+[params]
+mu = 0.5
 """
 
 CONFIG = """\
@@ -81,6 +94,11 @@ def timed(args: list[str], cache: Path, out: Path) -> tuple[float, int]:
     return time.perf_counter() - t0, proc.returncode
 
 
+def _row(label: str, seconds: float, rc: int) -> None:
+    note = "" if rc == 0 else f"  (exit {rc})"
+    print(f"{label:36s} {'':9s} {seconds:18.2f}{note}")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--reproduce", action="store_true", help="also time aiofl reproduce")
@@ -107,12 +125,15 @@ def main() -> None:
             note = "" if codes == {0} else f"  (exit {sorted(codes)})"
             warm_text = " / ".join(f"{w:.2f}" for w, _ in warm)
             print(f"{label:36s} {cold:9.2f} {warm_text:>18s}{note}")
-            if i == 0:  # a parameter value of the plant file edited
+            if i == 0:  # a parameter value of the plant file edited, then another model
                 (work / "duffing.toml").write_text(PLANT.replace("k = 4.0", "k = 5.0"))
                 edited, rc = timed(args, cache, work / "out")
-                note = "" if rc == 0 else f"  (exit {rc})"
-                edit_label = "  the same, k edited in the plant file"
-                print(f"{edit_label:36s} {'':9s} {edited:18.2f}{note}")
+                _row("  the same, k edited in the plant file", edited, rc)
+                (work / "vdp.toml").write_text(OTHER_PLANT)
+                (work / "vdp.sim.toml").write_text(CONFIG.replace("duffing.toml", "vdp.toml"))
+                other = ["simulate", str(work / "vdp.sim.toml")]
+                first, rc = timed(other, cache, work / "out")
+                _row("  another 2-state plant file, 1st run", first, rc)
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
