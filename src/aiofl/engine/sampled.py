@@ -552,20 +552,13 @@ class DiscreteController:
     def step(self, r: float | Sequence[float] | NDArray[np.float64], y: float) -> float:
         """One sample: ``r`` = r (or r, ṙ, ..., r^(ρ)) at t_k, ``y`` the measurement; returns u."""
         self._reference(r)
-        return float(
-            self._fn.step(
-                _NO_TABLE,
-                self._iq,
-                self._q,
-                self.row,
-                self._cs,
-                self._scr,
-                y,
-                self._rr,
-                0,
-                self._pn,
-            )
-        )
+        return float(self._fn.step(*self._update_args(self._cs, y)))
+
+    def _update_args(self, cs: NDArray[np.float64], y: float | NDArray[np.float64]) -> tuple:
+        """The arguments of the compiled update up to the nominal parameters (the plant
+        table is unread: α, β are called directly), from the controller state ``cs`` and
+        the measurement(s) ``y``."""
+        return (_NO_TABLE, self._iq, self._q, self.row, cs, self._scr, y, self._rr, 0, self._pn)
 
     def run(self, n: int, r: float | Sequence[float] | NDArray[np.float64], y: float) -> float:
         """``n`` samples (n ≥ 1) with the same reference ``r`` and measurement ``y`` in one
@@ -573,21 +566,7 @@ class DiscreteController:
         if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= 10**9:
             raise ValueError(f"n = {n!r}; allowed: an integer, 1 <= n <= 1e9")
         self._reference(r)
-        return float(
-            self._fn.run(
-                _NO_TABLE,
-                self._iq,
-                self._q,
-                self.row,
-                self._cs,
-                self._scr,
-                y,
-                self._rr,
-                0,
-                self._pn,
-                n,
-            )
-        )
+        return float(self._fn.run(*self._update_args(self._cs, y), n))
 
     def step_each(
         self,
@@ -608,9 +587,7 @@ class DiscreteController:
             )
         self._reference(r)
         us = np.empty(st.shape[0])
-        self._fn.step_each(
-            _NO_TABLE, self._iq, self._q, self.row, st, self._scr, yv, self._rr, 0, self._pn, us
-        )
+        self._fn.step_each(*self._update_args(st, yv), us)
         return st, us
 
     @property
