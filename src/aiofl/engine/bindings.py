@@ -162,16 +162,14 @@ def private_components(variant: str = "scalar") -> dict[str, types.ModuleType]:
         return out
 
 
-def plant_function(fn: Any, variant: str, *, inline: bool = True) -> Any:
+def plant_function(fn: Any, variant: str) -> Any:
     """A plant function as an instance of ``variant`` binds it: a private copy, with vector
-    math and inlined where called (``"lanes"``; ``inline=False``: called, as the entries
-    of a plant table call it inside their ``try``), else as written (``"scalar"``: libm,
-    called)."""
+    math and inlined where called (``"lanes"``: the lane instances and the plant table's
+    entries), else as written (``"scalar"``: libm, called)."""
     py = getattr(fn, "py_func", fn)
     if variant == "lanes":
         space = vector_math_globals(py.__globals__)
-        extra = {"inline": "always"} if inline else {}
-        return compile_.rejit(py, space, error_model="numpy", **extra)
+        return compile_.rejit(py, space, inline="always", error_model="numpy")
     return compile_.rejit(py, error_model="numpy")
 
 

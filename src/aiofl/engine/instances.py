@@ -1,7 +1,8 @@
 """Engine instances: every compiled kernel the engine runs, and running a batch on them.
 
-An *instance* is the time loop of :mod:`aiofl.engine.loop` compiled for one plant with
-compile-time choices (:func:`recipe`, built by :mod:`aiofl.engine.compile`):
+An *instance* is the time loop of :mod:`aiofl.engine.loop` compiled for one plant, or for
+every plant of a number of states (:func:`plant_independent`), with compile-time choices
+(:func:`recipe`, built by :mod:`aiofl.engine.compile`):
 
 - the lane width ``W``: 32 (groups of members, one per SIMD lane) or 1 (a lone member);
 - the timing: continuous (the controller's blocks in the stage right-hand side,
@@ -17,9 +18,12 @@ In the lane variant the plant's f, g, h, b_d and the controller's component func
 compiled *inlined* into the lane blocks (numba IR inlining) with ``exp``/``log``/``sin``/
 ``cos`` rebound to :mod:`aiofl.components.vecmath`
 (:func:`aiofl.engine.bindings.vector_math_globals`), so the loops over lanes vectorize.
-:func:`instance_for` builds an instance on first use (one per plant and choice per process;
-across processes the disk cache of :mod:`aiofl.engine.compile` skips the compile); only the
-instances a batch needs are built.
+Every width-1 instance but the diagnostic one is compiled without the plant and calls its
+functions through the batch's plant table (:mod:`aiofl.engine.plant_table`; :func:`run`
+writes the plant's table into the batch), so one compiled loop serves every plant of its
+size.  :func:`instance_for` builds an instance on first use (one per plant, or per size,
+and choice per process; across processes the disk cache of :mod:`aiofl.engine.compile`
+skips the compile); only the instances a batch needs are built.
 
 :func:`plan_groups` splits a batch into groups with uniform component kinds (ESO, TD, SEF and
 law kinds, ρ, the feedback length, the ESO start, the reference kind and, for sampled
@@ -30,15 +34,18 @@ early frees its core at once.  Members are independent, so a member's numbers do
 on the batch it is in, the thread count or the scheduling (bitwise).
 
 **User plants that fail.**  A plant whose functions are defined outside aiofl is
-type-checked (:meth:`aiofl.plants.base.Plant.typecheck`) before its instance is compiled
-when it is not loaded from the disk cache, and again whenever compiling fails, so a
+type-checked (:meth:`aiofl.plants.base.Plant.typecheck`) before its instance (or its
+table's entries) is compiled when it is not loaded from the disk cache, and again whenever
+compiling fails, so a
 function numba cannot compile, or one that returns complex numbers, is a
 :class:`~aiofl.plants.base.PlantError` naming the plant and the function, not a numba
 traceback.  At run time a division by zero or a math domain error in a plant function gives
 inf/NaN (numba's ``numpy`` error model), which the loop reports as the member diverging at
-that time.  A plant function that *raises* stops the run: :func:`run_groups` then replays
-the group's members one by one in the guarded instance and raises a PlantError
-``plant function f failed at state x = [...]: ValueError: ...``.
+that time.  A plant function that *raises* stops the run (in a plant-independent
+instance as :class:`~aiofl.engine.plant_table.PlantCallFailed`): :func:`run_groups` then
+replays the group's members one by one in the guarded instance, calls the function that
+raised once more from Python at the state (and parameters) it reports, and raises a
+PlantError ``plant function f failed at state x = [...]: ValueError: ...``.
 """
 
 from __future__ import annotations

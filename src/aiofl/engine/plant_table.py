@@ -11,10 +11,10 @@ convention::
     int32 entry(int32 *result, void **exception,
                 const double *x, intp n_x, const double *p, intp n_p, double *out)
 
-that calls the plant's function(s) (inlined into it) on the arrays ``x[:n_x]`` and
-``p[:n_p]``, writes their values into ``out`` and returns status 0, or a nonzero status if
-one raised (the kernel then raises :class:`PlantCallFailed`).  f and g share an entry: the
-loop evaluates them together, at the same state, so one call gives both.
+that calls the plant's function(s) on the arrays ``x[:n_x]`` and ``p[:n_p]``, writes their
+values into ``out`` and returns status 0, or a nonzero status if one raised (the kernel then
+raises :class:`PlantCallFailed`).  f and g share an entry: the loop evaluates them
+together, at the same state, so one call gives both.
 
 The entries are compiled per plant (a fraction of a second, cached on disk by the compile
 factory like any kernel); the time loop is compiled once per number of states and cached
