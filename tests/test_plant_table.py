@@ -32,7 +32,8 @@ def _ladrc(rho: int) -> Controller:
 def test_every_entry_returns_the_plant_values_and_a_strided_view_is_refused():
     """Each entry of a plant's table, called as a kernel calls it, gives the plant's
     compiled functions' values bit for bit (f and g together, h, b_d, the normal form, α and
-    β), status 0; a strided x gives status 2 and no call (the buffer's zeros)."""
+    β), status 0; a strided x gives status 2, a zero address (a table never set) status 3,
+    and neither calls (the buffer's zeros)."""
     plant = get_plant("slfjm")
     table = plant_table.plant_table(plant, "lanes", cache=False)
     x = np.array([0.1, -0.2, 0.3, 0.4])
@@ -50,8 +51,11 @@ def test_every_entry_returns_the_plant_values_and_a_strided_view_is_refused():
         assert status == 0 and tuple(got) == want[k], plant_table.TABLE[k]
     wide = np.zeros(8)
     wide[::2] = x
-    status, fx, _ = _probe(plant_table.call_intrinsic((4, 4)))(table[0], wide[::2], p)
+    pair = _probe(plant_table.call_intrinsic((4, 4)))
+    status, fx, _ = pair(table[0], wide[::2], p)
     assert status == 2 and fx == (0.0,) * 4
+    status, fx, _ = pair(0, x, p)  # a batch whose table was never set: no call
+    assert status == 3 and fx == (0.0,) * 4
     assert table.flags.writeable is False and table.size == plant_table.N_TABLE
 
 

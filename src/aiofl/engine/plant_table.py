@@ -305,8 +305,9 @@ def call_intrinsic(sizes: tuple[int, ...]) -> Any:
     ``address`` (numba's calling convention, :func:`_entry_address`) called on the 1-D float
     arrays ``x`` and ``p``; its values, read back from a buffer on the stack, returned as one
     tuple per plant function (of ``sizes[i]`` floats each); status 0, or nonzero if a plant
-    function raised.  ``x`` and ``p`` must be contiguous (every column of a width-1 instance
-    is): a strided one gives status 2 without a call.
+    function raised.  No call, and zeros, where ``x`` or ``p`` is strided (status 2: every
+    column of a width-1 instance is contiguous) or the address is 0 (status 3: a batch whose
+    table was never set, :func:`aiofl.engine.instances.set_plant_table`).
     """
     from llvmlite import ir
     from numba.core import cgutils
@@ -335,11 +336,15 @@ def call_intrinsic(sizes: tuple[int, ...]) -> Any:
             eight = ir.Constant(i64, 8)
             strides = [cgutils.unpack_tuple(builder, v.strides, 1)[0] for v in views]
             contiguous = builder.and_(*(builder.icmp_unsigned("==", s, eight) for s in strides))
+            addr = context.cast(builder, args[0], sig.args[0], nbtypes.int64)
+            missing = builder.icmp_unsigned("==", addr, ir.Constant(i64, 0))
             buf = cgutils.alloca_once(builder, dbl, size=total)
             slots = [builder.gep(buf, [ir.Constant(i32, i)]) for i in range(total)]
             for slot in slots:  # defined values even where a function returns fewer
                 builder.store(ir.Constant(dbl, 0.0), slot)
-            status = cgutils.alloca_once_value(builder, ir.Constant(i32, 2))
+            status = cgutils.alloca_once_value(
+                builder, builder.select(missing, ir.Constant(i32, 3), ir.Constant(i32, 2))
+            )
             # numba's calling convention: the result and the exception pointer first
             result = cgutils.alloca_once(builder, i32)
             exc_ptr = ir.IntType(8).as_pointer().as_pointer()
@@ -348,8 +353,8 @@ def call_intrinsic(sizes: tuple[int, ...]) -> Any:
             fnty = ir.FunctionType(
                 i32, [i32.as_pointer(), exc_ptr, dbl_ptr, i64, dbl_ptr, i64, dbl_ptr]
             )
-            with builder.if_then(contiguous, likely=True):
-                addr = context.cast(builder, args[0], sig.args[0], nbtypes.int64)
+            callable_ = builder.and_(contiguous, builder.not_(missing))
+            with builder.if_then(callable_, likely=True):
                 target = builder.inttoptr(addr, fnty.as_pointer())
                 lengths = [cgutils.unpack_tuple(builder, v.shape, 1)[0] for v in views]
                 call_args = [views[0].data, lengths[0], views[1].data, lengths[1], buf]
