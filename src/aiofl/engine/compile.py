@@ -281,12 +281,10 @@ def build(recipe: Recipe, *, cache: bool = True) -> Instance:
     if unknown:
         raise ValueError(f"also_cached names no template of the recipe: {sorted(unknown)}")
     ns = dict(recipe.bindings)
-    for tpl in recipe.templates:
+    for tpl in (*recipe.templates, recipe.entry):  # each sees those compiled before it
         space = {**ns, **tpl.bindings} if tpl.bindings else ns
         ns[tpl.name] = instantiate(tpl.function, space, suffix, **tpl.options)
-    e = recipe.entry
-    entry = instantiate(e.function, {**ns, **e.bindings} if e.bindings else ns, suffix, **e.options)
-    ns[recipe.entry.name] = entry
+    entry = ns[recipe.entry.name]
     if folder is not None:
         cached = [recipe.entry, *(t for t in recipe.templates if t.name in recipe.also_cached)]
         for tpl in cached:
