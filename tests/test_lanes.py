@@ -330,6 +330,40 @@ def test_a_sampled_members_numbers_do_not_depend_on_its_batch_or_lane() -> None:
         np.testing.assert_array_equal(alone.trajectories[0], full.trajectories[i])
 
 
+def test_members_of_different_sample_times_share_a_group_and_keep_their_bits(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """One group of 32 lanes sampling at five periods (1 to 10 steps per sample) and
+    features a lane holds between its samples: the stored measurement (noise, quantised),
+    the exact TD's derivatives at the last sample, a one-sample delay and transport delays
+    on the input and the output.  The plan puts them in one group, and each member's
+    numbers (metrics and every stored column) are those it has alone, bit for bit."""
+    from aiofl.engine import simulation
+
+    rc = load_config("retuned-s1-ladrc")
+    ladrc = replace(rc.controller, td="exact")
+    base = replace(rc.scenario, t_final=0.25, noise_variance=1e-8, noise_seed=3)
+    delayed = replace(base, input_delay=3e-4, output_delay=2e-4)
+    periods = (1e-4, 2e-4, 3e-4, 5e-4, 1e-3)
+    ctrls = [ladrc.with_values(**{"eso.omega0": 300.0 + 7 * i}) for i in range(WIDTH)]
+    scens = [delayed if i % 4 == 1 else base for i in range(WIDTH)]
+    samplings = [
+        Sampling(periods[i % 5], delay=int(i % 3 == 0), y_quantum=1e-5 * (i % 2))
+        for i in range(WIDTH)
+    ]
+    plans = []
+    real_plan = simulation.plan
+    monkeypatch.setattr(simulation, "plan", lambda *a: plans.append(real_plan(*a)) or plans[-1])
+    kw = {"dt": 1e-4, "engine": "lanes", "store": True, "decimation": 7}
+    group = simulate_batch(rc.plant, ctrls, scens, sampling=samplings, **kw)
+    assert list(plans[0]) == [(WIDTH, True)] and plans[0][(WIDTH, True)].shape == (1, WIDTH)
+    assert not group.diverged.any()
+    for i in range(0, WIDTH, 3):
+        alone = simulate_batch(rc.plant, ctrls[i], scens[i], sampling=samplings[i], **kw)
+        np.testing.assert_array_equal(alone.metrics[0], group.metrics[i])
+        np.testing.assert_array_equal(alone.trajectories[0], group.trajectories[i])
+
+
 def test_sampled_divergence_is_per_lane() -> None:
     """Forward-Euler observers beyond their stability limit (ω0 Ts large) diverge at the
     sampled kernel's time; their lane mates run on, as they do alone."""

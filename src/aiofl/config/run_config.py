@@ -381,6 +381,7 @@ def resolve_plant(name_or_file: str, base_dir: str | Path | None = None) -> Plan
     if key not in _FILE_PLANTS:
         from aiofl.plants.plant_cache import plant_from_file
 
+        _prepare_loops_ahead(path)
         try:  # a cached plant file needs no sympy: its error class is imported only here
             _FILE_PLANTS[key] = plant_from_file(path)
         except Exception as exc:
@@ -390,6 +391,20 @@ def resolve_plant(name_or_file: str, base_dir: str | Path | None = None) -> Plan
                 raise ConfigError(f"plant: {exc}") from None
             raise
     return _FILE_PLANTS[key]
+
+
+def _prepare_loops_ahead(path: Path) -> None:
+    """A plant file the cache has never seen: start compiling the loops of its number of
+    states in a second process while sympy builds it, if the cache has none
+    (:func:`aiofl.engine.prepare.prepare_loops_ahead`)."""
+    from aiofl.plants.plant_cache import declared_states, plant_module_path
+
+    module = plant_module_path(path)
+    n_states = declared_states(path) if module is not None and not module.exists() else None
+    if n_states is not None:
+        from aiofl.engine.prepare import prepare_loops_ahead
+
+        prepare_loops_ahead(n_states)
 
 
 class PlantFileGiven(ConfigError):

@@ -51,6 +51,7 @@ from aiofl.engine.code_fingerprint import file_digest, function_fingerprint, sou
 from aiofl.plants.base import Plant
 
 __all__ = [
+    "NO_PLANT_KEY",
     "Instance",
     "KernelCache",
     "Recipe",
@@ -59,6 +60,7 @@ __all__ = [
     "compile_lock",
     "fingerprint",
     "function_fingerprint",
+    "has_kernel",
     "plant_key",
     "prune_kernels",
     "rejit",
@@ -66,6 +68,10 @@ __all__ = [
     "source_digest",
     "sources_changed",
 ]
+
+NO_PLANT_KEY = "noplant"
+"""The plant key in the cache names of a recipe without a plant (a plant-independent
+instance, the discrete controller's update)."""
 
 PLANT_FUNCTIONS = ("f", "g", "h", "bd", "normal_form", "alpha_beta_of_xi")
 """The plant's functions a kernel may call, in the order of ``Plant.compiled``."""
@@ -275,7 +281,7 @@ def build(recipe: Recipe, *, cache: bool = True) -> Instance:
     folder = subdir("kernels") if fp is not None else None
     if folder is not None and sources_changed(recipe.sources):
         folder = None
-    key = plant_key(recipe.plant) if recipe.plant is not None else "noplant"
+    key = plant_key(recipe.plant) if recipe.plant is not None else NO_PLANT_KEY
     suffix = f"{recipe.kind}_{key}_{fp}" if folder is not None else f"{recipe.kind}_{id(recipe):x}"
     unknown = set(recipe.also_cached) - {tpl.name for tpl in recipe.templates}
     if unknown:
@@ -416,11 +422,28 @@ def compile_lock(entry: Any) -> Iterator[None]:
         fh.close()  # releases the lock
 
 
+def _cache_file_start(template: Callable[..., Any], prefix: str) -> str:
+    """How the names of the cache files of ``template``'s instances named ``prefix`` start
+    (numba's ``<module stem>.<function name>``, the function being ``template`` renamed
+    with the instance's suffix, :func:`build`)."""
+    stem = os.path.splitext(os.path.basename(template.__code__.co_filename))[0]
+    return f"{stem}.{template.__name__}_{prefix}"
+
+
+def has_kernel(folder: Path, template: Callable[..., Any], prefix: str) -> bool:
+    """Whether ``folder`` holds an index file of an instance of ``template`` named
+    ``prefix`` (kind and plant key, :func:`build`), of any fingerprint: a look at file
+    names that compiles and loads nothing (a file of an older fingerprint counts too)."""
+    start = _cache_file_start(template, prefix)
+    with contextlib.suppress(OSError):
+        return any(e.name.startswith(start) and e.name.endswith(".nbi") for e in os.scandir(folder))
+    return False
+
+
 def prune_kernels(folder: Path, template: Callable[..., Any], prefix: str, keep: str) -> None:
     """Delete the cache files of ``template``'s instances named ``prefix`` + a fingerprint
     other than ``keep`` (the same plant and kind compiled from older code)."""
-    stem = os.path.splitext(os.path.basename(template.__code__.co_filename))[0]
-    start = f"{stem}.{template.__name__}_{prefix}"
+    start = _cache_file_start(template, prefix)
     with contextlib.suppress(OSError):
         for entry in os.scandir(folder):
             if entry.name.startswith(start) and not entry.name.startswith(start + keep):

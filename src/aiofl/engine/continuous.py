@@ -166,15 +166,15 @@ def _tpl_deriv(fns, t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cove
     _BLK_METRICS(t, s[S_Y], r, u, dz[m0], dz[m0 + 1], dz[m0 + 2], dz[m0 + 3], dz[m0 + 4])
 
 
-def _tpl_setup(lanes, batch, q, qt, iq, ctrl):  # pragma: no cover - compiled
+def _tpl_setup(lanes, batch, q, qt, iq, ctrl, nper):  # pragma: no cover - compiled
     """Per-lane constants ``q[:, l]`` of the group's members
     (:func:`aiofl.engine.member._tpl_setup`) and the group's ``iq`` (kinds and sizes are
-    uniform within a group, so every lane writes the same).  Returns 0 (no samples)."""
+    uniform within a group, so every lane writes the same); ``ctrl`` and ``nper`` (the
+    sampled instance's) are unused."""
     for l in range(_W):
         _MEMBER_SETUP(batch.ints[lanes[l]], batch.floats[lanes[l]], qt, iq)
         for i in range(N_Q):
             q[i, l] = qt[i]
-    return 0
 
 
 def _tpl_store_controller(which, j, rho, ntd, exact, l, z, iq, rrs, ctrl):  # pragma: no cover
@@ -199,7 +199,7 @@ def _tpl_evaluate(batch, t, zin, noise_val, dz_out, sig):  # pragma: no cover - 
     qt = np.zeros(N_Q)
     iq = np.zeros(N_IQ, dtype=np.int64)
     lanes = np.zeros(1, dtype=np.int64)
-    _SETUP(lanes, batch, q, qt, iq, q)
+    _SETUP(lanes, batch, q, qt, iq, q, lanes)
     sc = np.zeros((L.N_SCEN, 1))
     for j in range(L.N_SCEN):
         sc[j, 0] = batch.scen[0, j]

@@ -26,8 +26,9 @@ and choice per process; across processes the disk cache of :mod:`aiofl.engine.co
 skips the compile); only the instances a batch needs are built.
 
 :func:`plan_groups` splits a batch into groups with uniform component kinds (ESO, TD, SEF and
-law kinds, ρ, the feedback length, the ESO start, the reference kind and, for sampled
-members, the steps per sample), in batch order, padding the last group of each kind with -1;
+law kinds, ρ, the feedback length, the ESO start and the reference kind), in batch order
+(sampled members: by sample time first; lanes of one group may sample at different
+periods, :mod:`aiofl.engine.sampled`), padding the last group of each kind with -1;
 :func:`run_groups` runs them on ``numba.get_num_threads()`` threads: the compiled loop
 releases the GIL and each thread claims the next unclaimed group, so a group that diverges
 early frees its core at once.  Members are independent, so a member's numbers do not depend
@@ -81,6 +82,7 @@ from aiofl.plants.base import Plant, PlantError
 __all__ = [
     "VARIANTS",
     "instance_for",
+    "instance_kind",
     "plan_groups",
     "plant_independent",
     "recipe",
@@ -171,6 +173,14 @@ def plant_independent(width: int, variant: str) -> bool:
     functions into their lane loops, which vectorize only so; the diagnostic instance wraps
     them and is never shared."""
     return width == 1 and variant != "guarded"
+
+
+def instance_kind(width: int, sampled_data: bool, variant: str, n_states: int | None) -> str:
+    """The kind an instance's kernels are cached under: variant, timing and width, e.g.
+    ``"ls32"``, and for a plant-independent instance its number of states, ``"lc1n4"``
+    (``n_states`` None: a plant-specific instance, whose cache key names the plant)."""
+    kind = f"{variant[0]}{'s' if sampled_data else 'c'}{width}"
+    return kind if n_states is None else f"{kind}n{n_states}"
 
 
 def recipe(
@@ -273,9 +283,8 @@ def recipe(
             tpl("_STORE_CONTROLLER", continuous._tpl_store_controller, inline),
             tpl("_EVAL", continuous._tpl_evaluate, opts),
         ]
-    kind = f"{variant[0]}{'s' if sampled_data else 'c'}{width}"
     return compile_.Recipe(
-        kind=f"{kind}n{n}" if independent else kind,
+        kind=instance_kind(width, sampled_data, variant, n if independent else None),
         plant=None if independent else plant,
         bindings=ns,
         templates=tuple(templates),
@@ -349,14 +358,17 @@ def _by_kind(
     members: NDArray[np.int64],
     steps: NDArray[np.float64] | None = None,
 ) -> list[list[int]]:
-    """``members`` split by component kinds (the integer row, the reference kind and, for
-    sampled members, the steps per sample ``steps``), each list in batch order, the kinds
-    in order of first appearance."""
+    """``members`` split by component kinds (the integer row and the reference kind), the
+    kinds in order of first appearance; each list in batch order, or for sampled members
+    (``steps``, each member's engine steps per sample) by steps per sample, then batch
+    order, so lanes sampling together share a group where they can."""
     by_kind: dict[tuple[int, ...], list[int]] = {}
     for i in members.tolist():
-        n_per = int(steps[i]) if steps is not None else 0
-        by_kind.setdefault((*(int(v) for v in ints[i]), int(ref_kind[i]), n_per), []).append(i)
-    return list(by_kind.values())
+        by_kind.setdefault((*(int(v) for v in ints[i]), int(ref_kind[i])), []).append(i)
+    kinds = list(by_kind.values())
+    if steps is not None:
+        kinds = [sorted(group, key=lambda i: int(steps[i])) for group in kinds]  # stable
+    return kinds
 
 
 def group_members(
@@ -379,7 +391,8 @@ def group_members(
     width
         Lanes per group.
     steps
-        Sampled members: each member's engine steps per sample (uniform within a group).
+        Sampled members: each member's engine steps per sample (a group may mix sample
+        times; members of one are put next to each other).
 
     Returns
     -------

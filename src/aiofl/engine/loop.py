@@ -101,7 +101,8 @@ S_BHAT = 13  #: model-assisted observer: the nominal β at x̂
 S_UC = 14  #: sampled, input delay: the controller's held command (S_U is the delayed one)
 S_YD = 15  #: sampled, output delay: y(t_k - τ_out), what the ADC reads (plus noise)
 S_YDON = 16  #: sampled: 1 in a lane with an output delay, else 0
-N_S = 17
+S_YS = 17  #: sampled: y + noise at this step, what a lane due to sample reads
+N_S = 18
 
 # Placeholders for what an instance binds (see aiofl.engine.instances).
 _W = WIDTH
@@ -140,9 +141,14 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
     p_owner = np.zeros((4, n_p, _W))  # parameters before, after, nominal, now
     sc_owner = np.zeros((L.N_SCEN, _W))
     s_owner = np.zeros((N_S, _W))
-    rr_owner = np.zeros((4, nr, _W))  # r and derivatives at t, t + dt/2, t + dt; at t_k
+    # r and derivatives at t, t + dt/2, t + dt; sampled: at a lane's last sample t_k, at t
+    rr_owner = np.zeros((5, nr, _W))
     rrow_owner = np.zeros(_W, dtype=np.int64)
     nrow_owner = np.zeros(_W, dtype=np.int64)
+    # sampled: each lane's steps per sample, steps left to its next sample, due at this step
+    nper_owner = np.zeros(_W, dtype=np.int64)
+    left_owner = np.zeros(_W, dtype=np.int64)
+    due_owner = np.zeros(_W, dtype=np.bool_)
     lanes = _UNMANAGED(lane_owner)
     real = _UNMANAGED(real_owner)
     live = _UNMANAGED(live_owner)
@@ -160,6 +166,9 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
     rrs = _UNMANAGED(rr_owner)
     rrow = _UNMANAGED(rrow_owner)
     nrow = _UNMANAGED(nrow_owner)
+    nper = _UNMANAGED(nper_owner)
+    left = _UNMANAGED(left_owner)
+    due = _UNMANAGED(due_owner)
     ref_t = _UNMANAGED(batch.ref_table)
     noise_t = _UNMANAGED(batch.noise_table)
     tr = _UNMANAGED(out.traj)
@@ -177,7 +186,7 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
     decimation = batch.decimation
 
     n_live = _ASSIGN_LANES(g, groups, lanes, real, live)
-    n_per = _SETUP(lanes, batch, q, qt, iq, ctrl)
+    _SETUP(lanes, batch, q, qt, iq, ctrl, nper)
     _LOAD_LANES(lanes, batch, pp, sc, rrow, nrow, zz)
     _START_MEMBERS(lanes, real, out)
     # transport delays (sampled): ring buffers of the held commands and of y, per lane
@@ -210,14 +219,21 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
             _REFERENCE((k + 1) * dt, t, sc, ref_t, rrow, rrs, 2, nd_stage, ref_kind, s)
         dany = _STEP_INPUTS(t, sc, noise_t, nrow, s, switched, pp)
         if _SAMPLED:
-            sample = k % n_per == 0 and k < n_steps
+            # the lanes due to sample (each at its own period: k a multiple of nper[l])
+            before_end = k < n_steps
+            sample = False
+            for l in range(_W):
+                d = left[l] == 0 and before_end
+                due[l] = d
+                left[l] = (nper[l] if d else left[l]) - 1
+                sample = sample or d
             if delayed:  # y(t_k) into the ring, y(t_k - τ_out) into s[S_YD]
                 _DELAY_OUTPUT(fns, k, z, p, s, ring, dsteps)
-            if sample:  # a sample: ADC, controller, DAC
-                _REFERENCE(t, t, sc, ref_t, rrow, rrs, 3, nd, ref_kind, s)
-                _SAMPLE(fns, k, z, p, pn, s, rrs, rl, iq, q, ctrl)
+            if sample:  # a sample of the lanes due: ADC, controller, DAC
+                _REFERENCE(t, t, sc, ref_t, rrow, rrs, 4, nd, ref_kind, s)
+                _SAMPLE(fns, k, z, p, pn, s, rrs, rl, iq, q, ctrl, due)
             if delayed:  # the plant's command u(t_k - τ_in) into s[S_U]
-                _DELAY_INPUT(k, sample, s, ring, dsteps)
+                _DELAY_INPUT(k, due, s, ring, dsteps)
         elif k == 0 and init_output:
             # ξ̂_1(0) = y_meas(0) = h(x(0)) + n(0), the first measurement; ξ̂_2.. stay 0;
             # bumpless: the differentiator's r_1(0) too (at rest at y_meas(0))
@@ -263,7 +279,7 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
     _KEEP_ALIVE(lane_owner, real_owner, live_owner, rows_owner, switched_owner, iq_owner)
     _KEEP_ALIVE(q_owner, qt_owner, ctrl_owner, rl_owner, z_owner, p_owner)
     _KEEP_ALIVE(sc_owner, s_owner, rr_owner, rrow_owner, nrow_owner, nrow_owner)
-    _KEEP_ALIVE(dsteps, ring, dsteps, ring, dsteps, ring)
+    _KEEP_ALIVE(dsteps, ring, nper_owner, left_owner, due_owner, ring)
 
 
 def _tpl_store_row(row, t, lanes, live, rows, z, s, rrs, iq, ctrl, tr):  # pragma: no cover

@@ -19,7 +19,16 @@ disabled nothing is started.
 plant's name or a plant file, each ``SPEC`` an instance as ``c1``, ``c32``, ``s1``, ``s32``
 (continuous or sampled, lane width), or ``dc``: the discrete controller's update compiled
 without a plant (:class:`aiofl.engine.sampled.DiscreteController`, which the sampled loop's
-linearisation and the exports step).
+linearisation and the exports step).  ``PLANT`` may also be ``--states N``: the
+plant-independent instances (``c1``, ``s1``) of every N-state plant, compiled without
+one.
+
+A plant file the cache has never seen (:func:`prepare_loops_ahead`, from
+:func:`aiofl.config.run_config.resolve_plant`): the width-1 loops of its number of states
+do not depend on it (:mod:`aiofl.engine.plant_table`), so when the cache has none of them
+a second process compiles them while this one runs sympy on the file and compiles the
+plant's table entries: on an empty cache the first command on a plant file waits for the
+longer of the two, not for both.
 """
 
 from __future__ import annotations
@@ -30,19 +39,42 @@ import os
 import subprocess
 import sys
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
-from aiofl.cache import cache_enabled
+from aiofl.cache import cache_enabled, subdir
+from aiofl.engine import compile as compile_
+from aiofl.engine import loop
 from aiofl.engine.batch import Batch, Outputs
 from aiofl.engine.discrete import N_DISC
-from aiofl.engine.instances import run
+from aiofl.engine.instances import (
+    instance_for,
+    instance_kind,
+    plant_independent,
+    run,
+    run_groups,
+)
 from aiofl.engine.plant_table import N_TABLE
 from aiofl.plants.base import Plant
 
-__all__ = ["parse_spec", "prepare", "prepare_in_background", "probe"]
+__all__ = [
+    "parse_spec",
+    "prepare",
+    "prepare_in_background",
+    "prepare_loops",
+    "prepare_loops_ahead",
+    "probe",
+    "size_only_plant",
+]
+
+SIZE_ONLY = "--states"
+"""The ``PLANT`` argument naming a number of states instead of a plant."""
+SIZE_ONLY_MAX = 32
+"""The largest number of states ``--states=N`` accepts (that of a plant file,
+:data:`aiofl.plants.expressions.MAX_STATES`; a test checks they agree)."""
 
 
 def parse_spec(text: str) -> tuple[int, bool]:
@@ -122,11 +154,69 @@ def prepare(plant: Plant, specs: Sequence[tuple[int, bool]], *, controller: bool
         run(plant, width, groups, batch, out, sampled_data=sampled_data, compile_only=True)
 
 
+def size_only_plant(n_states: int) -> Plant:
+    """A plant of ``n_states`` states and no parameters whose functions are never called:
+    what the plant-independent instances of every plant of that size are built from."""
+
+    def unused(x: Any, p: Any) -> float:  # pragma: no cover - never called
+        return 0.0
+
+    return Plant(
+        name=f"any {n_states}-state plant",
+        n_states=n_states,
+        f=unused,
+        g=unused,
+        h=unused,
+        params={},
+    )
+
+
+def prepare_loops(n_states: int, specs: Sequence[tuple[int, bool]]) -> None:
+    """Compile (or load) the plant-independent instances ``specs`` (lane width 1,
+    continuous or sampled) of every ``n_states``-state plant, without a plant.
+
+    Raises
+    ------
+    ValueError
+        A spec names a plant-specific instance (width 32).
+    """
+    plant = size_only_plant(n_states)
+    groups, batch, out = probe(plant)
+    for width, sampled_data in specs:
+        if not plant_independent(width, "lanes"):
+            raise ValueError(f"lane width {width}: not a plant-independent instance; allowed: 1")
+        inst = instance_for(plant, width, sampled_data=sampled_data)
+        run_groups(inst.entry, groups, batch, out, compile_only=True)
+
+
+LOOPS_AHEAD = ((1, False), (1, True))
+"""The instances :func:`prepare_loops_ahead` compiles: the lone member's loop, continuous
+(the common command) first, then sampled."""
+
+
+def prepare_loops_ahead(n_states: int) -> subprocess.Popen[bytes] | None:
+    """Start a process compiling the loops of :data:`LOOPS_AHEAD` for ``n_states``-state
+    plants if the disk cache holds neither (by their file names only, any fingerprint:
+    after an upgrade the command compiles them itself); None when nothing is started."""
+    from aiofl.plants.expressions import MAX_STATES  # (sympy: a plant file is being built)
+
+    folder = subdir("kernels")
+    if folder is None or not 1 <= n_states <= MAX_STATES:
+        return None
+    prefix = [
+        f"{instance_kind(w, s, 'lanes', n_states)}_{compile_.NO_PLANT_KEY}_" for w, s in LOOPS_AHEAD
+    ]
+    if any(compile_.has_kernel(folder, loop._tpl_loop, p) for p in prefix):
+        return None
+    return prepare_in_background(f"{SIZE_ONLY}={n_states}", LOOPS_AHEAD)
+
+
 def prepare_in_background(
     plant: str, specs: Sequence[tuple[int, bool]], *, controller: bool = False
 ) -> subprocess.Popen[bytes] | None:
     """Start a process compiling the instances ``specs`` of the plant named ``plant`` (a
-    registered name or a plant file) into the disk cache, in that order, after the discrete
+    registered name, a plant file, or ``--states=N``: every N-state plant's
+    plant-independent ones) into the disk cache, in that order, after the discrete
     controller's update when ``controller``; None when the cache is off or nothing is
     asked.  The process is stopped when this one exits."""
     if not cache_enabled() or not (specs or controller):
@@ -156,7 +246,7 @@ def _stop(proc: subprocess.Popen[bytes]) -> None:
 def main(argv: Sequence[str]) -> int:
     """``python -m aiofl.engine.prepare PLANT SPEC...`` (see the module notes)."""
     if len(argv) < 2:
-        print("usage: python -m aiofl.engine.prepare PLANT SPEC...", file=sys.stderr)
+        print("usage: python -m aiofl.engine.prepare PLANT|--states=N SPEC...", file=sys.stderr)
         return 2
     from aiofl.plants.plant_cache import plant_from_file
     from aiofl.plants.registry import get_plant
@@ -167,6 +257,16 @@ def main(argv: Sequence[str]) -> int:
         print(f"aiofl.engine.prepare: {exc}", file=sys.stderr)
         return 2
     name = argv[0]
+    if name.startswith(f"{SIZE_ONLY}="):
+        try:
+            n_states = int(name.partition("=")[2])
+            if not 1 <= n_states <= SIZE_ONLY_MAX:
+                raise ValueError(f"{name}: allowed 1 <= N <= {SIZE_ONLY_MAX}")
+            prepare_loops(n_states, specs)
+        except ValueError as exc:
+            print(f"aiofl.engine.prepare: {exc}", file=sys.stderr)
+            return 2
+        return 0
     plant = plant_from_file(name) if name.endswith(".toml") else get_plant(name)
     prepare(plant, specs, controller=CONTROLLER in argv[1:])
     return 0

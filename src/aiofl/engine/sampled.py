@@ -4,7 +4,9 @@ A member whose discrete row (:mod:`aiofl.engine.discrete`) has ``D_STEPS = N > 0
 time loop's sampled instance (:mod:`aiofl.engine.loop` with ``_SAMPLED``): the plant and the
 performance integrals are integrated at ``dt`` (:func:`_tpl_plant_deriv`, the loop's
 right-hand side between samples), and every N-th step, at :math:`t_k = kT_s`,
-:func:`_tpl_sample` runs the controller of every lane once: the ADC reads the measurement,
+:func:`_tpl_sample` runs the controller of the member's lane once (each lane has its own N,
+so members of different sample times share a group; a lane between its samples holds its
+measurement, reference and command): the ADC reads the measurement,
 :func:`_tpl_ctrl_step` updates the controller, the DAC holds its command until the next
 sample (see :mod:`aiofl.engine.discrete` for the delay and the quantisers).  The update is
 scalar, lane by lane, on the member's row of a lane-major controller state; between samples
@@ -70,7 +72,7 @@ from aiofl.engine.discrete import (
     Sampling,
     sampling_rows,
 )
-from aiofl.engine.loop import S_BAD, S_D, S_NOISE, S_U, S_UC, S_Y, S_YD, S_YDON, S_YM
+from aiofl.engine.loop import S_BAD, S_D, S_NOISE, S_U, S_UC, S_Y, S_YD, S_YDON, S_YM, S_YS
 from aiofl.engine.member import (
     IQ_EINIT,
     IQ_ESO,
@@ -241,39 +243,43 @@ def _tpl_ctrl_step_each(fns, iq, q, dsc, states, scr, ys, rr, ri, pn, us):  # pr
 
 
 # ---------------------------------------------------- in the time loop, lane by lane
-def _tpl_setup(lanes, batch, q, qt, iq, ctrl):  # pragma: no cover - compiled
+def _tpl_setup(lanes, batch, q, qt, iq, ctrl, nper):  # pragma: no cover - compiled
     """Per-member constants of the group's lanes, one row per lane (``q[l]``, read by the
     scalar controller update), their discrete rows (``ctrl[0, l]``) and the group's ``iq``
-    (kinds are uniform within a group, so every lane writes the same).  Returns the steps
-    per sample N (uniform within a group)."""
+    (kinds are uniform within a group, so every lane writes the same); each lane's steps
+    per sample N into ``nper[l]`` (the lanes of a group may sample at different periods)."""
     for l in range(_W):
         mi = lanes[l]
         _MEMBER_SETUP(batch.ints[mi], batch.floats[mi], q[l], iq)
         for j in range(N_DISC):
             ctrl[0, l, j] = batch.disc[mi, j]
-    return int(ctrl[0, 0, D_STEPS])
+        nper[l] = int(ctrl[0, l, D_STEPS])
 
 
-def _tpl_sample(fns, k, z, p, pn, s, rrs, rl, iq, q, ctrl):  # pragma: no cover - compiled
-    """A sample at t_k of every lane: the ADC (``s[S_YM]`` = y + noise, quantised), the
-    discrete controller's update (:func:`_tpl_ctrl_step`, or the classical IOFL law from
-    the true state and the nominal model) with the reference and its derivatives at t_k
-    (``rrs[3]``), and the DAC (the command, delayed a sample if asked, quantised, held in
-    ``s[S_U]`` until the next sample)."""
+def _tpl_sample(fns, k, z, p, pn, s, rrs, rl, iq, q, ctrl, due):  # pragma: no cover - compiled
+    """A sample at t_k of the lanes ``due`` (the others hold everything): the ADC
+    (``s[S_YM]`` = y + noise, quantised), the discrete controller's update
+    (:func:`_tpl_ctrl_step`, or the classical IOFL law from the true state and the nominal
+    model) with the reference and its derivatives at t_k (``rrs[4]``, kept in ``rrs[3]``
+    until the lane's next sample), and the DAC (the command, delayed a sample if asked,
+    quantised, held in ``s[S_U]`` until the next sample)."""
     rho = iq[IQ_RHO]
     nr = L.RHO_MAX + 2
     iofl = iq[IQ_LAW] == L.LAW_IOFL
-    _BLK_OUTPUT(fns, z, p, s[S_NOISE], s[S_Y], s[S_YM])
+    _BLK_OUTPUT(fns, z, p, s[S_NOISE], s[S_Y], s[S_YS])
     for l in range(_W):
-        if s[S_YDON, l] != 0.0:  # a sensor delay: y(t_k - τ_out) + n(t_k)
-            s[S_YM, l] = s[S_YD, l] + s[S_NOISE, l]
+        if not due[l]:
+            continue
+        # y(t_k) + n(t_k), or with a sensor delay y(t_k - τ_out) + n(t_k)
+        ym = s[S_YD, l] + s[S_NOISE, l] if s[S_YDON, l] != 0.0 else s[S_YS, l]
         dsc = ctrl[0, l]
         cs = ctrl[1, l]
         yq = dsc[D_YQ]
-        yl = yq * np.floor(s[S_YM, l] / yq + 0.5) if yq > 0.0 else s[S_YM, l]
+        yl = yq * np.floor(ym / yq + 0.5) if yq > 0.0 else ym
         s[S_YM, l] = yl
         for j in range(nr):
-            rl[0, j] = rrs[3, j, l]
+            rrs[3, j, l] = rrs[4, j, l]
+            rl[0, j] = rrs[4, j, l]
         if k == 0:
             _CTRL_INIT(iq, cs, yl)
         u_before = cs[C_UPREV]
@@ -314,15 +320,15 @@ def _tpl_delay_output(fns, k, z, p, s, ring, dsteps):  # pragma: no cover - comp
         s[S_YD, l] = ring[1, (k - m) % nb, l] if k >= m else ring[1, 0, l]
 
 
-def _tpl_delay_input(k, sample, s, ring, dsteps):  # pragma: no cover - compiled
+def _tpl_delay_input(k, due, s, ring, dsteps):  # pragma: no cover - compiled
     r"""Step k's held command into the ring and the plant's :math:`u(t_k - m\,dt)` into
     ``s[S_U]`` (0 while :math:`t_k < m\,dt`); the controller's own held command is kept
-    in ``s[S_UC]`` (set from the DAC at a sample).  The command is constant over each step,
-    so the delayed one is too: the delay is exact."""
+    in ``s[S_UC]`` (set from the DAC at a lane's sample, ``due``).  The command is constant
+    over each step, so the delayed one is too: the delay is exact."""
     nb = ring.shape[1]
     slot = k % nb
     for l in range(_W):
-        if sample:
+        if due[l]:
             s[S_UC, l] = s[S_U, l]
         ring[0, slot, l] = s[S_UC, l]
         m = dsteps[0, l]

@@ -35,7 +35,7 @@ from aiofl.cache import prune_older_than, subdir, touch
 from aiofl.plants.base import Plant
 from aiofl.plants.plant_modules import generator_digest, load_module, module_source, store_module
 
-__all__ = ["plant_from_file", "plant_module_path"]
+__all__ = ["declared_states", "plant_from_file", "plant_module_path"]
 
 
 def _key(path: Path, text: bytes) -> str:
@@ -54,6 +54,19 @@ def plant_module_path(path: str | Path) -> Path | None:
         return None
     p = Path(path)
     return folder / f"plant_{_key(p, p.read_bytes())}.py"
+
+
+def declared_states(path: str | Path) -> int | None:
+    """The number of states plant file ``path`` lists (``states = [...]``), read without
+    building the plant; None when the file does not say so plainly (it is then checked
+    when built)."""
+    import tomllib
+
+    try:
+        states = tomllib.loads(Path(path).read_text(encoding="utf-8")).get("states")
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
+        return None
+    return len(states) if isinstance(states, list) and states else None
 
 
 def plant_from_file(path: str | Path) -> Plant:
