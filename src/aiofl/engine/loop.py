@@ -145,9 +145,9 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
     rr_owner = np.zeros((5, nr, _W))
     rrow_owner = np.zeros(_W, dtype=np.int64)
     nrow_owner = np.zeros(_W, dtype=np.int64)
-    # sampled: each lane's steps per sample, steps left to its next sample, due at this step
+    # sampled: each lane's steps per sample, the step of its next sample, due at this step
     nper_owner = np.zeros(_W, dtype=np.int64)
-    left_owner = np.zeros(_W, dtype=np.int64)
+    next_owner = np.zeros(_W, dtype=np.int64)
     due_owner = np.zeros(_W, dtype=np.bool_)
     lanes = _UNMANAGED(lane_owner)
     real = _UNMANAGED(real_owner)
@@ -167,7 +167,7 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
     rrow = _UNMANAGED(rrow_owner)
     nrow = _UNMANAGED(nrow_owner)
     nper = _UNMANAGED(nper_owner)
-    left = _UNMANAGED(left_owner)
+    next_sample = _UNMANAGED(next_owner)
     due = _UNMANAGED(due_owner)
     ref_t = _UNMANAGED(batch.ref_table)
     noise_t = _UNMANAGED(batch.noise_table)
@@ -209,6 +209,7 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
     scale = dt / STAGE_DIVISOR[method]
     row = 0
     save_in = 0
+    next_any = 0  # sampled: the step of the group's next sample (its lanes' earliest)
     for k in range(n_steps + 1):
         t = k * dt
         # r(t): carried over from the last step's t + dt unless held or first (RK4)
@@ -219,14 +220,15 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
             _REFERENCE((k + 1) * dt, t, sc, ref_t, rrow, rrs, 2, nd_stage, ref_kind, s)
         dany = _STEP_INPUTS(t, sc, noise_t, nrow, s, switched, pp)
         if _SAMPLED:
-            # the lanes due to sample (each at its own period: k a multiple of nper[l])
-            before_end = k < n_steps
-            sample = False
-            for l in range(_W):
-                d = left[l] == 0 and before_end
-                due[l] = d
-                left[l] = (nper[l] if d else left[l]) - 1
-                sample = sample or d
+            # a sample of the lanes due (each at its own period: k a multiple of nper[l])
+            sample = k == next_any and k < n_steps
+            if sample:
+                next_any = n_steps
+                for l in range(_W):
+                    d = next_sample[l] == k
+                    due[l] = d
+                    next_sample[l] += nper[l] if d else 0
+                    next_any = min(next_any, next_sample[l])
             if delayed:  # y(t_k) into the ring, y(t_k - τ_out) into s[S_YD]
                 _DELAY_OUTPUT(fns, k, z, p, s, ring, dsteps)
             if sample:  # a sample of the lanes due: ADC, controller, DAC
@@ -234,6 +236,9 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
                 _SAMPLE(fns, k, z, p, pn, s, rrs, rl, iq, q, ctrl, due)
             if delayed:  # the plant's command u(t_k - τ_in) into s[S_U]
                 _DELAY_INPUT(k, due, s, ring, dsteps)
+            if sample:  # no lane is due until the next sample
+                for l in range(_W):
+                    due[l] = False
         elif k == 0 and init_output:
             # ξ̂_1(0) = y_meas(0) = h(x(0)) + n(0), the first measurement; ξ̂_2.. stay 0;
             # bumpless: the differentiator's r_1(0) too (at rest at y_meas(0))
@@ -279,7 +284,7 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
     _KEEP_ALIVE(lane_owner, real_owner, live_owner, rows_owner, switched_owner, iq_owner)
     _KEEP_ALIVE(q_owner, qt_owner, ctrl_owner, rl_owner, z_owner, p_owner)
     _KEEP_ALIVE(sc_owner, s_owner, rr_owner, rrow_owner, nrow_owner, nrow_owner)
-    _KEEP_ALIVE(dsteps, ring, nper_owner, left_owner, due_owner, ring)
+    _KEEP_ALIVE(dsteps, ring, nper_owner, next_owner, due_owner, ring)
 
 
 def _tpl_store_row(row, t, lanes, live, rows, z, s, rrs, iq, ctrl, tr):  # pragma: no cover
