@@ -19,7 +19,8 @@ PACKAGE = SRC / "aiofl"
 LAYERS: tuple[tuple[str, ...], ...] = (
     # lowest first; a module may import from its own layer (without a cycle) or below
     # the paper's pieces; atomic file output; the bounds on every input size; the disk cache;
-    # single-value checks shared by the Python objects and the config schema; one BLAS thread
+    # single-value checks shared by the Python objects and the config schema; one BLAS thread;
+    # numba's helpers keyed by fast-math flags
     (
         "aiofl.components",
         "aiofl.outputs",
@@ -27,6 +28,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "aiofl.cache",
         "aiofl.checks",
         "aiofl.blas_threads",
+        "aiofl.numba_patches",
     ),
     ("aiofl.layout",),  # the member vocabulary: component kinds, parameter columns
     # plain descriptions of a design, a test and the model error (uncertainty)

@@ -72,6 +72,8 @@ def test_fingerprint_covers_every_source_a_kernel_runs(name):
     }
     missing = sorted(reached - set(recipe.sources) - plant_files)
     assert not missing, f"{name}: not in the fingerprint: {missing}"
+    # how numba compiles its helpers is part of every kernel's code (aiofl.numba_patches)
+    assert str(SRC / "numba_patches.py") in recipe.sources
 
 
 def test_editing_any_source_changes_the_fingerprint(tmp_path):

@@ -26,6 +26,12 @@ import math
 import numpy as np
 from numba import njit
 
+from aiofl.numba_patches import key_helpers_by_fastmath
+
+# numba's lowering helpers compiled per set of fast-math flags, before any component is
+# compiled (aiofl.numba_patches)
+key_helpers_by_fastmath()
+
 __all__ = [
     "CALLER_JIT_OPTIONS",
     "FASTMATH",

@@ -64,10 +64,13 @@ def user_functions(plant: Plant) -> bool:
 def engine_sources() -> tuple[str, ...]:
     """The files every kernel's code comes from besides the plant's: the layout, the
     per-member setup and law, this module, the compile factory, the array views, the batch
-    record, the plant interface (its functions' compile flags) and the component modules."""
+    record, the plant interface (its functions' compile flags), the corrections to numba
+    (how its helpers are compiled) and the component modules."""
+    from aiofl import numba_patches
+
     base = sys.modules[Plant.__module__]
     here = sys.modules[__name__]
-    mods = (L, member, here, compile_, views, batch, base, *_component_modules())
+    mods = (L, member, here, compile_, views, batch, base, numba_patches, *_component_modules())
     return tuple(m.__file__ for m in mods)
 
 

@@ -48,6 +48,7 @@ from numba.core.caching import CompileResultCacheImpl, FunctionCache, _CacheLoca
 
 from aiofl.cache import subdir
 from aiofl.engine.code_fingerprint import file_digest, function_fingerprint, source_digest
+from aiofl.numba_patches import key_helpers_by_fastmath, patch_source
 from aiofl.plants.base import Plant
 
 __all__ = [
@@ -328,28 +329,16 @@ def share_scope_when_inlining() -> bool:
     The change is applied once per process, to numba's ``InlineWorker.inline_ir`` by
     re-compiling its source with the two lines above replaced; if the source is not the
     one this was written for (another numba version), nothing is changed.  Returns whether
-    the faster copy is in place.
+    the faster copy is in place.  :func:`build` applies it, and
+    :func:`aiofl.numba_patches.key_helpers_by_fastmath`.
     """
-    if _INLINING_PATCHED:
-        return _INLINING_PATCHED[0]
-    import inspect
-    import textwrap
+    if not _INLINING_PATCHED:
+        from numba.core import inline_closurecall as ic
 
-    from numba.core import inline_closurecall as ic
-
-    ok = False
-    try:
-        src = textwrap.dedent(inspect.getsource(ic.InlineWorker.inline_ir))
-        if src.count(_INLINE_COPY_OLD) == 1:
-            space = dict(vars(ic))
-            code = compile(src.replace(_INLINE_COPY_OLD, _INLINE_COPY_NEW), ic.__file__, "exec")
-            exec(code, space)  # numba's own source, two lines changed
-            ic.InlineWorker.inline_ir = space["inline_ir"]
-            ok = True
-    except (OSError, TypeError, SyntaxError):  # pragma: no cover - source unavailable
-        ok = False
-    _INLINING_PATCHED.append(ok)
-    return ok
+        ok = patch_source(ic.InlineWorker, "inline_ir", ic, _INLINE_COPY_OLD, _INLINE_COPY_NEW)
+        _INLINING_PATCHED.append(ok)
+    key_helpers_by_fastmath()
+    return _INLINING_PATCHED[0]
 
 
 # -------------------------------------------------------------------- numba's disk cache

@@ -425,9 +425,13 @@ def standalone_recipe(plant: Any = None) -> compile_.Recipe:
     observer."""
     from aiofl.plants.base import _no_alpha_beta
 
+    # private copies of every compiled function it calls, as the loops' recipes bind: the
+    # public ones are cached by numba beside their own source only, so a cached update
+    # could link a stale callee (bindings.private_components)
     ns = dict(vars(member))
+    bindings.bind_private(ns)
     ns.update(_N=1, _NZ=1, **bindings.component_functions())
-    _bind(ns)
+    _bind(ns, bindings.private_components()["discrete"])
     ab = plant.compiled[5] if plant is not None else _no_alpha_beta
     # the plant's α, β called directly (its table argument unread: DiscreteController
     # passes an empty one)
