@@ -1,15 +1,14 @@
-"""Two corrections to numba, applied once per process before aiofl compiles anything.
+"""Corrections to numba, made by re-compiling one of its functions from its own source.
 
 numba compiles every kernel of :mod:`aiofl.engine` and every component of
-:mod:`aiofl.components`; two of its internals are corrected here by re-compiling one of its
-functions from its own source with a line or two changed (:func:`patch_source`; if the
-source is not the one this was written for, another numba version, nothing is changed and
-the patch reports False):
+:mod:`aiofl.components`.  :func:`patch_source` replaces a numba method by its own source
+with a line or two changed (if the source is not the one a patch was written for, another
+numba version, nothing is changed and the patch reports False).  Two patches use it:
 
-- :func:`key_helpers_by_fastmath`: the helpers numba compiles while lowering are cached
-  per set of fast-math flags, so a function's code does not depend on what the process
-  compiled before it (applied when :mod:`aiofl.components.fastmath` is imported, i.e.
-  before any component or kernel is compiled);
+- :func:`key_helpers_by_fastmath` (here): the helpers numba compiles while lowering are
+  cached per set of fast-math flags, so a function's code does not depend on what the
+  process compiled before it; applied when :mod:`aiofl.components.fastmath` is imported,
+  i.e. before any component or kernel is compiled;
 - :func:`aiofl.engine.compile.share_scope_when_inlining`: numba's IR inliner copies a
   callee with one memo (compile time only; applied by the engine's compile factory).
 """
