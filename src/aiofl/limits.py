@@ -14,6 +14,7 @@ limit                          what it bounds
 :data:`MAX_NOISE_SAMPLES`      the held measurement-noise table, t_final/noise_hold + 2
 :data:`MAX_POPULATION`         members of one tuning generation (one batched engine call)
 :data:`MAX_EVALUATIONS`        members of a whole tuning run, population x generations
+:data:`MAX_PLANT_FILE_BYTES`   a plant file, read before it is parsed
 =============================  ===========================================================
 """
 
@@ -23,6 +24,7 @@ __all__ = [
     "DT_MAX",
     "MAX_EVALUATIONS",
     "MAX_NOISE_SAMPLES",
+    "MAX_PLANT_FILE_BYTES",
     "MAX_POPULATION",
     "MAX_STEPS",
     "MAX_TRAJECTORY_BYTES",
@@ -32,6 +34,9 @@ __all__ = [
 
 #: largest horizon [s]
 T_FINAL_MAX = 1e4
+#: largest plant file read (1 MiB; the 32-state, 64-parameter plant the expression limits
+#: allow fits in a fraction of it)
+MAX_PLANT_FILE_BYTES = 1 << 20
 #: largest fixed step [s]
 DT_MAX = 0.1
 #: most integration steps per member, t_final/dt: 100x the paper's 20-s run at dt = 1e-4,

@@ -19,7 +19,7 @@ disabled nothing is started.
 plant's name or a plant file, each ``SPEC`` an instance as ``c1``, ``c32``, ``s1``, ``s32``
 (continuous or sampled, lane width), or ``dc``: the discrete controller's update compiled
 without a plant (:class:`aiofl.engine.sampled.DiscreteController`, which the sampled loop's
-linearisation and the exports step).  ``PLANT`` may also be ``--states N``: the
+linearisation and the exports step).  ``PLANT`` may also be ``--states=N``: the
 plant-independent instances (``c1``, ``s1``) of every N-state plant, compiled without
 one.
 
@@ -198,7 +198,8 @@ def prepare_loops_ahead(n_states: int) -> subprocess.Popen[bytes] | None:
     """Start a process compiling the loops of :data:`LOOPS_AHEAD` for ``n_states``-state
     plants if the disk cache holds neither (by their file names only, any fingerprint:
     after an upgrade the command compiles them itself); None when nothing is started."""
-    from aiofl.plants.expressions import MAX_STATES  # (sympy: a plant file is being built)
+    # (that module imports sympy, which the plant file being built needs anyway)
+    from aiofl.plants.expressions import MAX_STATES
 
     folder = subdir("kernels")
     if folder is None or not 1 <= n_states <= MAX_STATES:

@@ -58,12 +58,17 @@ def plant_module_path(path: str | Path) -> Path | None:
 
 def declared_states(path: str | Path) -> int | None:
     """The number of states plant file ``path`` lists (``states = [...]``), read without
-    building the plant; None when the file does not say so plainly (it is then checked
-    when built)."""
+    building the plant; None when the file does not say so plainly, or is larger than
+    :data:`~aiofl.limits.MAX_PLANT_FILE_BYTES` (it is then checked when built)."""
     import tomllib
 
+    from aiofl.limits import MAX_PLANT_FILE_BYTES
+
     try:
-        states = tomllib.loads(Path(path).read_text(encoding="utf-8")).get("states")
+        p = Path(path)
+        if p.stat().st_size > MAX_PLANT_FILE_BYTES:
+            return None
+        states = tomllib.loads(p.read_text(encoding="utf-8")).get("states")
     except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError):
         return None
     return len(states) if isinstance(states, list) and states else None

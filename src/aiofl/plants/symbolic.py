@@ -34,6 +34,7 @@ import sympy as sp
 from numpy.typing import NDArray
 from sympy.core.function import AppliedUndef
 
+from aiofl.limits import MAX_PLANT_FILE_BYTES
 from aiofl.plants.base import Plant, unit_from_label
 from aiofl.plants.codegen import GENERATED_FUNCTIONS, compile_sources, plant_sources
 from aiofl.plants.expressions import (
@@ -54,9 +55,6 @@ __all__ = ["SymbolicPlant", "read_plant_toml"]
 
 _MAX_NAME = 64
 """Longest state or parameter name."""
-_MAX_FILE_BYTES = 1 << 20
-"""Largest plant file read (1 MiB)."""
-
 _MAX_UNIT = 32
 """Longest unit text (``output_unit``, ``input_unit``, ``disturbance_unit``, ``state_units``)."""
 
@@ -587,9 +585,9 @@ def read_plant_toml(path: str | Path) -> dict[str, Any]:
     if not p.is_file():
         raise SymbolicPlantError(f"plant file {str(p)!r} does not exist")
     size = p.stat().st_size
-    if size > _MAX_FILE_BYTES:
+    if size > MAX_PLANT_FILE_BYTES:
         raise SymbolicPlantError(
-            f"plant file {str(p)!r} has {size} bytes; allowed: at most {_MAX_FILE_BYTES} "
+            f"plant file {str(p)!r} has {size} bytes; allowed: at most {MAX_PLANT_FILE_BYTES} "
             f"({MAX_STATES} states x 4 vectors of expressions fit in a fraction of it)"
         )
     try:
