@@ -329,8 +329,9 @@ def share_scope_when_inlining() -> bool:
     The change is applied once per process, to numba's ``InlineWorker.inline_ir`` by
     re-compiling its source with the two lines above replaced; if the source is not the
     one this was written for (another numba version), nothing is changed.  Returns whether
-    the faster copy is in place.  :func:`build` applies it, and
-    :func:`aiofl.numba_patches.key_helpers_by_fastmath`.
+    the faster copy is in place.  Applied by :func:`build`, which thereby also makes sure
+    of :func:`aiofl.numba_patches.key_helpers_by_fastmath` (in place already once any
+    component module is imported).
     """
     if not _INLINING_PATCHED:
         from numba.core import inline_closurecall as ic
