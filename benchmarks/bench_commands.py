@@ -13,6 +13,9 @@ sources) and "warm" the same command again in a new process:
   plant file of another model, never seen, in the same cache (sympy and its table entries;
   the width-1 loop of 2-state plants is cached: :mod:`aiofl.engine.plant_table`);
 * ``simulate frontier-s1-ladrc`` (a built-in plant): cold, then warm;
+* ``robustness`` of the plant-file config over 100 draws of ±20 % k and ±50 % c
+  (``--no-corners``): 100 members of one kind, which run in lanes once the plant's lane
+  instance is at hand or worth its compile (:mod:`aiofl.engine.lane_choice`), alone before;
 * with ``--reproduce``: ``aiofl reproduce`` cold, then warm.
 
 The targets of issue 19 (2-core machine, quiet): plant file cold <= 15 s, warm <= 3 s;
@@ -76,6 +79,15 @@ b0 = 1.0
 dt = 1e-3
 """
 
+UNCERTAINTY = """\
+[uncertainty]
+draws = 100
+seed = 1
+[uncertainty.parameters]
+k = { uniform = 0.2 }
+c = { uniform = 0.5 }
+"""
+
 
 def _aiofl() -> list[str]:
     exe = Path(sys.executable).with_name("aiofl")
@@ -108,9 +120,12 @@ def main() -> None:
     try:
         (work / "duffing.toml").write_text(PLANT)
         (work / "sim.toml").write_text(CONFIG)
+        (work / "robust.toml").write_text(CONFIG + UNCERTAINTY)
+        robust = ["robustness", str(work / "robust.toml"), "--no-corners"]
         cases = [
             ("simulate CONFIG on a plant file", ["simulate", str(work / "sim.toml")]),
             ("simulate frontier-s1-ladrc", ["simulate", "frontier-s1-ladrc"]),
+            ("robustness, plant file, 100 draws", robust),
         ]
         if opts.reproduce:
             cases.append(("reproduce", ["reproduce"]))

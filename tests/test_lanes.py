@@ -385,7 +385,7 @@ def test_sampled_divergence_is_per_lane() -> None:
 def test_engine_choice_is_validated(monkeypatch: pytest.MonkeyPatch) -> None:
     rc = load_config("retuned-s1-ladrc")
     scen = replace(rc.scenario, t_final=0.01)
-    with pytest.raises(ValueError, match="engine = 'simd'; allowed: lanes, scalar"):
+    with pytest.raises(ValueError, match="engine = 'simd'; allowed: auto, lanes, scalar"):
         simulate_batch(rc.plant, rc.controller, scen, engine="simd")
     monkeypatch.setenv("AIOFL_ENGINE", "fast")
     with pytest.raises(ValueError, match="engine = 'fast'"):

@@ -144,7 +144,7 @@ def test_a_plant_gives_the_same_bits_through_its_table_as_inlined_in_lanes(ts):
         parameter_change_time=0.4,
     )
     kw = {"dt": 1e-4, "store": True, "decimation": 20, "sampling": Sampling(ts) if ts else None}
-    group = simulate_batch(rc.plant, ctrls, scen, **kw)
+    group = simulate_batch(rc.plant, ctrls, scen, engine="lanes", **kw)
     for i in (0, 13):
         alone = simulate_batch(rc.plant, ctrls[i], scen, **kw)
         np.testing.assert_array_equal(alone.metrics[0], group.metrics[i])

@@ -81,6 +81,7 @@ from aiofl.plants.base import Plant, PlantError
 
 __all__ = [
     "VARIANTS",
+    "instance_built",
     "instance_for",
     "instance_kind",
     "plan_groups",
@@ -315,6 +316,17 @@ def instance_for(
                 plant.typecheck()  # numba compiles them now rather than inside the kernel
             _INSTANCES[key] = (owner, inst)
         return _INSTANCES[key][1]
+
+
+def instance_built(
+    plant: Plant, width: int = loop.WIDTH, *, sampled_data: bool = False, variant: str = "lanes"
+) -> bool:
+    """Whether :func:`instance_for` has built this instance in this process (its kernel is
+    compiled, or loaded from the disk cache, by its first run)."""
+    independent = plant_independent(width, variant)
+    key = (plant.n_states if independent else id(plant), independent, width, sampled_data, variant)
+    with _LOCK:
+        return key in _INSTANCES and _INSTANCES[key][0] is (None if independent else plant)
 
 
 def set_plant_table(plant: Plant, batch: Any, variant: str = "lanes") -> None:

@@ -30,6 +30,8 @@ from aiofl.controller import Controller, ControllerBatch, controller_batch
 from aiofl.engine.batch import Batch, Outputs
 from aiofl.engine.discrete import D_STEPS, N_DISC, Sampling, check_delays, sampling_rows
 from aiofl.engine.instances import instance_for, plan_groups, run, set_plant_table
+from aiofl.engine.lane_choice import lanes_worth_it
+from aiofl.engine.loop import WIDTH
 from aiofl.engine.observer_gains import model_jacobians, with_model_gains
 from aiofl.engine.plant_table import N_TABLE
 from aiofl.limits import DT_MAX, MAX_STEPS, MAX_TRAJECTORY_BYTES, check_run_size
@@ -245,11 +247,14 @@ def simulate_batch(
         multiples of ``dt`` (:mod:`aiofl.engine.sampled`).  Continuous members are
         unaffected.
     engine
-        ``"lanes"`` (default): members run in groups of 32, one per SIMD lane, or alone
-        (width 1) when their kind has few members (:mod:`aiofl.engine.instances`);
+        ``"lanes"``: members run in groups of 32, one per SIMD lane, or alone (width 1)
+        when their kind has few members (:mod:`aiofl.engine.instances`); ``"auto"``
+        (default): as ``"lanes"``, but members run alone while the plant's lane instance
+        is neither at hand (built, or in the kernel cache) nor worth its compile for the
+        work so far (:mod:`aiofl.engine.lane_choice`): the same numbers, bit for bit;
         ``"scalar"``: every member alone, in the same time loop compiled with libm and
         the components' fast-math flags, a differently-rounded check of the lane engine.
-        Default: the environment variable ``AIOFL_ENGINE``, else ``"lanes"``.  Sampled
+        Default: the environment variable ``AIOFL_ENGINE``, else ``"auto"``.  Sampled
         members run the sampled instance of the same loop (the plant in lanes, the
         controller lane by lane at the samples).
 
@@ -293,7 +298,7 @@ def simulate_batch(
         decimation=decimation,
         divergence_threshold=divergence_threshold,
     )
-    run_plan(plant, plan(rec, engine), rec, out, engine)
+    run_plan(plant, plan(rec, engine, plant), rec, out, engine)
     return BatchResult(
         metrics=out.metrics,
         diverged=out.status == L.STATUS_DIVERGED,
@@ -389,10 +394,14 @@ def pack(
     return rec, out
 
 
-def plan(batch: Batch, engine: str = "lanes") -> dict[tuple[int, bool], NDArray[np.int64]]:
+def plan(
+    batch: Batch, engine: str = "auto", plant: Plant | None = None
+) -> dict[tuple[int, bool], NDArray[np.int64]]:
     """The groups to run, by (lane width, sampled): continuous and sampled members apart,
     grouped by kinds (:func:`aiofl.engine.instances.plan_groups`); with ``engine="scalar"``
-    every member alone (width 1)."""
+    every member alone (width 1); with ``engine="auto"`` (and the ``plant``) the members
+    planned for lanes run alone instead when the lanes are neither at hand nor worth
+    compiling (:func:`aiofl.engine.lane_choice.lanes_worth_it`)."""
     steps = batch.disc[:, D_STEPS]
     sampled = steps > 0
     out: dict[tuple[int, bool], NDArray[np.int64]] = {}
@@ -405,7 +414,12 @@ def plan(batch: Batch, engine: str = "lanes") -> dict[tuple[int, bool], NDArray[
             out[(1, is_sampled)] = members.reshape(-1, 1)
             continue
         by_steps = steps if is_sampled else None
-        for width, groups in plan_groups(batch.ints, ref_kind, members, by_steps).items():
+        planned = plan_groups(batch.ints, ref_kind, members, by_steps)
+        if engine == "auto" and plant is not None and WIDTH in planned:
+            in_lanes = int(np.count_nonzero(planned[WIDTH] >= 0))
+            if not lanes_worth_it(plant, is_sampled, float(in_lanes) * batch.n_steps):
+                planned = {1: members.reshape(-1, 1)}
+        for width, groups in planned.items():
             out[(width, is_sampled)] = groups
     return out
 
@@ -415,7 +429,7 @@ def run_plan(
     groups_by_instance: dict[tuple[int, bool], NDArray[np.int64]],
     batch: Batch,
     out: Outputs,
-    engine: str = "lanes",
+    engine: str = "auto",
 ) -> None:
     """Run every planned group on its instance (compiled on first use)."""
     variant = "scalar" if engine == "scalar" else "lanes"
@@ -423,14 +437,14 @@ def run_plan(
         run(plant, width, groups, batch, out, sampled_data=is_sampled, variant=variant)
 
 
-ENGINES = ("lanes", "scalar")
+ENGINES = ("auto", "lanes", "scalar")
 """The time loops :func:`simulate_batch` can run (``engine``)."""
 
 
 def _engine_choice(engine: str | None) -> str:
     import os
 
-    choice = engine if engine is not None else os.environ.get("AIOFL_ENGINE", "") or "lanes"
+    choice = engine if engine is not None else os.environ.get("AIOFL_ENGINE", "") or "auto"
     if choice not in ENGINES:
         raise ValueError(f"engine = {choice!r}; allowed: {', '.join(ENGINES)}")
     return choice

@@ -1,0 +1,98 @@
+r"""Whether a batch runs in lanes: the lane instance at hand, or worth compiling.
+
+A group of 32 lanes runs 5–7 times the member-steps per second of a lone member, but its
+instance is compiled per plant, 12–14 s of numba on one core, while the width-1 instance is
+shared by every plant of a size (:mod:`aiofl.engine.plant_table`) and usually cached.  Both
+give a member the same numbers, bit for bit (:mod:`aiofl.engine.loop`), so the choice is one
+of time alone.  A user's ``aiofl robustness`` on a plant file (100 draws of a 5-s scenario
+at 1 ms: 5·10⁵ member-steps) ran in 0.1 s at width 1 and waited 13 s for a width-32
+compile; a tuning run of thousands of members pays for the compile many times over.
+
+:func:`lanes_worth_it` decides for the members a batch would run in lanes (``engine="auto"``,
+the default of :func:`aiofl.engine.simulation.simulate_batch`):
+
+1. **At hand** (:func:`lanes_at_hand`): the plant's width-32 instance of that timing is
+   built in this process, or its kernel, compiled from exactly this code, is in the disk
+   cache (:func:`aiofl.engine.compile.has_kernel` with the recipe's fingerprint): lanes.
+2. Otherwise the rule of *renting before buying* (the ski-rental problem; Karlin et al.,
+   "Competitive randomized algorithms for nonuniform problems", *Algorithmica* 11, 1994):
+   the members run at width 1, and their member-steps are added to the plant's *rent* in
+   this process, until the rent with this batch's steps would reach the price of the
+   compile, :math:`S^* = N_c\,T` member-steps (:data:`LONE_STEPS_PER_COMPILE` :math:`N_c`,
+   T the engine's threads: the lone members run on all of them, the compile on one); that
+   batch compiles the lanes.  A process's width-1 time before it compiles is then at most
+   the compile's time, so no command waits more than twice as long as with the best choice
+   in hindsight, and a batch that alone is worth the compile compiles at once.
+
+The member-steps of a batch are its members times the horizon's steps (a member that
+diverges early costs less: the estimate errs towards compiling).  ``engine="lanes"`` always
+runs the kinds with many members in lanes (the tests that check lanes do so).
+"""
+
+from __future__ import annotations
+
+import threading
+
+from aiofl.cache import subdir
+from aiofl.engine import compile as compile_
+from aiofl.engine import instances, loop
+from aiofl.plants.base import Plant
+
+__all__ = ["LONE_STEPS_PER_COMPILE", "lanes_at_hand", "lanes_worth_it", "rent"]
+
+LONE_STEPS_PER_COMPILE = 6.0e7
+r"""Member-steps a lone member runs on one thread in the time a width-32 instance takes to
+compile: 12–14 s of compiling (``docs/benchmarks.md``) at 4.5–6 M member-steps/s alone
+(LESO, LADRC; INLESO 2.5, so for it the rule compiles later than ideal, within the factor
+2).  Both scale with one core's speed, so their product holds across machines."""
+
+_LOCK = threading.Lock()
+_RENT: dict[tuple[int, bool], tuple[Plant, float]] = {}
+
+
+def lanes_at_hand(plant: Plant, sampled_data: bool) -> bool:
+    """Whether ``plant``'s width-32 lane instance of that timing costs no compile: built in
+    this process, or stored in the kernel cache under the fingerprint of today's code."""
+    width = loop.WIDTH
+    if instances.instance_built(plant, width, sampled_data=sampled_data):
+        return True
+    folder = subdir("kernels")
+    if folder is None:
+        return False
+    rec = instances.recipe(plant, width, sampled_data=sampled_data)
+    fp = compile_.fingerprint(rec)
+    if fp is None or compile_.sources_changed(rec.sources):
+        return False
+    name = f"{rec.kind}_{compile_.plant_key(plant)}_{fp}"
+    return compile_.has_kernel(folder, loop._tpl_loop, name)
+
+
+def rent(plant: Plant, sampled_data: bool) -> float:
+    """The member-steps this process has run at width 1 for ``plant`` at that timing
+    instead of compiling its lanes (0 once it compiled them)."""
+    with _LOCK:
+        owner, steps = _RENT.get((id(plant), sampled_data), (None, 0.0))
+        return steps if owner is plant else 0.0
+
+
+def lanes_worth_it(plant: Plant, sampled_data: bool, member_steps: float) -> bool:
+    """Run ``member_steps`` of ``plant`` (members a batch would run in lanes) in lanes?
+
+    True when the lanes are at hand, or when the rent so far and these steps reach the
+    compile's price (see the module notes); otherwise False, and the steps are added to the
+    rent.
+    """
+    import numba
+
+    if lanes_at_hand(plant, sampled_data):
+        return True
+    price = LONE_STEPS_PER_COMPILE * max(1, numba.get_num_threads())
+    key = (id(plant), sampled_data)
+    with _LOCK:
+        owner, paid = _RENT.get(key, (None, 0.0))
+        paid = paid if owner is plant else 0.0
+        if paid + member_steps >= price:
+            _RENT.pop(key, None)
+            return True
+        _RENT[key] = (plant, paid + member_steps)
+        return False

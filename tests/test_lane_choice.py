@@ -1,0 +1,108 @@
+"""When a batch runs in lanes (aiofl.engine.lane_choice): the lane instance at hand, or
+worth its compile by the rent rule; otherwise its members run alone, with the same numbers.
+
+The plants here are fresh copies of a library plant (a new object: no instance of it is
+built in this process), and no test compiles a lane instance.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numba
+import numpy as np
+import pytest
+
+from aiofl.controller import Controller
+from aiofl.engine import compile as compile_
+from aiofl.engine import instances, lane_choice, loop, simulation
+from aiofl.engine.simulation import simulate_batch
+from aiofl.plants import get_plant
+from aiofl.scenario import Reference, Scenario
+
+WIDTH = loop.WIDTH
+
+
+@pytest.fixture
+def fresh():
+    """A pendulum no instance was built for."""
+    return dataclasses.replace(get_plant("pendulum"))
+
+
+def _members(n: int) -> tuple[list[Controller], Scenario]:
+    values = {"eso.omega0": 30.0, "sef.omega_c": 4.0, "td.omega": 8.0, "law.b0": 4.0}
+    base = Controller.from_structure("LADRC", rho=2, values=values)
+    ctrls = [base.with_values(**{"eso.omega0": 30.0 + k}) for k in range(n)]
+    return ctrls, Scenario(t_final=0.05, reference=Reference(amplitude=0.5, omega=1.0))
+
+
+def test_a_stored_kernel_of_todays_code_is_at_hand_one_of_older_code_is_not(
+    fresh, tmp_path, monkeypatch
+):
+    """The disk check looks for the index file named after the recipe's kind, the plant's
+    key and the fingerprint of today's code; a file of another fingerprint (older code, to
+    be compiled again) does not count, nor does the other timing's (an empty cache)."""
+    monkeypatch.setenv("AIOFL_CACHE_DIR", str(tmp_path / "cache"))
+    monkeypatch.delenv("AIOFL_NO_CACHE", raising=False)
+    plant = fresh
+    assert not lane_choice.lanes_at_hand(plant, False)
+    rec = instances.recipe(plant, WIDTH)
+    fp = compile_.fingerprint(rec)
+    assert fp is not None
+    folder = lane_choice.subdir("kernels")
+    assert folder is not None
+    start = compile_._cache_file_start(loop._tpl_loop, f"{rec.kind}_{compile_.plant_key(plant)}_")
+    (folder / f"{start}{'0' * len(fp)}.nbi").write_bytes(b"")  # an older fingerprint
+    assert not lane_choice.lanes_at_hand(plant, False)
+    (folder / f"{start}{fp}.nbi").write_bytes(b"")
+    assert lane_choice.lanes_at_hand(plant, False)
+    assert not lane_choice.lanes_at_hand(plant, True)  # the sampled instance is not stored
+
+
+def test_the_rent_is_paid_until_it_reaches_the_compile_then_the_lanes_are_bought(
+    fresh, tmp_path, monkeypatch
+):
+    """Steps below the price run alone and add to the plant's rent; the batch that brings
+    the rent to the price runs in lanes and clears it; a batch worth the compile alone
+    buys at once; each plant and timing pays its own rent (an empty cache: nothing at
+    hand)."""
+    monkeypatch.setenv("AIOFL_CACHE_DIR", str(tmp_path / "cache"))
+    plant, other = fresh, dataclasses.replace(fresh)
+    monkeypatch.setattr(lane_choice, "LONE_STEPS_PER_COMPILE", 100.0)
+    price = 100.0 * numba.get_num_threads()
+    assert not lane_choice.lanes_worth_it(plant, False, 0.4 * price)
+    assert not lane_choice.lanes_worth_it(plant, False, 0.4 * price)
+    assert lane_choice.rent(plant, False) == pytest.approx(0.8 * price)
+    assert lane_choice.rent(other, False) == 0.0 and lane_choice.rent(plant, True) == 0.0
+    assert lane_choice.lanes_worth_it(plant, False, 0.2 * price)  # rent + steps = price
+    assert lane_choice.rent(plant, False) == 0.0
+    assert lane_choice.lanes_worth_it(other, True, price)  # worth it alone
+    assert not lane_choice.lanes_worth_it(other, False, 0.5 * price)
+
+
+def test_a_small_batch_of_a_plant_without_lanes_runs_alone_with_the_same_numbers(
+    fresh, monkeypatch
+):
+    """``engine="auto"``: a kind with enough members for lanes runs alone when its lane
+    instance is not at hand (the test's premise: whether another test stored the
+    pendulum's is beside the point here) and the work is below the price (nothing compiled
+    for lanes); ``engine="lanes"`` plans the same batch in one group.  The members' numbers
+    are those they have alone, bit for bit."""
+    plant = fresh
+    monkeypatch.setattr(lane_choice, "lanes_at_hand", lambda plant, sampled_data: False)
+    ctrls, scen = _members(20)
+    plans = []
+    real_plan = simulation.plan
+    monkeypatch.setattr(
+        simulation, "plan", lambda *a: plans.append((a, real_plan(*a))) or plans[-1][1]
+    )
+    res = simulate_batch(plant, ctrls, scen, dt=1e-3)
+    (rec, engine, _), planned = plans[0]
+    assert engine == "auto" and list(planned) == [(1, False)]
+    assert planned[(1, False)].shape == (20, 1)
+    assert not instances.instance_built(plant, WIDTH)
+    assert lane_choice.rent(plant, False) == 20 * rec.n_steps
+    assert list(real_plan(rec, "lanes", plant)) == [(WIDTH, False)]
+    for i in (0, 19):
+        alone = simulate_batch(plant, ctrls[i], scen, dt=1e-3)
+        np.testing.assert_array_equal(alone.metrics[0], res.metrics[i])
