@@ -20,13 +20,16 @@ sources) and "warm" the same command again in a new process:
 
 The targets of issue 19 (2-core machine, quiet): plant file cold <= 15 s, warm <= 3 s;
 built-in preset warm <= 2 s; reproduce warm <= 25 s.  The load average is printed: the
-figures mean little on a busy machine.
+figures mean little on a busy machine.  Each row also gives the CPU seconds of each run
+(cold / warm ...: user + system time of the command and of the processes it started):
+a command's wall time on N cores is at least its CPU seconds over N.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import shutil
 import subprocess
 import sys
@@ -94,21 +97,35 @@ def _aiofl() -> list[str]:
     return [str(exe)] if exe.exists() else [sys.executable, "-m", "aiofl"]
 
 
+CPU_SECONDS: list[float] = []
+"""CPU seconds (user + system, the command and every process it started and waited for)
+of each :func:`timed` run, in order."""
+
+
+def _children_cpu() -> float:
+    use = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return use.ru_utime + use.ru_stime
+
+
 def timed(args: list[str], cache: Path, out: Path) -> tuple[float, int]:
-    """Wall time and exit status of ``aiofl ARGS --out OUT`` with the cache folder ``cache``."""
+    """Wall time and exit status of ``aiofl ARGS --out OUT`` with the cache folder ``cache``
+    (its CPU seconds appended to :data:`CPU_SECONDS`)."""
     env = {k: v for k, v in os.environ.items() if k != "AIOFL_NO_CACHE"}
     env["AIOFL_CACHE_DIR"] = str(cache)
     shutil.rmtree(out, ignore_errors=True)
+    cpu0 = _children_cpu()
     t0 = time.perf_counter()
     proc = subprocess.run(
         [*_aiofl(), *args, "--out", str(out)], env=env, capture_output=True, check=False
     )
-    return time.perf_counter() - t0, proc.returncode
+    wall = time.perf_counter() - t0
+    CPU_SECONDS.append(_children_cpu() - cpu0)
+    return wall, proc.returncode
 
 
 def _row(label: str, seconds: float, rc: int) -> None:
     note = "" if rc == 0 else f"  (exit {rc})"
-    print(f"{label:36s} {'':9s} {seconds:18.2f}{note}")
+    print(f"{label:36s} {'':9s} {seconds:18.2f}  [{CPU_SECONDS[-1]:.0f} CPU-s]{note}")
 
 
 def main() -> None:
@@ -134,12 +151,14 @@ def main() -> None:
         print(f"{'command':36s} {'cold [s]':>9s} {'warm [s]':>18s}")
         for i, (label, args) in enumerate(cases):
             cache = work / f"cache{i}"
+            first = len(CPU_SECONDS)
             cold, rc = timed(args, cache, work / "out")
             warm = [timed(args, cache, work / "out") for _ in range(opts.warm_runs)]
             codes = {rc, *(c for _, c in warm)}
             note = "" if codes == {0} else f"  (exit {sorted(codes)})"
             warm_text = " / ".join(f"{w:.2f}" for w, _ in warm)
-            print(f"{label:36s} {cold:9.2f} {warm_text:>18s}{note}")
+            cpu = " / ".join(f"{c:.0f}" for c in CPU_SECONDS[first:])
+            print(f"{label:36s} {cold:9.2f} {warm_text:>18s}  [{cpu} CPU-s]{note}")
             if i == 0:  # a parameter value of the plant file edited, then another model
                 (work / "duffing.toml").write_text(PLANT.replace("k = 4.0", "k = 5.0"))
                 edited, rc = timed(args, cache, work / "out")
