@@ -59,6 +59,27 @@ def test_a_stored_kernel_of_todays_code_is_at_hand_one_of_older_code_is_not(
     assert not lane_choice.lanes_at_hand(plant, True)  # the sampled instance is not stored
 
 
+def test_a_lane_instance_another_process_is_compiling_is_at_hand(fresh, tmp_path, monkeypatch):
+    """Its compile lock held (here by another open file, as another process holds it):
+    waiting for it costs less than renting beside it; the lock released and no kernel
+    stored (the compile failed), it is not."""
+    import fcntl
+
+    monkeypatch.setenv("AIOFL_CACHE_DIR", str(tmp_path / "cache"))
+    plant = fresh
+    rec = instances.recipe(plant, WIDTH, sampled_data=True)
+    fp = compile_.fingerprint(rec)
+    folder = lane_choice.subdir("kernels")
+    assert folder is not None and fp is not None
+    name = f"{rec.kind}_{compile_.plant_key(plant)}_{fp}"
+    lock = folder / f"{compile_._cache_file_start(loop._tpl_loop, name)}-k.py311.lock"
+    with lock.open("a+b") as held:
+        fcntl.flock(held, fcntl.LOCK_EX)
+        assert lane_choice.lanes_at_hand(plant, True)
+        assert not lane_choice.lanes_at_hand(plant, False)
+    assert not lane_choice.lanes_at_hand(plant, True)
+
+
 def test_the_rent_is_paid_until_it_reaches_the_compile_then_the_lanes_are_bought(
     fresh, tmp_path, monkeypatch
 ):
@@ -106,3 +127,33 @@ def test_a_small_batch_of_a_plant_without_lanes_runs_alone_with_the_same_numbers
     for i in (0, 19):
         alone = simulate_batch(plant, ctrls[i], scen, dt=1e-3)
         np.testing.assert_array_equal(alone.metrics[0], res.metrics[i])
+
+
+def test_declared_work_worth_the_compile_buys_the_lanes_at_the_first_batch(
+    fresh, tmp_path, monkeypatch
+):
+    """A process that declares work reaching the price (a tuning run's budget) runs its
+    first batch in lanes without paying rent; a declaration below the price changes
+    nothing, and a new one replaces the last."""
+    monkeypatch.setenv("AIOFL_CACHE_DIR", str(tmp_path / "cache"))
+    plant = fresh
+    monkeypatch.setattr(lane_choice, "LONE_STEPS_PER_COMPILE", 100.0)
+    price = 100.0 * numba.get_num_threads()
+    lane_choice.expect(plant, False, 0.5 * price)
+    assert not lane_choice.lanes_worth_it(plant, False, 1.0)
+    lane_choice.expect(plant, False, price)
+    assert lane_choice.lanes_worth_it(plant, False, 1.0)
+    assert lane_choice.rent(plant, False) == 0.0
+    assert not lane_choice.lanes_worth_it(plant, True, 1.0)  # declared for the other timing
+
+
+def test_a_tuning_run_declares_its_whole_budget():
+    """population × generations × (robust draws + 1) × noise realisations members."""
+    from aiofl.config import parse_config
+    from aiofl.tuning.search import prepare
+    from test_tuning import FAST
+
+    cfg = parse_config(
+        {**FAST, "tune": {**FAST["tune"], "population": 6, "generations": 7}}, "a test config"
+    )
+    assert prepare(cfg).spec.expected_members == 6 * 7

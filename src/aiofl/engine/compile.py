@@ -430,6 +430,28 @@ def has_kernel(folder: Path, template: Callable[..., Any], prefix: str) -> bool:
     return False
 
 
+def being_compiled(folder: Path, template: Callable[..., Any], prefix: str) -> bool:
+    """Whether another process holds the compile lock (:func:`compile_lock`) of an instance
+    of ``template`` named ``prefix`` in ``folder``: it is compiling that kernel now, and a
+    caller that waits for the lock loads it."""
+    try:
+        import fcntl
+    except ImportError:  # pragma: no cover - not POSIX
+        return False
+    start = _cache_file_start(template, prefix)
+    with contextlib.suppress(OSError):
+        for entry in os.scandir(folder):
+            if not (entry.name.startswith(start) and entry.name.endswith(".lock")):
+                continue
+            with open(entry.path, "a+b") as fh:
+                try:
+                    fcntl.flock(fh, fcntl.LOCK_EX | fcntl.LOCK_NB)
+                except BlockingIOError:
+                    return True
+                fcntl.flock(fh, fcntl.LOCK_UN)
+    return False
+
+
 def prune_kernels(folder: Path, template: Callable[..., Any], prefix: str, keep: str) -> None:
     """Delete the cache files of ``template``'s instances named ``prefix`` + a fingerprint
     other than ``keep`` (the same plant and kind compiled from older code)."""

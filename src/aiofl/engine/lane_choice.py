@@ -13,7 +13,9 @@ the default of :func:`aiofl.engine.simulation.simulate_batch`):
 
 1. **At hand** (:func:`lanes_at_hand`): the plant's width-32 instance of that timing is
    built in this process, or its kernel, compiled from exactly this code, is in the disk
-   cache (:func:`aiofl.engine.compile.has_kernel` with the recipe's fingerprint): lanes.
+   cache (:func:`aiofl.engine.compile.has_kernel` with the recipe's fingerprint) or being
+   compiled into it by another process (its compile lock held,
+   :func:`aiofl.engine.compile.being_compiled`): lanes.
 2. Otherwise the rule of *renting before buying* (the ski-rental problem; Karlin et al.,
    "Competitive randomized algorithms for nonuniform problems", *Algorithmica* 11, 1994):
    the members run at width 1, and their member-steps are added to the plant's *rent* in
@@ -22,7 +24,9 @@ the default of :func:`aiofl.engine.simulation.simulate_batch`):
    T the engine's threads: the lone members run on all of them, the compile on one); that
    batch compiles the lanes.  A process's width-1 time before it compiles is then at most
    the compile's time, so no command waits more than twice as long as with the best choice
-   in hindsight, and a batch that alone is worth the compile compiles at once.
+   in hindsight, and a batch that alone is worth the compile compiles at once.  A run that
+   knows its work ahead (a tuning run: population × generations × members per candidate)
+   declares it (:func:`expect`) and buys at its first batch when that is worth it.
 
 The member-steps of a batch are its members times the horizon's steps (a member that
 diverges early costs less: the estimate errs towards compiling).  ``engine="lanes"`` always
@@ -38,7 +42,7 @@ from aiofl.engine import compile as compile_
 from aiofl.engine import instances, loop
 from aiofl.plants.base import Plant
 
-__all__ = ["LONE_STEPS_PER_COMPILE", "lanes_at_hand", "lanes_worth_it", "rent"]
+__all__ = ["LONE_STEPS_PER_COMPILE", "expect", "lanes_at_hand", "lanes_worth_it", "rent"]
 
 LONE_STEPS_PER_COMPILE = 6.0e7
 r"""Member-steps a lone member runs on one thread in the time a width-32 instance takes to
@@ -48,11 +52,15 @@ compile: 12–14 s of compiling (``docs/benchmarks.md``) at 4.5–6 M member-ste
 
 _LOCK = threading.Lock()
 _RENT: dict[tuple[int, bool], tuple[Plant, float]] = {}
+_EXPECTED: dict[tuple[int, bool], tuple[Plant, float]] = {}
 
 
 def lanes_at_hand(plant: Plant, sampled_data: bool) -> bool:
-    """Whether ``plant``'s width-32 lane instance of that timing costs no compile: built in
-    this process, or stored in the kernel cache under the fingerprint of today's code."""
+    """Whether ``plant``'s width-32 lane instance of that timing costs this process no
+    compile: built in this process, stored in the kernel cache under the fingerprint of
+    today's code, or being compiled into it by another process now (``aiofl reproduce``
+    compiles the instances it needs later in a second process,
+    :mod:`aiofl.engine.prepare`: waiting for it costs less than renting beside it)."""
     width = loop.WIDTH
     if instances.instance_built(plant, width, sampled_data=sampled_data):
         return True
@@ -64,7 +72,9 @@ def lanes_at_hand(plant: Plant, sampled_data: bool) -> bool:
     if fp is None or compile_.sources_changed(rec.sources):
         return False
     name = f"{rec.kind}_{compile_.plant_key(plant)}_{fp}"
-    return compile_.has_kernel(folder, loop._tpl_loop, name)
+    return compile_.has_kernel(folder, loop._tpl_loop, name) or compile_.being_compiled(
+        folder, loop._tpl_loop, name
+    )
 
 
 def rent(plant: Plant, sampled_data: bool) -> float:
@@ -75,12 +85,22 @@ def rent(plant: Plant, sampled_data: bool) -> float:
         return steps if owner is plant else 0.0
 
 
+def expect(plant: Plant, sampled_data: bool, member_steps: float) -> None:
+    """Declare the member-steps this process is going to run for ``plant`` at that timing
+    (a tuning run's whole budget, :class:`aiofl.tuning.evaluate.EvalSpec`): when they reach
+    the compile's price, the first batch compiles the lanes instead of renting (a run that
+    will pay for them anyway should not pay rent first).  A new declaration replaces the
+    last."""
+    with _LOCK:
+        _EXPECTED[(id(plant), sampled_data)] = (plant, float(member_steps))
+
+
 def lanes_worth_it(plant: Plant, sampled_data: bool, member_steps: float) -> bool:
     """Run ``member_steps`` of ``plant`` (members a batch would run in lanes) in lanes?
 
-    True when the lanes are at hand, or when the rent so far and these steps reach the
-    compile's price (see the module notes); otherwise False, and the steps are added to the
-    rent.
+    True when the lanes are at hand, or when the rent so far and these steps, or the work
+    declared by :func:`expect`, reach the compile's price (see the module notes); otherwise
+    False, and the steps are added to the rent.
     """
     import numba
 
@@ -91,7 +111,9 @@ def lanes_worth_it(plant: Plant, sampled_data: bool, member_steps: float) -> boo
     with _LOCK:
         owner, paid = _RENT.get(key, (None, 0.0))
         paid = paid if owner is plant else 0.0
-        if paid + member_steps >= price:
+        owner, planned = _EXPECTED.get(key, (None, 0.0))
+        planned = planned if owner is plant else 0.0
+        if paid + member_steps >= price or planned >= price:
             _RENT.pop(key, None)
             return True
         _RENT[key] = (plant, paid + member_steps)
