@@ -147,13 +147,21 @@ def test_declared_work_worth_the_compile_buys_the_lanes_at_the_first_batch(
     assert not lane_choice.lanes_worth_it(plant, True, 1.0)  # declared for the other timing
 
 
-def test_a_tuning_run_declares_its_whole_budget():
-    """population × generations × (robust draws + 1) × noise realisations members."""
+def test_a_tuning_run_declares_its_whole_budget(monkeypatch):
+    """population × generations candidates, each (robust draws + 1) × noise realisations
+    members of the tuning horizon's steps, declared at its first evaluation."""
     from aiofl.config import parse_config
+    from aiofl.tuning.evaluate import evaluate_chunk
     from aiofl.tuning.search import prepare
     from test_tuning import FAST
 
     cfg = parse_config(
         {**FAST, "tune": {**FAST["tune"], "population": 6, "generations": 7}}, "a test config"
     )
-    assert prepare(cfg).spec.expected_members == 6 * 7
+    prep = prepare(cfg)
+    assert prep.spec.expected_candidates == 6 * 7
+    declared = []
+    monkeypatch.setattr(lane_choice, "expect", lambda *a: declared.append(a))
+    evaluate_chunk(prep.spec, prep.space.decode(prep.initial[:1]))
+    n_steps = round(prep.spec.t_final / prep.spec.dt)
+    assert len(declared) == 1 and declared[0][1:] == (False, 6 * 7 * n_steps)

@@ -62,9 +62,9 @@ class EvalSpec:
         R >= 1 noise sequences per scenario (realisation r seeded
         :func:`aiofl.scenario.realisation_seed` (its noise seed, r), the same for every
         candidate); a member's metrics are their mean over the R (diverged if any is).
-    expected_members
-        Members the whole run evaluates (population × generations × (K + 1) × R; 0:
-        unknown): declared to the engine's lane choice
+    expected_candidates
+        Candidates the whole run evaluates (population × generations; 0: unknown), each
+        (K + 1) R members: declared to the engine's lane choice
         (:func:`aiofl.engine.lane_choice.expect`), so a run worth the plant's lane instance
         compiles it at its first generation.  Not part of :meth:`key`.
     """
@@ -77,7 +77,7 @@ class EvalSpec:
     divergence_threshold: float
     draws: tuple[Mapping[str, Any], ...] = ()
     noise_realisations: int = 1
-    expected_members: int = 0
+    expected_candidates: int = 0
 
     def key(self) -> str:
         """A digest identifying the spec (used to cache the built objects on a worker)."""
@@ -183,9 +183,9 @@ def evaluate_chunk(spec: EvalSpec, values: NDArray[np.float64]) -> PopulationRes
         return PopulationResult(np.zeros((*shape, 5)), np.zeros(shape, dtype=bool), np.zeros(shape))
     with _LOCK:
         plant, controller, scenarios, sampling = _build(spec)
-        if spec.expected_members:
-            n_steps = round(spec.t_final / spec.dt)
-            expect(plant, sampling is not None, float(spec.expected_members) * n_steps)
+        if spec.expected_candidates:
+            steps = float(spec.expected_candidates * k1 * r) * round(spec.t_final / spec.dt)
+            expect(plant, sampling is not None, steps)
         members = np.repeat(values, k1 * r, axis=0)
         batch = controller_batch(
             controller, {name: members[:, j] for j, name in enumerate(spec.names)}

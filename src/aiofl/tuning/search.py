@@ -330,10 +330,7 @@ def prepare(
         divergence_threshold=cfg.divergence_threshold,
         draws=robust_draws,
         noise_realisations=st.noise_realisations,
-        expected_members=st.population
-        * st.generations
-        * (1 + len(robust_draws))
-        * st.noise_realisations,
+        expected_candidates=st.population * st.generations,
     )
     if st.noise_realisations > 1 and not _noisy(cfg):
         raise ConfigError(
