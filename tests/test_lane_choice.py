@@ -13,6 +13,7 @@ import numba
 import numpy as np
 import pytest
 
+from aiofl.cache import subdir
 from aiofl.controller import Controller
 from aiofl.engine import compile as compile_
 from aiofl.engine import instances, lane_choice, loop, simulation
@@ -49,7 +50,7 @@ def test_a_stored_kernel_of_todays_code_is_at_hand_one_of_older_code_is_not(
     rec = instances.recipe(plant, WIDTH)
     fp = compile_.fingerprint(rec)
     assert fp is not None
-    folder = lane_choice.subdir("kernels")
+    folder = subdir("kernels")
     assert folder is not None
     start = compile_._cache_file_start(loop._tpl_loop, f"{rec.kind}_{compile_.plant_key(plant)}_")
     (folder / f"{start}{'0' * len(fp)}.nbi").write_bytes(b"")  # an older fingerprint
@@ -69,7 +70,7 @@ def test_a_lane_instance_another_process_is_compiling_is_at_hand(fresh, tmp_path
     plant = fresh
     rec = instances.recipe(plant, WIDTH, sampled_data=True)
     fp = compile_.fingerprint(rec)
-    folder = lane_choice.subdir("kernels")
+    folder = subdir("kernels")
     assert folder is not None and fp is not None
     name = f"{rec.kind}_{compile_.plant_key(plant)}_{fp}"
     lock = folder / f"{compile_._cache_file_start(loop._tpl_loop, name)}-k.py311.lock"

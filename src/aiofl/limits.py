@@ -15,6 +15,7 @@ limit                          what it bounds
 :data:`MAX_POPULATION`         members of one tuning generation (one batched engine call)
 :data:`MAX_EVALUATIONS`        members of a whole tuning run, population x generations
 :data:`MAX_PLANT_FILE_BYTES`   a plant file, read before it is parsed
+:data:`MAX_STATES`             the states of a symbolic plant (and of a size-only instance)
 =============================  ===========================================================
 """
 
@@ -26,6 +27,7 @@ __all__ = [
     "MAX_NOISE_SAMPLES",
     "MAX_PLANT_FILE_BYTES",
     "MAX_POPULATION",
+    "MAX_STATES",
     "MAX_STEPS",
     "MAX_TRAJECTORY_BYTES",
     "T_FINAL_MAX",
@@ -37,6 +39,9 @@ T_FINAL_MAX = 1e4
 #: largest plant file read (1 MiB; the 32-state, 64-parameter plant the expression limits
 #: allow fits in a fraction of it)
 MAX_PLANT_FILE_BYTES = 1 << 20
+#: most states of a symbolic plant: the analysis takes up to n Lie derivatives over n states
+#: and n x n Jacobians, and numba compiles n-tuples (aiofl.plants.expressions)
+MAX_STATES = 32
 #: largest fixed step [s]
 DT_MAX = 0.1
 #: most integration steps per member, t_final/dt: 100x the paper's 20-s run at dt = 1e-4,

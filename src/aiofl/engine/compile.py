@@ -282,8 +282,8 @@ def build(recipe: Recipe, *, cache: bool = True) -> Instance:
     folder = subdir("kernels") if fp is not None else None
     if folder is not None and sources_changed(recipe.sources):
         folder = None
-    key = plant_key(recipe.plant) if recipe.plant is not None else NO_PLANT_KEY
-    suffix = f"{recipe.kind}_{key}_{fp}" if folder is not None else f"{recipe.kind}_{id(recipe):x}"
+    prefix = kernel_prefix(recipe.kind, recipe.plant)
+    suffix = f"{prefix}{fp}" if folder is not None else f"{recipe.kind}_{id(recipe):x}"
     unknown = set(recipe.also_cached) - {tpl.name for tpl in recipe.templates}
     if unknown:
         raise ValueError(f"also_cached names no template of the recipe: {sorted(unknown)}")
@@ -297,7 +297,7 @@ def build(recipe: Recipe, *, cache: bool = True) -> Instance:
         for tpl in cached:
             fn = ns[tpl.name]
             fn._cache = KernelCache.for_function(fn.py_func, folder, fp)
-            prune_kernels(folder, tpl.function, f"{recipe.kind}_{key}_", fp)
+            prune_kernels(folder, tpl.function, prefix, fp)
     return Instance(entry=entry, namespace=ns, cached=folder is not None, fingerprint=fp)
 
 
@@ -418,6 +418,25 @@ def _cache_file_start(template: Callable[..., Any], prefix: str) -> str:
     with the instance's suffix, :func:`build`)."""
     stem = os.path.splitext(os.path.basename(template.__code__.co_filename))[0]
     return f"{stem}.{template.__name__}_{prefix}"
+
+
+def kernel_prefix(kind: str, plant: Plant | None) -> str:
+    """How the names of a recipe's cached kernels start, before the fingerprint: its kind
+    and the plant's key (:data:`NO_PLANT_KEY` for a plant-independent instance)."""
+    return f"{kind}_{plant_key(plant) if plant is not None else NO_PLANT_KEY}_"
+
+
+def kernel_at_hand(recipe: Recipe) -> bool:
+    """Whether ``recipe``'s entry costs this process no compile beyond a load: stored in the
+    kernel folder under the fingerprint of today's code, or being compiled into it now by
+    another process (:func:`being_compiled`; waiting for its lock, this one loads it)."""
+    folder = subdir("kernels")
+    fp = fingerprint(recipe)
+    if folder is None or fp is None or sources_changed(recipe.sources):
+        return False
+    name = kernel_prefix(recipe.kind, recipe.plant) + fp
+    entry = recipe.entry.function
+    return has_kernel(folder, entry, name) or being_compiled(folder, entry, name)
 
 
 def has_kernel(folder: Path, template: Callable[..., Any], prefix: str) -> bool:

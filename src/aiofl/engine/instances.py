@@ -306,8 +306,7 @@ def instance_for(
     cache, its plant wrappers no longer caught the plant's exception: the ValueError of a
     raising plant escaped instead of the PlantFailure naming the function and the state)."""
     independent = plant_independent(width, variant)
-    owner = None if independent else plant
-    key = (plant.n_states if independent else id(plant), independent, width, sampled_data, variant)
+    key, owner = _instance_key(plant, width, sampled_data, variant)
     with _LOCK:
         if key not in _INSTANCES or _INSTANCES[key][0] is not owner:
             rec = recipe(plant, width, sampled_data=sampled_data, variant=variant)
@@ -323,10 +322,19 @@ def instance_built(
 ) -> bool:
     """Whether :func:`instance_for` has built this instance in this process (its kernel is
     compiled, or loaded from the disk cache, by its first run)."""
+    key, owner = _instance_key(plant, width, sampled_data, variant)
+    with _LOCK:
+        return key in _INSTANCES and _INSTANCES[key][0] is owner
+
+
+def _instance_key(
+    plant: Plant, width: int, sampled_data: bool, variant: str
+) -> tuple[tuple[int, bool, int, bool, str], Plant | None]:
+    """An instance's key in this process's table, and the plant it belongs to (None for a
+    plant-independent one, shared by every plant of its number of states)."""
     independent = plant_independent(width, variant)
     key = (plant.n_states if independent else id(plant), independent, width, sampled_data, variant)
-    with _LOCK:
-        return key in _INSTANCES and _INSTANCES[key][0] is (None if independent else plant)
+    return key, None if independent else plant
 
 
 def set_plant_table(plant: Plant, batch: Any, variant: str = "lanes") -> None:

@@ -13,9 +13,8 @@ the default of :func:`aiofl.engine.simulation.simulate_batch`):
 
 1. **At hand** (:func:`lanes_at_hand`): the plant's width-32 instance of that timing is
    built in this process, or its kernel, compiled from exactly this code, is in the disk
-   cache (:func:`aiofl.engine.compile.has_kernel` with the recipe's fingerprint) or being
-   compiled into it by another process (its compile lock held,
-   :func:`aiofl.engine.compile.being_compiled`): lanes.
+   cache or being compiled into it by another process (its compile lock held;
+   :func:`aiofl.engine.compile.kernel_at_hand`): lanes.
 2. Otherwise the rule of *renting before buying* (the ski-rental problem; Karlin et al.,
    "Competitive randomized algorithms for nonuniform problems", *Algorithmica* 11, 1994):
    the members run at width 1, and their member-steps are added to the plant's *rent* in
@@ -37,7 +36,6 @@ from __future__ import annotations
 
 import threading
 
-from aiofl.cache import subdir
 from aiofl.engine import compile as compile_
 from aiofl.engine import instances, loop
 from aiofl.plants.base import Plant
@@ -64,17 +62,7 @@ def lanes_at_hand(plant: Plant, sampled_data: bool) -> bool:
     width = loop.WIDTH
     if instances.instance_built(plant, width, sampled_data=sampled_data):
         return True
-    folder = subdir("kernels")
-    if folder is None:
-        return False
-    rec = instances.recipe(plant, width, sampled_data=sampled_data)
-    fp = compile_.fingerprint(rec)
-    if fp is None or compile_.sources_changed(rec.sources):
-        return False
-    name = f"{rec.kind}_{compile_.plant_key(plant)}_{fp}"
-    return compile_.has_kernel(folder, loop._tpl_loop, name) or compile_.being_compiled(
-        folder, loop._tpl_loop, name
-    )
+    return compile_.kernel_at_hand(instances.recipe(plant, width, sampled_data=sampled_data))
 
 
 def rent(plant: Plant, sampled_data: bool) -> float:

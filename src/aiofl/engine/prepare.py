@@ -58,6 +58,7 @@ from aiofl.engine.instances import (
     run_groups,
 )
 from aiofl.engine.plant_table import N_TABLE
+from aiofl.limits import MAX_STATES
 from aiofl.plants.base import Plant
 
 __all__ = [
@@ -71,10 +72,8 @@ __all__ = [
 ]
 
 SIZE_ONLY = "--states"
-"""The ``PLANT`` argument naming a number of states instead of a plant."""
-SIZE_ONLY_MAX = 32
-"""The largest number of states ``--states=N`` accepts (that of a plant file,
-:data:`aiofl.plants.expressions.MAX_STATES`; a test checks they agree)."""
+"""The ``PLANT`` argument naming a number of states instead of a plant (at most
+:data:`aiofl.limits.MAX_STATES`, a plant file's)."""
 
 
 def parse_spec(text: str) -> tuple[int, bool]:
@@ -198,14 +197,11 @@ def prepare_loops_ahead(n_states: int) -> subprocess.Popen[bytes] | None:
     """Start a process compiling the loops of :data:`LOOPS_AHEAD` for ``n_states``-state
     plants if the disk cache holds neither (by their file names only, any fingerprint:
     after an upgrade the command compiles them itself); None when nothing is started."""
-    # (that module imports sympy, which the plant file being built needs anyway)
-    from aiofl.plants.expressions import MAX_STATES
-
     folder = subdir("kernels")
     if folder is None or not 1 <= n_states <= MAX_STATES:
         return None
     prefix = [
-        f"{instance_kind(w, s, 'lanes', n_states)}_{compile_.NO_PLANT_KEY}_" for w, s in LOOPS_AHEAD
+        compile_.kernel_prefix(instance_kind(w, s, "lanes", n_states), None) for w, s in LOOPS_AHEAD
     ]
     if any(compile_.has_kernel(folder, loop._tpl_loop, p) for p in prefix):
         return None
@@ -261,8 +257,8 @@ def main(argv: Sequence[str]) -> int:
     if name.startswith(f"{SIZE_ONLY}="):
         try:
             n_states = int(name.partition("=")[2])
-            if not 1 <= n_states <= SIZE_ONLY_MAX:
-                raise ValueError(f"{name}: allowed 1 <= N <= {SIZE_ONLY_MAX}")
+            if not 1 <= n_states <= MAX_STATES:
+                raise ValueError(f"{name}: allowed 1 <= N <= {MAX_STATES}")
             prepare_loops(n_states, specs)
         except ValueError as exc:
             print(f"aiofl.engine.prepare: {exc}", file=sys.stderr)

@@ -61,6 +61,8 @@ from typing import Any
 import numpy as np
 import sympy as sp
 
+from aiofl import limits
+
 __all__ = [
     "CONSTANTS",
     "FUNCTIONS",
@@ -94,11 +96,11 @@ MAX_EXPONENT = 64
 """Largest magnitude of a constant exponent, :math:`|n| \\le 64`."""
 MAX_EXPANDED_TERMS = 2000
 """Most terms of an expression's fully expanded form (an estimate from its tree)."""
-MAX_STATES = 32
-"""Most states of a symbolic plant.  The analysis takes up to n Lie derivatives over n
-states and n x n Jacobians, and numba compiles n-tuples; SISO plants of this kind have a
-handful of states (the shipped ones 1 to 4), and 32 is 4x the largest controller order
-(``RHO_MAX = 8``)."""
+MAX_STATES = limits.MAX_STATES
+"""Most states of a symbolic plant (:data:`aiofl.limits.MAX_STATES`).  The analysis takes
+up to n Lie derivatives over n states and n x n Jacobians, and numba compiles n-tuples;
+SISO plants of this kind have a handful of states (the shipped ones 1 to 4), and 32 is 4x
+the largest controller order (``RHO_MAX = 8``)."""
 MAX_PARAMS = 64
 """Most parameters of a symbolic plant (the shipped ones have at most 9)."""
 
