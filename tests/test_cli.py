@@ -244,7 +244,7 @@ def test_simulate_writes_the_engines_metrics(tmp_path: Path) -> None:
     )
     assert rec["scenario"] == 1
     assert rec["scenario_name"] == "nominal"
-    assert (rec["structure"], rec["source"], rec["diverged"], rec["diverged_at"]) == (
+    assert (rec["structure"], rec["source"], rec["failed"], rec["stopped_at"]) == (
         "INLESO",
         "config",
         False,
@@ -269,12 +269,12 @@ def test_simulate_reports_divergence_with_time_and_null_metrics(tmp_path: Path) 
     text = (out / "metrics.json").read_text()
     assert "NaN" not in text and "Infinity" not in text
     rec = json.loads(text)
-    assert rec["diverged"] is True
-    assert rec["diverged_at"] == pytest.approx(12.42, abs=0.01)
+    assert rec["failed"] is True
+    assert rec["stopped_at"] == pytest.approx(12.42, abs=0.01)
     for key in ("itae", "isu", "iau", "opi", "iae", "ise"):
         assert rec[key] is None
     data = np.loadtxt(out / "trajectory.csv", delimiter=",", skiprows=1)
-    assert data[-1, 0] <= rec["diverged_at"]
+    assert data[-1, 0] <= rec["stopped_at"]
     assert np.isfinite(data).all()
     assert (out / "figure.png").exists()
 

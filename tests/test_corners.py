@@ -175,14 +175,14 @@ def test_the_corners_that_diverge_are_the_analytic_ones(tmp_path: Path) -> None:
         for m_f, c_f in zip(cols["m"], cols["c"], strict=True)
     ]
     assert want == list(np.isclose(cols["m"], 0.5))  # exactly the corners with m × 0.5
-    np.testing.assert_array_equal(res.corner_diverged, want)
+    np.testing.assert_array_equal(res.corner_failed, want)
     assert c["stable"] == 2 and c["corners_stable"] == 0.5
-    assert {d["corner"] for d in c["diverged"]} == set(np.flatnonzero(want))
+    assert {d["corner"] for d in c["failed"]} == set(np.flatnonzero(want))
     # the worst case is a diverged corner, and the search stops there at once
     w = info["worst_case"]
     assert w["itae"] is None and w["evaluations"] == 0 and w["point"]["m"] == 0.5
-    assert w["start"].startswith("corner") and w["diverged_at"] == pytest.approx(
-        min(d["t"] for d in c["diverged"])
+    assert w["start"].startswith("corner") and w["stopped_at"] == pytest.approx(
+        min(d["t"] for d in c["failed"])
     )
     assert res.stable_fraction <= 1.0 and len(res.itae) == 6  # the draws are kept apart
     json.dumps(info, allow_nan=False)

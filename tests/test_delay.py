@@ -259,7 +259,7 @@ def test_frontier_sampled_delay_margin_at_1ms_against_the_engine():
     from aiofl.engine.simulation import simulate_batch
 
     res = simulate_batch(cfg.plant, [cfg.controller] * 2, scens, sampling=Sampling(1e-3), dt=1e-4)
-    assert not res.diverged[0] and res.diverged[1]
+    assert not res.failed[0] and res.failed[1]
 
 
 def test_analyze_sampling_reports_both_delay_margins(tmp_path):

@@ -84,7 +84,7 @@ def test_frontier_preset_nominal_run_gives_the_numbers_its_header_states(name: s
     assert m, f"{name}: no 'Nominal, 20 s: ITAE ..., ISU ...' line in the header"
     itae, isu = float(m.group(1)), float(m.group(2))
     res = load_config(name).simulate()
-    assert not res.diverged
+    assert not res.failed
     assert res.metrics["itae"] == pytest.approx(itae, rel=1e-6)
     assert res.metrics["isu"] == pytest.approx(isu, rel=1e-6)
     target = re.search(r"ITAE <= [0-9.]+ at ISU <= [0-9.]+ (met|NOT met)", head)

@@ -97,8 +97,8 @@ def _check_outcome(res: Any, workdir: Path, *, ran: bool) -> None:
             assert res.stderr.startswith("aiofl: error: ") and res.stderr.strip()
         return
     record = json.loads((out / "metrics.json").read_text(encoding="utf-8"))
-    if record["diverged"]:
-        assert math.isfinite(record["diverged_at"])
+    if record["failed"]:
+        assert math.isfinite(record["stopped_at"])
     else:
         for key in ("itae", "isu", "iau", "opi"):
             assert isinstance(record[key], float) and math.isfinite(record[key]), record
@@ -338,8 +338,8 @@ def _command(
                 _strict_json(path)
         if command == "simulate":
             record = _strict_json(out / "metrics.json")
-            if record["diverged"]:
-                assert math.isfinite(record["diverged_at"])
+            if record["failed"]:
+                assert math.isfinite(record["stopped_at"])
             else:
                 assert all(math.isfinite(record[k]) for k in ("itae", "isu", "iau", "opi"))
             assert "nan" not in (out / "trajectory.csv").read_text(encoding="utf-8").lower()

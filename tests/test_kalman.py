@@ -390,7 +390,7 @@ def test_kalman_config_runs_through_simulate(tmp_path: Path, ts: float | None) -
     res = runner.invoke(app, ["simulate", str(_write(tmp_path, data)), "--out", str(out)])
     assert res.exit_code == 0, res.stderr
     rec = json.loads((out / "metrics.json").read_text())
-    assert not rec["diverged"]
+    assert not rec["failed"]
     direct = parse_config(data).simulate(store=False)
     assert rec["itae"] == direct.metrics["itae"]
 

@@ -175,10 +175,10 @@ def test_divergence_is_per_lane() -> None:
     ctrls = [base.with_values(**{"law.b0": b0 * f}) for f in np.geomspace(1e-4, 1, 16)]
     res = simulate_batch(rc.plant, ctrls, scen, dt=rc.dt, engine="lanes")
     ref = simulate_batch(rc.plant, ctrls, scen, dt=rc.dt, engine="scalar")
-    assert res.diverged.any() and not res.diverged.all()
-    np.testing.assert_array_equal(res.diverged, ref.diverged)
-    np.testing.assert_allclose(res.diverged_at, ref.diverged_at, rtol=0, atol=1e-12)
-    for i in np.flatnonzero(~res.diverged):
+    assert res.failed.any() and not res.failed.all()
+    np.testing.assert_array_equal(res.failed, ref.failed)
+    np.testing.assert_allclose(res.stopped_at, ref.stopped_at, rtol=0, atol=1e-12)
+    for i in np.flatnonzero(~res.failed):
         alone = simulate_batch(rc.plant, ctrls[i], scen, dt=rc.dt, engine="lanes")
         np.testing.assert_array_equal(alone.metrics[0], res.metrics[i])
 
@@ -199,9 +199,9 @@ def test_lanes_agree_with_the_scalar_engine_on_every_preset(name: str) -> None:
     kw = {"dt": rc.dt, "method": rc.method, "divergence_threshold": rc.divergence_threshold}
     lanes = simulate_batch(rc.plant, rc.controller, rc.scenario, engine="lanes", **kw)
     scalar = simulate_batch(rc.plant, rc.controller, rc.scenario, engine="scalar", **kw)
-    assert lanes.diverged[0] == scalar.diverged[0]
-    if scalar.diverged[0]:
-        assert lanes.diverged_at[0] == pytest.approx(scalar.diverged_at[0], abs=1e-12)
+    assert lanes.failed[0] == scalar.failed[0]
+    if scalar.failed[0]:
+        assert lanes.stopped_at[0] == pytest.approx(scalar.stopped_at[0], abs=1e-12)
         return
     diff = _rel(lanes.metrics[0], scalar.metrics[0])
     if diff > 1e-10:
@@ -250,7 +250,7 @@ def test_lanes_agree_with_the_scalar_engine_on_every_input_and_setting() -> None
         args = ([p[0] for p in pairs], [p[1] for p in pairs])
         lanes = simulate_batch(rc.plant, *args, engine="lanes", **kw)
         scalar = simulate_batch(rc.plant, *args, engine="scalar", **kw)
-        np.testing.assert_array_equal(lanes.diverged, scalar.diverged)
+        np.testing.assert_array_equal(lanes.failed, scalar.failed)
         assert _rel(lanes.metrics, scalar.metrics) <= 1e-10
         a, b = lanes.trajectories, scalar.trajectories
         assert a is not None and b is not None
@@ -297,8 +297,8 @@ def test_sampled_members_in_lanes_agree_with_the_sampled_kernel() -> None:
         kw["sampling"] = samplings
         lanes = simulate_batch(rc.plant, ctrls, scens, engine="lanes", **kw)
         scalar = simulate_batch(rc.plant, ctrls, scens, engine="scalar", **kw)
-        assert not scalar.diverged.any()
-        np.testing.assert_array_equal(lanes.diverged, scalar.diverged)
+        assert not scalar.failed.any()
+        np.testing.assert_array_equal(lanes.failed, scalar.failed)
         assert _rel(lanes.metrics, scalar.metrics) <= 1e-10
         a, b = lanes.trajectories, scalar.trajectories
         assert a is not None and b is not None
@@ -357,7 +357,7 @@ def test_members_of_different_sample_times_share_a_group_and_keep_their_bits(
     kw = {"dt": 1e-4, "engine": "lanes", "store": True, "decimation": 7}
     group = simulate_batch(rc.plant, ctrls, scens, sampling=samplings, **kw)
     assert list(plans[0]) == [(WIDTH, True)] and plans[0][(WIDTH, True)].shape == (1, WIDTH)
-    assert not group.diverged.any()
+    assert not group.failed.any()
     for i in range(0, WIDTH, 3):
         alone = simulate_batch(rc.plant, ctrls[i], scens[i], sampling=samplings[i], **kw)
         np.testing.assert_array_equal(alone.metrics[0], group.metrics[i])
@@ -374,10 +374,10 @@ def test_sampled_divergence_is_per_lane() -> None:
     kw = {"dt": rc.dt, "sampling": Sampling(1e-3, eso="euler")}
     res = simulate_batch(rc.plant, ctrls, scen, engine="lanes", **kw)
     ref = simulate_batch(rc.plant, ctrls, scen, engine="scalar", **kw)
-    assert res.diverged.any() and not res.diverged.all()
-    np.testing.assert_array_equal(res.diverged, ref.diverged)
-    np.testing.assert_allclose(res.diverged_at, ref.diverged_at, rtol=0, atol=1e-12)
-    for i in np.flatnonzero(~res.diverged)[:2]:
+    assert res.failed.any() and not res.failed.all()
+    np.testing.assert_array_equal(res.failed, ref.failed)
+    np.testing.assert_allclose(res.stopped_at, ref.stopped_at, rtol=0, atol=1e-12)
+    for i in np.flatnonzero(~res.failed)[:2]:
         alone = simulate_batch(rc.plant, ctrls[i], scen, engine="lanes", **kw)
         np.testing.assert_array_equal(alone.metrics[0], res.metrics[i])
 

@@ -274,7 +274,7 @@ def test_verdicts_agree_with_nonlinear_simulation() -> None:
             reference=Reference(kind="step", amplitude=0.0), t_final=10.0, x0=(x1, 0, 0, 0)
         )
         res = simulate(cfg.plant, cfg.controller, scen)
-        late = np.max(np.abs(res["y"][res.t > 6.0])) if not res.diverged else math.inf
+        late = np.max(np.abs(res["y"][res.t > 6.0])) if not res.failed else math.inf
         if stable:
             assert late < 0.05 * x1
         else:

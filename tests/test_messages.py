@@ -364,9 +364,9 @@ def _robustness_result(itae: np.ndarray, isu: np.ndarray, name: str = "design") 
         nominal_params={"J_l": 1.0, "K_s": 1.0},
         itae=itae,
         isu=isu,
-        diverged=div,
-        diverged_at=np.where(div, 0.5, np.nan),
-        nominal={"itae": nominal, "isu": None, "diverged": nominal is None, "diverged_at": None},
+        failed=div,
+        stopped_at=np.where(div, 0.5, np.nan),
+        nominal={"itae": nominal, "isu": None, "failed": nominal is None, "stopped_at": None},
         t=t,
         error=(0.1 * np.outer(np.ones(k), np.sin(t))).astype(np.float32),
         engine_calls=1,
@@ -428,7 +428,7 @@ def _tune_result(diverged: list[int]) -> Any:
     n = len(diverged)
     history = [
         {"generation": g + 1, "best": 1.0 / (g + 1), "median": 2.0 / (g + 1),
-         "best_so_far": 1.0 / (g + 1), "diverged": d}
+         "best_so_far": 1.0 / (g + 1), "failed": d}
         for g, d in enumerate(diverged)
     ]  # fmt: skip
     settings = TuneSettings.model_validate(

@@ -93,7 +93,7 @@ def test_with_the_true_model_the_residual_stays_zero_and_it_tracks_like_iofl(slf
     tracking is IOFL's (which is fed the true state) up to the observer's transient."""
     sc = Scenario(reference=Reference(kind="sine"), t_final=5.0)
     res = simulate(slfjm, assisted(slfjm), sc, decimation=10)
-    assert not res.diverged
+    assert not res.failed
     late = res.t > 1.0
     assert np.max(np.abs(res["xi_hat5"][late])) < 1e-6
     free = simulate(slfjm, dataclasses.replace(assisted(slfjm), eso_model="none"), sc)

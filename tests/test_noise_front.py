@@ -187,8 +187,8 @@ def test_fresh_seed_entries_are_simulate_with_that_seed() -> None:
             cfg = seed_config(load_config(name), s)
             assert cfg.scenario.noise_seed == s
             one = cfg.simulate(store=False)
-            assert bool(got["diverged"][k]) == one.diverged
-            if not one.diverged:
+            assert bool(got["failed"][k]) == one.failed
+            if not one.failed:
                 assert got["itae"][k] == one.metrics["itae"]
                 assert got["isu"][k] == one.metrics["isu"]
     # the assisted preset keeps its sampling on the fresh seeds

@@ -56,7 +56,7 @@ def test_config_with_a_relative_plant_file_compiles_and_tracks(tmp_path: Path) -
     # loading twice reuses the compiled plant (one kernel per process)
     assert load_config(cfg_path).plant is cfg.plant
     res = cfg.simulate()
-    assert not res.diverged
+    assert not res.failed
     late = res.t > 2.0
     assert np.max(np.abs(res["y"][late] - 0.5)) < 5e-3
 

@@ -498,5 +498,5 @@ def test_a_plant_function_that_raises_at_run_time_names_the_function_and_the_sta
 def test_a_division_by_zero_at_run_time_is_a_diverged_member_with_its_time() -> None:
     plant = _user_plant(_f_fails, "fails_rt", {"mode": 2.0})
     res = _simulate(plant)
-    assert res.diverged and res.diverged_at is not None and 0.0 < res.diverged_at <= 1.0
+    assert res.failed and res.stopped_at is not None and 0.0 < res.stopped_at <= 1.0
     assert res.metrics is None  # no NaN table

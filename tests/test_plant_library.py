@@ -65,7 +65,7 @@ def test_aiofl_tracks_each_extra_plant_knowing_only_rho_and_b0(name: str) -> Non
     b0 = cfg.controller.value("law.b0")
     assert 0.5 < b0 / TRUE_BETA[name] < 1.5 and b0 != TRUE_BETA[name]
     res = cfg.simulate()
-    assert not res.diverged
+    assert not res.failed
     assert res.metrics is not None
     t, r, y = res.t, res["r"], res["y"]
     ref = cfg.scenario.reference
@@ -93,7 +93,7 @@ def test_internal_dynamics_stay_bounded_under_iofl_and_aiofl() -> None:
         **{"sef.omega_c": 20.0, "eso.omega0": 100.0, "law.b0": 80.0}
     )
     res = simulate(cfg.plant, iofl.with_binomial_alphas(), replace(cfg.scenario, t_final=10.0))
-    assert not res.diverged
+    assert not res.failed
     err = np.abs(res["y"] - res["r"])
     assert np.max(err[res.t > 3.0]) < 1e-10
     assert np.max(np.abs(res["x2"])) < 3.0  # link angle bounded

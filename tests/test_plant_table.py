@@ -149,4 +149,4 @@ def test_a_plant_gives_the_same_bits_through_its_table_as_inlined_in_lanes(ts):
         alone = simulate_batch(rc.plant, ctrls[i], scen, **kw)
         np.testing.assert_array_equal(alone.metrics[0], group.metrics[i])
         np.testing.assert_array_equal(alone.trajectories[0], group.trajectories[i])
-    assert not np.any(group.diverged)
+    assert not np.any(group.failed)

@@ -89,5 +89,5 @@ def test_the_python_quickstart_runs() -> None:
     namespace: dict[str, object] = {}
     exec(compile(code, "README quickstart", "exec"), namespace)
     res = namespace["res"]
-    assert not res.diverged and res.metrics["itae"] < 0.05  # type: ignore[attr-defined]
-    assert not namespace["out"].diverged.any()  # type: ignore[attr-defined]
+    assert not res.failed and res.metrics["itae"] < 0.05  # type: ignore[attr-defined]
+    assert not namespace["out"].failed.any()  # type: ignore[attr-defined]

@@ -63,8 +63,8 @@ def test_tracking_and_growth_are_classified_by_their_definitions() -> None:
     b = measure(t, r + 0.1 * np.exp(0.3 * t), r, window=5.0)
     assert b.kind == "growing"
     assert b.growth == pytest.approx(math.exp(0.3 * 5.0), rel=2e-3)
-    d = measure(t, r, r, diverged=True, diverged_at=12.42)
-    assert (d.kind, d.diverged_at, d.max_abs_error) == ("diverged", 12.42, None)
+    d = measure(t, r, r, failed=True, stopped_at=12.42)
+    assert (d.kind, d.stopped_at, d.max_abs_error) == ("diverged", 12.42, None)
 
 
 def test_min_damping_is_the_closed_form_and_the_analysis_value_wins() -> None:
@@ -90,7 +90,7 @@ def test_reconciliation_sentence_states_both_sides() -> None:
     assert "max Re λ = 1.27 1/s" in text
     assert f"amplitude {bounded.error_amplitude:.3g} rad" in text
     assert "they differ" in text
-    div = measure(t, y, r, diverged=True, diverged_at=17.57)
+    div = measure(t, y, r, failed=True, stopped_at=17.57)
     assert "diverges at t = 17.57 s — they agree" in reconcile(unstable, div, "rad")
     t, y, r = _sine_run(0.01, 0.0)
     assert "tracks: max |e| over the last 5 s = 0.01 m" in reconcile(stable, measure(t, y, r), "m")
@@ -123,8 +123,8 @@ def test_every_sentence_matches_its_trajectory(rep) -> None:
         text = rows[run.case.preset][-1]
         b = run.behaviour
         kinds.add(b.kind)
-        if run.result.diverged:
-            assert f"diverges at t = {run.result.diverged_at:.2f} s" in text
+        if run.result.failed:
+            assert f"diverges at t = {run.result.stopped_at:.2f} s" in text
             continue
         e = _window(run)
         assert b.max_abs_error == pytest.approx(np.max(np.abs(e)), rel=1e-12)
@@ -155,7 +155,7 @@ def test_metrics_records_carry_the_measurements(rep) -> None:
         tr = recs[run.case.preset]["tracking"]
         assert tr["behaviour"] == run.behaviour.kind
         assert tr["tolerance"] == TOLERANCE
-        if not run.result.diverged:
+        if not run.result.failed:
             e = _window(run)
             assert tr["max_abs_error"] == np.max(np.abs(e))
             assert tr["error_amplitude"] == pytest.approx(0.5 * np.ptp(e), rel=1e-12)
@@ -200,8 +200,8 @@ def test_findings_are_few_and_every_number_is_in_metrics_json(rep) -> None:
             assert any(_printed_as(token, v) for v in values), (token, text)
     # the divergence finding gives each diverged printed case with its time
     for run in rep.runs:
-        if run.case.source == "printed" and run.result.diverged:
-            assert f"{run.case.preset} at t = {run.result.diverged_at:.2f} s" in found[0]
+        if run.case.source == "printed" and run.result.failed:
+            assert f"{run.case.preset} at t = {run.result.stopped_at:.2f} s" in found[0]
 
 
 @pytest.mark.slow
@@ -298,17 +298,17 @@ def test_plant_files_take_units_from_toml_keys_or_state_labels(tmp_path: Path) -
         SymbolicPlant.from_dict({**spec, "output_unit": 5})
 
 
-def _fake_result(t_final: float = 4.0, diverged_at: float | None = None) -> SimulationResult:
-    t = np.linspace(0.0, t_final if diverged_at is None else diverged_at, 401)
+def _fake_result(t_final: float = 4.0, stopped_at: float | None = None) -> SimulationResult:
+    t = np.linspace(0.0, t_final if stopped_at is None else stopped_at, 401)
     r = 0.8 * np.sin(2 * t)
     y = r + 0.05 * np.cos(3 * t)
-    u = np.cos(t) if diverged_at is None else 1e5 * np.exp(t) * np.sin(40 * t)
-    if diverged_at is not None:
+    u = np.cos(t) if stopped_at is None else 1e5 * np.exp(t) * np.sin(40 * t)
+    if stopped_at is not None:
         y = r + np.exp(3 * t) * np.sin(40 * t)
     return SimulationResult(
-        None if diverged_at else {"itae": 1.0, "iae": 1.0, "ise": 1.0, "isu": 1.0, "iau": 1.0},
-        diverged_at is not None,
-        diverged_at,
+        None if stopped_at else {"itae": 1.0, "iae": 1.0, "ise": 1.0, "isu": 1.0, "iau": 1.0},
+        stopped_at is not None,
+        stopped_at,
         t,
         {"r": r, "y": y, "u": u},
     )
@@ -354,7 +354,7 @@ def _diverge(rep, scenario: int, structures: set[str]):
     diverged (at t = 1 s)."""
     from dataclasses import replace
 
-    gone = {"diverged": True, "diverged_at": 1.0, "itae": None, "isu": None}
+    gone = {"failed": True, "stopped_at": 1.0, "itae": None, "isu": None}
     return replace(
         rep,
         records=[
@@ -514,9 +514,9 @@ def test_sensor_table_columns_are_simulate_with_that_sensor() -> None:
         assert [k for k, _, _ in SENSOR_COLUMNS] == ["ideal", "encoder-16bit", "encoder-12bit"]
         for key, preset, _ in SENSOR_COLUMNS:
             one = load_config(case.preset).with_sensor(preset).simulate(store=False)
-            assert got[key]["diverged"] == one.diverged
-            if one.diverged:
-                assert got[key]["diverged_at"] == one.diverged_at
+            assert got[key]["failed"] == one.failed
+            if one.failed:
+                assert got[key]["stopped_at"] == one.stopped_at
             else:
                 assert got[key]["itae"] == one.metrics["itae"]
                 assert got[key]["isu"] == one.metrics["isu"]
@@ -526,13 +526,13 @@ def test_sensor_table_columns_are_simulate_with_that_sensor() -> None:
             assert load_config(case.preset).sampling is not None
             assert got["encoder-12bit"]["itae"] == shipped.metrics["itae"]
             assert got["ideal"]["itae"] != shipped.metrics["itae"]
-        elif not shipped.diverged:
+        elif not shipped.failed:
             assert got["ideal"]["itae"] == shipped.metrics["itae"]
     given = {p: got["ideal"] for p, got in table.results.items()}  # runs already made
     again = compute_sensor_table(cases, ideal=given)
     assert again.results == table.results
     # a sampled preset's own run is not taken as its ideal column
-    wrong = {"assisted-s1-ladrc": {"itae": 1.0, "isu": 1.0, "diverged": False, "diverged_at": 0}}
+    wrong = {"assisted-s1-ladrc": {"itae": 1.0, "isu": 1.0, "failed": False, "stopped_at": 0}}
     assert compute_sensor_table(cases, ideal=wrong).results == table.results
     rep = SimpleNamespace(runs=[SimpleNamespace(case=c) for c in cases], sensors=table)
     rows = {r[2]: r for r in sensor_rows(rep)}  # type: ignore[arg-type]

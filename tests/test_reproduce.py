@@ -29,7 +29,7 @@ FILES = (
     "noise-front-s3.png",
     "report.html",
 )
-KEYS = {"scenario", "structure", "source", "itae", "isu", "iau", "opi", "diverged", "diverged_at"}
+KEYS = {"scenario", "structure", "source", "itae", "isu", "iau", "opi", "diverged", "stopped_at"}
 # what the report measured; "robustness": its rows over model-error draws (conftest: 16)
 COMPUTED_KEYS = KEYS | {"preset", "tracking", "linearisation", "robustness", "sensors"}
 
@@ -70,7 +70,7 @@ def test_every_design_is_shown_with_real_sensors(reproduced) -> None:
         assert set(got) == {"ideal", "encoder-16bit", "encoder-12bit", "verdict"}
         assert got["ideal"]["sensor"].startswith("ideal (continuous, not quantised")
         if load_config(r["preset"]).sampling is None:
-            assert (got["ideal"]["itae"], got["ideal"]["diverged"]) == (r["itae"], r["diverged"])
+            assert (got["ideal"]["itae"], got["ideal"]["failed"]) == (r["itae"], r["failed"])
         else:  # shipped sampled (assisted-*): its own run is its 12-bit / noisy 1-ms run
             assert got["ideal"]["itae"] != r["itae"]
         assert got["encoder-12bit"]["sensor"].startswith("encoder-12bit (sampled at 1 ms")
@@ -95,7 +95,7 @@ def test_paper_records_carry_tables_I_to_III(reproduced) -> None:
         for structure, vals in table.items():
             rec = _one(recs, s, structure, "paper")
             assert (rec["itae"], rec["isu"]) == (vals["itae"], vals["isu"])
-            assert (rec["iau"], rec["opi"], rec["diverged"], rec["diverged_at"]) == (
+            assert (rec["iau"], rec["opi"], rec["failed"], rec["stopped_at"]) == (
                 None,
                 None,
                 False,
@@ -109,8 +109,8 @@ def test_paper_records_carry_tables_I_to_III(reproduced) -> None:
 def test_printed_records_match_single_runs(reproduced) -> None:
     recs = _records(reproduced)
     div = _one(recs, 1, "LESO", "printed")
-    assert div["diverged"] is True
-    assert div["diverged_at"] == pytest.approx(12.42, abs=0.01)
+    assert div["failed"] is True
+    assert div["stopped_at"] == pytest.approx(12.42, abs=0.01)
     assert [div[k] for k in ("itae", "isu", "iau", "opi")] == [None] * 4
     # batching in reproduce gives the numbers of a single run of the same preset
     single = load_config("paper-s1-inleso").simulate(store=False)
@@ -121,7 +121,7 @@ def test_printed_records_match_single_runs(reproduced) -> None:
     assert rec["opi"] == pytest.approx(single.opi(), rel=1e-12)
     for r in recs:
         if r["source"] != "paper":
-            assert r["diverged"] == (r["itae"] is None) == (r["diverged_at"] is not None)
+            assert r["failed"] == (r["itae"] is None) == (r["stopped_at"] is not None)
 
 
 def test_trivial_itae_equals_its_closed_form() -> None:
@@ -145,8 +145,8 @@ def test_tables_put_paper_beside_computed(reproduced) -> None:
             assert f"{vals['itae']:.9g}" in md
     recs = _records(reproduced)
     for r in recs:
-        if r["source"] == "printed" and r["diverged"]:
-            assert f"diverged at t = {r['diverged_at']:.2f} s" in md
+        if r["source"] == "printed" and r["failed"]:
+            assert f"diverged at t = {r['stopped_at']:.2f} s" in md
     triv = trivial_itae(load_config("paper-s1-leso"))
     assert md.count(f"| {triv:.6g} |") == 3  # the y = 0 row in each table
     assert md.count("y ≡ 0 (no control") == 3
@@ -247,8 +247,8 @@ def test_report_findings_are_few_and_verdicts_sit_beside_runs(reproduced) -> Non
         if rec["source"] == "paper":
             continue
         row = next(line for line in md.splitlines() if line.startswith(f"| {rec['preset']}"))
-        if rec["diverged"]:
-            assert f"diverges at t = {rec['diverged_at']:.2f} s" in row
+        if rec["failed"]:
+            assert f"diverges at t = {rec['stopped_at']:.2f} s" in row
         else:
             assert f"{rec['tracking']['max_abs_error']:.3g} rad" in row
     # tables are in the SLFJM's units
@@ -277,7 +277,7 @@ def test_every_computed_record_carries_its_robustness_row(reproduced) -> None:
         rob = r["robustness"]
         assert (rob["draws"], rob["seed"]) == (16, 0)  # conftest runs --draws 16
         assert 0.0 <= rob["stable_fraction"] <= 1.0
-        assert rob["diverged"] == round(16 * (1 - rob["stable_fraction"]))
+        assert rob["failed"] == round(16 * (1 - rob["stable_fraction"]))
         q = rob["itae"]
         finite = [q[k] for k in ("q05", "q50", "q95") if q[k] is not None]
         assert finite == sorted(finite)
@@ -332,7 +332,7 @@ def test_summary_answers_each_scenario_from_metrics_json(reproduced) -> None:
     assert set(by_scenario) == {1, 2, 3}
 
     def best(candidates: list[dict]) -> dict | None:
-        ok = [r for r in candidates if not r["diverged"]]
+        ok = [r for r in candidates if not r["failed"]]
         return min(ok, key=lambda r: r["itae"]) if ok else None
 
     for s, row in by_scenario.items():
@@ -344,7 +344,7 @@ def test_summary_answers_each_scenario_from_metrics_json(reproduced) -> None:
         stable = [
             r
             for r in mine
-            if r["structure"] != "IOFL" and not r["diverged"] and r["robustness"]["diverged"] == 0
+            if r["structure"] != "IOFL" and not r["failed"] and r["robustness"]["failed"] == 0
         ]
         robust = min(stable, key=lambda r: r["robustness"]["itae"]["q95"])
         assert f"{robust['preset']}: ITAE 95 % {robust['robustness']['itae']['q95']:.3g}" in row[4]
@@ -352,8 +352,8 @@ def test_summary_answers_each_scenario_from_metrics_json(reproduced) -> None:
         for r in mine:
             if r["source"] == "printed":
                 what = (
-                    f"diverges at t = {r['diverged_at']:.2f} s"
-                    if r["diverged"]
+                    f"diverges at t = {r['stopped_at']:.2f} s"
+                    if r["failed"]
                     else f"ITAE {r['itae']:.4g}"
                 )
                 assert f"{r['structure']} " in row[2] and what in row[2]

@@ -151,9 +151,9 @@ def test_cvar_is_the_rockafellar_uryasev_minimum(v: list[float], m: int) -> None
 def test_a_diverged_draw_makes_the_aggregates_infinite() -> None:
     x = np.array([1.0, 2.0, 3.0, 4.0])
     div = np.array([False, False, False, True])
-    assert aggregate(x, "mean", diverged=div) == math.inf
-    assert aggregate(x, "worst", diverged=div) == math.inf
-    assert aggregate(x, "cvar", alpha=0.5, diverged=div) == math.inf
+    assert aggregate(x, "mean", failed=div) == math.inf
+    assert aggregate(x, "worst", failed=div) == math.inf
+    assert aggregate(x, "cvar", alpha=0.5, failed=div) == math.inf
     assert aggregate(np.array([1.0, np.nan]), "mean") == math.inf
     # along the last axis of a (candidates, draws) table
     np.testing.assert_array_equal(
@@ -184,18 +184,18 @@ def test_statistics_equal_a_direct_computation_draw_by_draw(mixed: tuple) -> Non
             cfg.plant, cfg.controller, scen, dt=cfg.dt, method=cfg.method,
             divergence_threshold=cfg.divergence_threshold,
         )  # fmt: skip
-        div.append(bool(r.diverged[0]))
-        t_div.append(float(r.diverged_at[0]))
+        div.append(bool(r.failed[0]))
+        t_div.append(float(r.stopped_at[0]))
         itae.append(math.inf if div[-1] else float(r.metric("itae")[0]))
         isu.append(math.inf if div[-1] else float(r.metric("isu")[0]))
     assert 0 < sum(div) < len(div)  # the case tests both kinds of draw
-    np.testing.assert_array_equal(res.diverged, div)
+    np.testing.assert_array_equal(res.failed, div)
     np.testing.assert_array_equal(res.itae, itae)
     np.testing.assert_array_equal(res.isu, isu)
     info = res.to_dict()
     assert info["stable_fraction"] == 1 - sum(div) / len(div)
-    assert [d["draw"] for d in info["diverged"]] == [i for i, x in enumerate(div) if x]
-    assert [d["t"] for d in info["diverged"]] == [t for t, x in zip(t_div, div, strict=True) if x]
+    assert [d["draw"] for d in info["failed"]] == [i for i, x in enumerate(div) if x]
+    assert [d["t"] for d in info["failed"]] == [t for t, x in zip(t_div, div, strict=True) if x]
     srt = sorted(itae)
     for key, q in (("q05", 0.05), ("q50", 0.5), ("q95", 0.95)):
         # the empirical quantile: the ceil(qK)-th smallest value (inverted CDF)
@@ -215,7 +215,7 @@ def test_the_nominal_member_is_the_config_run(mixed: tuple) -> None:
     cfg, res = mixed
     r = cfg.simulate(store=False)
     assert res.nominal["itae"] == r.metrics["itae"]
-    assert res.nominal["diverged"] is False
+    assert res.nominal["failed"] is False
 
 
 def test_the_json_has_no_nan_or_infinity(mixed: tuple) -> None:
@@ -227,7 +227,7 @@ def test_the_json_has_no_nan_or_infinity(mixed: tuple) -> None:
 def test_the_envelope_table_is_bounded_and_matches_the_trajectories(mixed: tuple) -> None:
     cfg, res = mixed
     assert res.error.shape == (8, len(res.t)) and len(res.t) <= 401
-    i = int(np.flatnonzero(~res.diverged)[0])
+    i = int(np.flatnonzero(~res.failed)[0])
     scen = res.draws.scenarios(cfg.scenario)[i]
     full = simulate(
         cfg.plant, cfg.controller, scen, dt=cfg.dt, store=True, decimation=1,
@@ -246,9 +246,9 @@ def test_chunked_runs_equal_one_call(mixed: tuple, monkeypatch: pytest.MonkeyPat
     monkeypatch.setattr(rb, "CALL_TRAJECTORY_BYTES", 1)  # one member per call
     runs = simulate_draws(cfg, res.draws)
     assert runs.engine_calls == 9
-    np.testing.assert_array_equal(runs.diverged[1:], res.diverged)
+    np.testing.assert_array_equal(runs.failed[1:], res.failed)
     np.testing.assert_array_equal(
-        np.where(runs.diverged[1:], np.inf, runs.metrics[1:, 0]), res.itae
+        np.where(runs.failed[1:], np.inf, runs.metrics[1:, 0]), res.itae
     )
 
 

@@ -152,7 +152,7 @@ def test_quantised_measurement_and_command(slfjm):
         sampling=Sampling(1e-3, y_quantum=yq, u_quantum=uq),
         decimation=10,
     )
-    assert not res.diverged
+    assert not res.failed
     np.testing.assert_allclose(res["y_meas"] / yq, np.round(res["y_meas"] / yq), atol=1e-9)
     np.testing.assert_allclose(res["u"] / uq, np.round(res["u"] / uq), atol=1e-9)
     # stored at the samples (the last row, at t_final, is after the last sample)
@@ -177,7 +177,7 @@ def test_sampled_loop_converges_to_the_continuous_loop_first_order(slfjm):
             decimation=10,
             sampling=[None, *(Sampling(t, eso=eso) for t in tss)],
         )
-        assert not res.diverged.any()
+        assert not res.failed.any()
         y = res.trajectories[:, :, 2]
         diff = [float(np.max(np.abs(y[i] - y[0]))) for i in (1, 2, 3)]
         ratios = [diff[0] / diff[1], diff[1] / diff[2]]
@@ -194,9 +194,9 @@ def test_an_euler_observer_beyond_its_stability_limit_diverges_as_data(slfjm):
         Scenario(t_final=1.0),
         sampling=[Sampling(1e-3, eso="euler"), Sampling(1e-3, eso="zoh")],
     )
-    assert res.diverged[0] and 0 < res.diverged_at[0] < 1.0
+    assert res.failed[0] and 0 < res.stopped_at[0] < 1.0
     assert np.isnan(res.metric("itae")[0])
-    assert not res.diverged[1]
+    assert not res.failed[1]
 
 
 def test_sample_time_must_be_a_multiple_of_dt(slfjm):
@@ -267,9 +267,9 @@ def test_tune_ts_tunes_the_sampled_controller_and_writes_it(tmp_path: Path):
     assert best.sampling == Sampling(1e-3)
     full = json.loads((out / "summary.json").read_text())["full_horizon"]
     again = best.simulate(store=False)  # sampled, from the written table
-    assert again.diverged == full["diverged"]
-    if again.diverged:
-        assert again.diverged_at == pytest.approx(full["diverged_at"], rel=1e-12)
+    assert again.failed == full["failed"]
+    if again.failed:
+        assert again.stopped_at == pytest.approx(full["stopped_at"], rel=1e-12)
     else:
         assert again.metrics["itae"] == pytest.approx(full["itae"], rel=1e-12)
     bad = CliRunner().invoke(app, [*args, "--ts", "1.5e-4", "--out", str(tmp_path / "b")])
@@ -308,7 +308,7 @@ def test_sampled_loop_starts_its_observer_like_the_continuous_loop():
     res = simulate_batch(
         cfg.plant, ctrls * 2, scen, store=True, decimation=1, sampling=[None, None, samp, samp]
     )
-    assert not res.diverged.any()
+    assert not res.failed.any()
     y = res.trajectories[:, :, 2]
     assert np.all(y[:, 0] == 1.0)
     for s, same, other in ((2, 0, 1), (3, 1, 0)):

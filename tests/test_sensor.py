@@ -252,7 +252,7 @@ def test_noise_realisations_score_the_mean_over_common_noise_sequences() -> None
         runs = simulate_batch(
             cfg.plant, ctrl, [replace(sc, noise_seed=s) for s in seeds], dt=cfg.dt
         )
-        assert not runs.diverged.any()
+        assert not runs.failed.any()
         per = runs.metrics @ c
         assert len(set(per)) == 3  # three different noise sequences
         np.testing.assert_allclose(res.objective[b], per.mean(), rtol=1e-12)

@@ -398,7 +398,7 @@ def test_iofl_on_the_nominal_model_tracks_to_numerical_precision() -> None:
     from aiofl.config import load_config
 
     res = load_config("iofl-s1").simulate()
-    assert not res.diverged
+    assert not res.failed
     err = np.abs(res["y"] - res["r"])
     assert np.max(err[res.t > 3.0]) < 1e-12
     assert np.max(err[res.t < 0.5]) > 1e-4  # there is a transient (ξ2(0) ≠ ṙ(0))
@@ -413,7 +413,7 @@ def test_iofl_degrades_under_uncertainty_and_ignores_output_noise() -> None:
     s1 = load_config("iofl-s1").simulate(store=False)
     s2 = load_config("iofl-s2").simulate()
     s3 = load_config("iofl-s3").simulate(store=False)
-    assert not s2.diverged
+    assert not s2.failed
     assert s2.metrics is not None and s1.metrics is not None and s3.metrics is not None
     assert s2.metrics["itae"] > 1000 * s1.metrics["itae"]
     err = np.abs(s2["y"] - s2["r"])
@@ -440,7 +440,7 @@ def test_symbolic_toml_plant_compiles_into_the_engine(tmp_path: object) -> None:
     )
     scen = Scenario(reference=Reference(amplitude=0.5, omega=1.0), t_final=5.0)
     res = simulate(plant, ctrl, scen, dt=1e-3)
-    assert not res.diverged
+    assert not res.failed
     err = np.abs(res["y"] - res["r"])
     assert np.max(err[res.t > 3.0]) < 1e-10
     assert math.isfinite(res.metrics["isu"])  # type: ignore[index]

@@ -97,8 +97,8 @@ def test_a_checkpoint_with_arrays_of_the_wrong_shape_is_refused(tmp_path: Path) 
     gen = {
         "s": np.zeros((4, 3)),
         "metrics": np.zeros((4, 2)),  # 2 metrics instead of 5
-        "diverged": np.zeros(4, dtype=bool),
-        "diverged_at": np.zeros(4),
+        "failed": np.zeros(4, dtype=bool),
+        "stopped_at": np.zeros(4),
         "seconds": 1.0,
     }
     save_checkpoint(path, "fp", [gen])
@@ -139,7 +139,7 @@ class AllDiverge:
 def test_history_has_no_nan_when_every_member_diverges() -> None:
     cfg = parse_config(dict(FAST), "fast")
     res = tune(cfg, progress=False, evaluator=AllDiverge(), generations=2)
-    assert all(h["diverged"] == h["evaluations"] for h in res.history)
+    assert all(h["failed"] == h["evaluations"] for h in res.history)
     lines = _history_csv(res).splitlines()
     header = lines[0].split(",")
     assert "nan" not in "\n".join(lines).lower()

@@ -220,12 +220,12 @@ def test_diverging_members_get_finite_penalties() -> None:
         divergence_penalty=1e4,
     )
     res = tune(cfg, progress=False)
-    assert res.diverged.any() and not res.diverged.all()
+    assert res.failed.any() and not res.failed.all()
     assert np.isfinite(res.objective).all()
-    pen = res.objective[res.diverged]
+    pen = res.objective[res.failed]
     assert ((pen >= 1e4) & (pen <= 2e4)).all()
-    assert res.objective[~res.diverged].max() < 1e4
-    assert sum(h["diverged"] for h in res.history) == int(res.diverged.sum())
+    assert res.objective[~res.failed].max() < 1e4
+    assert sum(h["failed"] for h in res.history) == int(res.failed.sum())
     assert not res.best_values["eso.omega0"] > 3e3
 
 
@@ -267,7 +267,7 @@ def test_dask_path_equals_local_path() -> None:
         ev = DaskEvaluator(client, chunks=3)  # 10 members -> chunks of 4, 3, 3
         remote = ev(prep.spec, values)
         assert np.array_equal(local.metrics, remote.metrics)
-        assert np.array_equal(local.diverged, remote.diverged)
+        assert np.array_equal(local.failed, remote.failed)
         via_dask = tune(cfg, progress=False, scheduler=client)
     via_local = tune(cfg, progress=False)
     assert_same_run(via_local, via_dask)

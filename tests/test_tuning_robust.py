@@ -89,7 +89,7 @@ def direct_metrics(cfg: Any, values: np.ndarray, names: tuple[str, ...], draws: 
         )
         for k, s in enumerate(scenarios):
             r = simulate_batch(cfg.plant, ctrl, s, dt=cfg.dt, method=cfg.method)
-            out[b, k], div[b, k] = r.metrics[0], r.diverged[0]
+            out[b, k], div[b, k] = r.metrics[0], r.failed[0]
     return out, div
 
 
@@ -138,9 +138,9 @@ def test_a_diverged_draw_makes_every_candidate_infeasible() -> None:
     penalty = 1e6
     cfg = fast_config(robust={"draws": 2, "aggregate": "mean"}, generations=1)
     ok = tune(cfg, draws=DRAWS[:2], progress=False)
-    assert (ok.objective < penalty).all() and not ok.diverged.any()
+    assert (ok.objective < penalty).all() and not ok.failed.any()
     bad = tune(cfg, draws=[DRAWS[0], UNSTABLE], progress=False)
-    assert bad.diverged.all()
+    assert bad.failed.all()
     # one of 3 members diverged at t_d < t_f: P (2 - (1 + 1 + t_d/t_f)/3), in (P, 4/3 P]
     assert (bad.objective > penalty).all() and (bad.objective <= penalty * 4 / 3).all()
     # NSGA-II: a real constraint (G[:, 0] = number of diverged members), never in the front
@@ -335,7 +335,7 @@ def test_robust_dask_chunks_and_resume_equal_the_local_run(tmp_path: Path) -> No
     prep = prepare(cfg, draws=DRAWS)
     values = prep.space.decode(prep.initial)
     local = evaluate_chunk(prep.spec, values)
-    assert local.metrics.shape == (5, 4, 5) and local.diverged.shape == (5, 4)
+    assert local.metrics.shape == (5, 4, 5) and local.failed.shape == (5, 4)
     with (
         distributed.LocalCluster(
             n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None
@@ -344,7 +344,7 @@ def test_robust_dask_chunks_and_resume_equal_the_local_run(tmp_path: Path) -> No
     ):
         remote = DaskEvaluator(client, chunks=2)(prep.spec, values)  # 3 + 2 candidates
     assert np.array_equal(local.metrics, remote.metrics)
-    assert np.array_equal(local.diverged, remote.diverged)
+    assert np.array_equal(local.failed, remote.failed)
     full = tune(cfg, draws=DRAWS, progress=False)
     tune(cfg, draws=DRAWS, progress=False, checkpoint_dir=tmp_path, generations=1)
     resumed = tune(cfg, draws=DRAWS, progress=False, checkpoint_dir=tmp_path, resume=True)

@@ -121,7 +121,7 @@ class Design:
     # ------------------------------------------------------------------ commands
     def simulate(self, *, store: bool = True) -> Any:
         """One run (``aiofl simulate``): a :class:`aiofl.engine.simulation.SimulationResult`
-        (``.metrics``, ``.diverged``, ``.t``, ``["y"]``, ``.opi(weights)``)."""
+        (``.metrics``, ``.failed``, ``.t``, ``["y"]``, ``.opi(weights)``)."""
         return self.config.simulate(store=store)
 
     def opi(self) -> float | None:

@@ -67,8 +67,15 @@ METHOD_RK4 = 0
 METHOD_EULER = 1
 METHODS = MappingProxyType({"rk4": METHOD_RK4, "euler": METHOD_EULER})
 
+# What a member's run did (the engine's verdict, :mod:`aiofl.engine.loop`): *ok*; *lost*,
+# the plant left its operating envelope (the output's distance from the reference, the
+# output's or a state's declared range), a fact about the plant; *diverged*, the numbers
+# blew up (non-finite, or a plant state beyond the divergence threshold).  The observer's
+# states never make a run lost; a non-finite controller state makes it diverged.
 STATUS_OK = 0
 STATUS_DIVERGED = 1
+STATUS_LOST = 2
+STATUS_NAMES = MappingProxyType({STATUS_OK: "ok", STATUS_DIVERGED: "diverged", STATUS_LOST: "lost"})
 
 # --------------------------------------------------------------------- integer row
 I_ESO, I_TD, I_SEF, I_LAW, I_RHO, I_NFB, I_ESO_INIT, I_ESO_MODEL, I_ESO_GAINS = range(9)
@@ -136,12 +143,55 @@ S_DIST_AMP, S_DIST_TIME, S_PCHANGE_TIME, S_NOISE_STD, S_NOISE_HOLD = range(6, 11
 S_REF_DT = 11  # sample spacing of a REF_SAMPLES reference
 S_IN_DELAY = 12  # input (actuator) transport delay [s]: the plant sees u(t - τ_in)
 S_OUT_DELAY = 13  # output (sensor) transport delay [s]: the ADC reads y(t - τ_out)
-N_SCEN = 14
+S_ENVELOPE = 14  # |y - r| above it: the run is lost (inf: no envelope)
+S_U_REF = 15  # ISU and IAU measure u - u_ref (the holding input at the operating point)
+S_STEADY_FROM = 16  # the steady-state window starts here [s] (noise in u, steady error)
+N_SCEN = 17
+
+# ------------------------------------------------------ what the loop watches per member
+# (aiofl.engine.loop._tpl_watch, at every step t_k on the plant's y = h(x_k), the reference
+# r(t_k) and the command u applied over the step)
+ST_U_PEAK = 0  #: max |u|
+ST_T_SAT = 1  #: time with u at the actuator's limit [s]
+ST_E_PEAK = 2  #: max |y - r|
+ST_STEP_PEAK = 3  #: step reference: max of sign(A)(y - r0) from the step on
+ST_T10 = 4  #: step reference: first time sign(A)(y - r0) >= 0.1 |A| (NaN: never)
+ST_T90 = 5  #: step reference: first time sign(A)(y - r0) >= 0.9 |A| (NaN: never)
+ST_T_OUT = 6  #: step reference: last time |y - r| >= 2 % |A| (NaN: never)
+ST_SS_N = 7  #: steps in the steady-state window
+ST_SS_U0 = 8  #: the window's first u (the shift of the sums below)
+ST_SS_SU = 9  #: sum of u - u0 over the window
+ST_SS_SU2 = 10  #: sum of (u - u0)^2 over the window
+ST_SS_SE = 11  #: sum of y - r over the window
+ST_Y_END = 12  #: y - r at the last step watched
+ST_U_LAST = 13  #: u at the previous step watched
+ST_SS_DU2 = 14  #: sum over the window of (u_k - u_{k-1})^2 where u changed
+ST_SS_NDU = 15  #: the steps in the window where u changed
+N_STAT = 16
 
 # ------------------------------------------------------------------ metric columns
 METRIC_NAMES = ("itae", "iae", "ise", "isu", "iau")
 M_ITAE, M_IAE, M_ISE, M_ISU, M_IAU = range(5)
 N_METRIC = len(METRIC_NAMES)
+
+RESPONSE_NAMES = (
+    "overshoot",
+    "rise_time",
+    "settling_time",
+    "steady_error",
+    "u_std",
+    "u_noise",
+    "u_rms",
+    "u_peak",
+    "e_peak",
+    "saturated_time",
+)
+"""What the loop watched, as figures (:mod:`aiofl.engine.response`): step metrics, the
+command at steady state, peaks, the time at the actuator's limit; NaN where one does not
+apply (no step reference) or was not reached (never settled)."""
+SCORE_NAMES = METRIC_NAMES + RESPONSE_NAMES
+"""Everything a tuner can minimise or bound per run: the integrals, then the figures."""
+N_SCORE = len(SCORE_NAMES)
 
 
 def trajectory_columns(n_states: int) -> tuple[str, ...]:

@@ -49,7 +49,15 @@ _SCENARIO_RANGES: dict[str, dict[str, float]] = {
     "noise_hold": {"gt": 0.0},
     "input_delay": {"ge": 0.0, "le": DELAY_MAX},
     "output_delay": {"ge": 0.0, "le": DELAY_MAX},
+    "u_ref": {},
 }
+
+ENVELOPE_FACTOR = 10.0
+"""The default envelope (:attr:`Scenario.envelope`) in units of the scenario's output
+scale: an output ten times farther from the reference than anything the scenario asks for
+has left any operating point a design is meant for."""
+STEADY_FRACTION = 0.2
+"""The steady-state window's default share of the horizon, at its end."""
 
 
 @dataclass(frozen=True)
@@ -131,6 +139,20 @@ class Scenario:
         noise at t.  Held exactly by the sampled engine; each must be an integer multiple of
         the step dt, and the continuous controller refuses them
         (:func:`aiofl.engine.discrete.delay_steps`).
+    envelope
+        The operating envelope: a run whose :math:`|y - r|` exceeds it is *lost* (stopped
+        and reported with the time; ``inf`` switches it off).  None (default):
+        :data:`ENVELOPE_FACTOR` times the scenario's output scale, the largest of
+        :math:`|r(t)|` and :math:`|y(0)|` (:meth:`default_envelope`); no envelope when
+        that scale is 0.  A plant may also declare ranges of its states and output
+        (:attr:`aiofl.plants.base.Plant.state_bounds`, ``output_range``).
+    u_ref
+        ISU and IAU measure :math:`u - u_{ref}` (default 0): the holding input at the
+        operating point (:func:`aiofl.plants.operating_point.trim`), so that holding the plant
+        there costs nothing and a tuner weighs only the control effort beyond it.
+    steady_from
+        The steady-state window starts here [s] (its noise in u and steady-state error);
+        None (default): the last :data:`STEADY_FRACTION` of the horizon.
     """
 
     name: str = "custom"
@@ -147,6 +169,9 @@ class Scenario:
     x0: tuple[float, ...] = ()
     input_delay: float = 0.0
     output_delay: float = 0.0
+    envelope: float | None = None
+    u_ref: float = 0.0
+    steady_from: float | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str):
@@ -181,6 +206,46 @@ class Scenario:
             raise ValueError(f"scenario.x0 = {self.x0!r}; allowed: a sequence of finite numbers")
         x0 = tuple(check_number(f"scenario.x0[{i}]", v) for i, v in enumerate(self.x0))
         object.__setattr__(self, "x0", x0)
+        if self.envelope is not None:
+            env = check_number("scenario.envelope", self.envelope, gt=0.0, finite=False)
+            object.__setattr__(self, "envelope", env)
+        if self.steady_from is not None:
+            start = check_number("scenario.steady_from", self.steady_from, ge=0.0)
+            if start >= self.t_final:
+                raise ValueError(
+                    f"scenario.steady_from = {self.steady_from!r}; allowed: >= 0 and below "
+                    f"the horizon t_final = {self.t_final:g} s"
+                )
+            object.__setattr__(self, "steady_from", start)
+
+    def output_scale(self, y0: float = 0.0) -> float:
+        """The largest of :math:`|r(t)|` over the horizon and :math:`|y_0|`: the size of
+        the outputs this scenario asks for (its default envelope's unit)."""
+        ref = self.reference
+        if ref.kind == "sine":
+            r_max = abs(ref.offset) + abs(ref.amplitude)
+        elif ref.kind == "step":
+            r_max = max(abs(ref.offset), abs(ref.offset + ref.amplitude))
+        else:
+            r_max = max((abs(v) for v in ref.samples), default=0.0)
+        return max(r_max, abs(float(y0)) if math.isfinite(y0) else 0.0)
+
+    def default_envelope(self, y0: float = 0.0) -> float:
+        """The envelope used when :attr:`envelope` is None: :data:`ENVELOPE_FACTOR` times
+        :meth:`output_scale` (``inf``, no envelope, when the scale is 0)."""
+        scale = self.output_scale(y0)
+        return ENVELOPE_FACTOR * scale if scale > 0.0 else math.inf
+
+    def resolved_envelope(self, y0: float = 0.0) -> float:
+        """The envelope a run uses: :attr:`envelope`, or :meth:`default_envelope`."""
+        return self.envelope if self.envelope is not None else self.default_envelope(y0)
+
+    @property
+    def steady_start(self) -> float:
+        """Where the steady-state window starts [s] (:attr:`steady_from` or its default)."""
+        if self.steady_from is not None:
+            return self.steady_from
+        return (1.0 - STEADY_FRACTION) * self.t_final
 
     @property
     def noise_samples(self) -> int:
@@ -206,6 +271,9 @@ class Scenario:
         row[L.S_NOISE_HOLD] = self.noise_hold
         row[L.S_IN_DELAY] = self.input_delay
         row[L.S_OUT_DELAY] = self.output_delay
+        row[L.S_ENVELOPE] = self.resolved_envelope()
+        row[L.S_U_REF] = self.u_ref
+        row[L.S_STEADY_FROM] = self.steady_start
         return row
 
 

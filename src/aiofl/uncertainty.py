@@ -493,7 +493,7 @@ def aggregate(
     how: Literal["mean", "worst", "cvar"] = "mean",
     *,
     alpha: float = 0.9,
-    diverged: ArrayLike | None = None,
+    failed: ArrayLike | None = None,
     axis: int = -1,
 ) -> NDArray[np.float64]:
     r"""Aggregate a metric over draws (along ``axis``), diverged draws as :math:`+\infty`.
@@ -504,8 +504,8 @@ def aggregate(
     the design is infeasible.
     """
     x = np.array(values, dtype=np.float64)
-    if diverged is not None:
-        x[np.asarray(diverged, dtype=bool)] = np.inf
+    if failed is not None:
+        x[np.asarray(failed, dtype=bool)] = np.inf
     x[np.isnan(x)] = np.inf
     if x.shape[axis] == 0:
         raise ValueError("aggregate over zero draws")

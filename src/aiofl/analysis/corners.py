@@ -50,6 +50,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from aiofl import layout as L
 from aiofl.uncertainty import Draws, UncertaintyModel, box_bounds, box_draws
 
 __all__ = [
@@ -85,12 +86,12 @@ def corner_summary(res: Any, design: str) -> dict[str, Any]:
     diverged corners (index, time, factors) and the worst corner."""
     d: Draws = res.corners
     cols = d.columns()
-    div = res.corner_diverged
+    div = res.corner_failed
     itae = res.corner_itae
     n = len(d)
     if div.any():
         idx = np.flatnonzero(div)
-        w = int(idx[np.argmin(res.corner_diverged_at[idx])])
+        w = int(idx[np.argmin(res.corner_stopped_at[idx])])
     else:
         w = int(np.argmax(itae))
 
@@ -102,14 +103,20 @@ def corner_summary(res: Any, design: str) -> dict[str, Any]:
         "count": n,
         "corners_stable": float(np.mean(~div)),
         "stable": int(n - div.sum()),
-        "diverged": [
-            {"corner": int(i), "t": float(res.corner_diverged_at[i]), "point": point(int(i))}
+        "failed": [
+            {
+                "corner": int(i),
+                "status": L.STATUS_NAMES[int(res.corner_status[i])],
+                "t": float(res.corner_stopped_at[i]),
+                "point": point(int(i)),
+            }
             for i in np.flatnonzero(div)
         ],
         "worst": {
             "corner": w,
             "itae": float(itae[w]) if np.isfinite(itae[w]) else None,
-            "diverged_at": float(res.corner_diverged_at[w]) if div[w] else None,
+            "status": L.STATUS_NAMES[int(res.corner_status[w])],
+            "stopped_at": float(res.corner_stopped_at[w]) if div[w] else None,
             "point": point(w),
         },
     }
@@ -121,29 +128,33 @@ class WorstCase:
     """The worst plant found by :func:`worst_case_search`.
 
     ``point`` holds the drawn quantities (parameter factors, ``ts``, ``noise_variance``);
-    ``itae`` is None when it diverged (at ``diverged_at``); ``start`` says where the search
-    began and ``improved`` whether it found something worse than the start.
+    ``itae`` is None when it was lost or diverged (``status``, at ``stopped_at``);
+    ``start`` says where the search began and ``improved`` whether it found something
+    worse than the start.
     """
 
     point: dict[str, float]
     itae: float | None
-    diverged_at: float | None
+    stopped_at: float | None
     start: str
     start_itae: float | None
     evaluations: int
     engine_calls: int
     improved: bool
     message: str
+    status: str = "ok"
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data for ``robustness.json``."""
         return {
             "method": f"scipy L-BFGS-B on -ln ITAE over the box, <= {SEARCH_EVALUATIONS} "
-            "evaluations of k+1 plants (finite-difference gradient); divergence ends it",
+            "evaluations of k+1 plants (finite-difference gradient); a lost or diverged run "
+            "ends it",
+            "status": self.status,
             "start": self.start,
             "start_itae": self.start_itae,
             "itae": self.itae,
-            "diverged_at": self.diverged_at,
+            "stopped_at": self.stopped_at,
             "point": self.point,
             "improved": self.improved,
             "evaluations": self.evaluations,
@@ -156,9 +167,11 @@ class _Budget(Exception):
     """The search's evaluations are spent."""
 
 
-class _Diverged(Exception):
-    def __init__(self, u: NDArray[np.float64], t: float) -> None:
-        self.u, self.t = u, t
+class _Failed(Exception):
+    """A point of the search whose plant was lost or whose numbers diverged."""
+
+    def __init__(self, u: NDArray[np.float64], t: float, status: str) -> None:
+        self.u, self.t, self.status = u, t, status
 
 
 def worst_case_search(
@@ -201,9 +214,9 @@ def worst_case_search(
             d = replace(d, noise_seeds=np.full(len(pts), noise_seed, dtype=np.int64))
         r = simulate_designs([cfg], d)[0]
         calls += 1
-        if r.diverged.any():
-            i = int(np.flatnonzero(r.diverged)[np.argmin(r.diverged_at[r.diverged])])
-            raise _Diverged(pts[i], float(r.diverged_at[i]))
+        if r.failed.any():
+            i = int(np.flatnonzero(r.failed)[np.argmin(r.stopped_at[r.failed])])
+            raise _Failed(pts[i], float(r.stopped_at[i]), L.STATUS_NAMES[int(r.status[i])])
         i = int(np.argmax(r.itae))
         if r.itae[i] > best[1]:
             best[:] = [pts[i].copy(), float(r.itae[i])]
@@ -235,23 +248,24 @@ def worst_case_search(
         message = str(opt.message)
     except _Budget:
         message = f"stopped after {evaluations} evaluations"
-    except _Diverged as exc:
+    except _Failed as exc:
         return WorstCase(
             point=point(exc.u),
             itae=None,
-            diverged_at=exc.t,
+            stopped_at=exc.t,
             start=start_label,
             start_itae=start_itae,
             evaluations=calls,
             engine_calls=calls,
             improved=True,
-            message=f"diverged at t = {exc.t:g} s: the search stops at the first divergence",
+            message=f"{exc.status} at t = {exc.t:g} s: the search stops at the first failure",
+            status=exc.status,
         )
     u_best, itae_best = best
     return WorstCase(
         point=point(u_best),
         itae=float(itae_best),
-        diverged_at=None,
+        stopped_at=None,
         start=start_label,
         start_itae=start_itae,
         evaluations=calls,
@@ -392,7 +406,7 @@ def _scaled_members(cfgs: Sequence[Any], scales: Sequence[Mapping[str, float]]) 
             divergence_threshold=base.divergence_threshold,
             sampling=samp if any(s is not None for s in samp) else None,
         )
-        out[idx] = res.diverged
+        out[idx] = res.failed
     return out
 
 
@@ -535,39 +549,42 @@ def run_box_robustness(
         cols = res.draws.columns()
         cands = [  # (diverged, how bad, point, label): a divergence, the earliest, is worst
             (
-                bool(res.corner_diverged[i]),
-                -res.corner_diverged_at[i] if res.corner_diverged[i] else res.corner_itae[i],
+                bool(res.corner_failed[i]),
+                -res.corner_stopped_at[i] if res.corner_failed[i] else res.corner_itae[i],
                 {k: float(v[i]) for k, v in res.corners.columns().items()},
                 f"corner {i}",
-                float(res.corner_diverged_at[i]),
+                float(res.corner_stopped_at[i]),
                 _seed(res.corners, i),
+                L.STATUS_NAMES[int(res.corner_status[i])],
             )
             for i in [int(extra["corners"]["worst"]["corner"])]
         ]
         dw = res.worst_index()
         cands.append(
             (
-                bool(res.diverged[dw]),
-                -res.diverged_at[dw] if res.diverged[dw] else res.itae[dw],
+                bool(res.failed[dw]),
+                -res.stopped_at[dw] if res.failed[dw] else res.itae[dw],
                 {k: float(v[dw]) for k, v in cols.items()},
                 f"draw {dw}",
-                float(res.diverged_at[dw]),
+                float(res.stopped_at[dw]),
                 _seed(res.draws, dw),
+                L.STATUS_NAMES[int(res.status[dw])],
             )
         )
-        div0, _, src, label, t_div, n_seed = max(cands, key=lambda c: (c[0], c[1]))
+        div0, _, src, label, t_div, n_seed, how = max(cands, key=lambda c: (c[0], c[1]))
         u = np.array([(src[n] - lo) / (hi - lo) if hi > lo else 0.5 for n, (lo, hi) in box.items()])
         if div0:
             wc = WorstCase(
                 point=dict(src),
                 itae=None,
-                diverged_at=t_div,
+                stopped_at=t_div,
                 start=label,
                 start_itae=None,
                 evaluations=0,
                 engine_calls=0,
                 improved=False,
-                message="the start diverged: nothing to search",
+                message=f"the start was {how}: nothing to search",
+                status=how,
             )
         else:
             wc = worst_case_search(cfg, cfg.uncertainty, u, start_label=label, noise_seed=n_seed)

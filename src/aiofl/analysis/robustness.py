@@ -74,8 +74,9 @@ class DrawRuns:
     """Engine results of the nominal plant (member 0) and the K draws (members 1..K)."""
 
     metrics: NDArray[np.float64]  # (K+1, 5)
-    diverged: NDArray[np.bool_]
-    diverged_at: NDArray[np.float64]
+    failed: NDArray[np.bool_]  # lost or diverged
+    stopped_at: NDArray[np.float64]
+    status: NDArray[np.int64]  # aiofl.layout.STATUS_*
     t: NDArray[np.float64]  # (P,)
     error: NDArray[np.float32]  # (K+1, P), y - r; NaN after a divergence
     engine_calls: int
@@ -89,9 +90,7 @@ def _points(k: int, n_steps: int) -> tuple[int, int]:
     return dec, n_steps // dec + 1
 
 
-def _chunk(
-    config: Any, draws: Draws, nominal: bool, decimation: int
-) -> tuple[NDArray[np.float64], NDArray[np.bool_], NDArray[np.float64], NDArray[np.float32]]:
+def _chunk(config: Any, draws: Draws, nominal: bool, decimation: int) -> tuple[Any, ...]:
     """Simulate ``draws`` (and the nominal plant first if ``nominal``) of ``config`` (a
     RunConfig, or its raw dict on a Dask worker) in one engine call."""
     from aiofl.config import parse_config
@@ -103,7 +102,8 @@ def _chunk(
     if nominal:
         scenarios, samplings = [cfg.scenario, *scenarios], [cfg.sampling, *samplings]
     if not scenarios:
-        return np.zeros((0, L.N_METRIC)), np.zeros(0, bool), np.zeros(0), np.zeros((0, 0), "f4")
+        none = np.zeros(0, np.int64)
+        return np.zeros((0, L.N_METRIC)), np.zeros(0, bool), np.zeros(0), np.zeros((0, 0)), none
     with _LOCK:  # one engine call at a time per process (threaded Dask workers)
         res = simulate_batch(
             cfg.plant,
@@ -120,7 +120,7 @@ def _chunk(
     assert traj is not None
     cols = list(res.columns)
     err = (traj[:, :, cols.index("y")] - traj[:, :, cols.index("r")]).astype(np.float32)
-    return res.metrics.copy(), res.diverged.copy(), res.diverged_at.copy(), err
+    return res.metrics.copy(), res.failed.copy(), res.stopped_at.copy(), err, res.status.copy()
 
 
 def _subset(draws: Draws, idx: slice) -> Draws:
@@ -165,8 +165,9 @@ def simulate_draws(
     t = np.arange(n_pts) * (dec * cfg.dt)
     return DrawRuns(
         metrics=np.concatenate([p[0] for p in parts]),
-        diverged=np.concatenate([p[1] for p in parts]),
-        diverged_at=np.concatenate([p[2] for p in parts]),
+        failed=np.concatenate([p[1] for p in parts]),
+        stopped_at=np.concatenate([p[2] for p in parts]),
+        status=np.concatenate([p[4] for p in parts]),
         t=t,
         error=np.concatenate([p[3] for p in parts]),
         engine_calls=len(tasks),
@@ -179,14 +180,23 @@ def _num(x: float) -> float | None:
 
 
 class _DrawStatistics:
-    """Statistics over the K draws of a result with ``diverged`` (K,) and metric arrays."""
+    """Statistics over the K draws of a result with ``failed`` and ``status`` (K,) and
+    metric arrays."""
 
-    diverged: NDArray[np.bool_]
+    failed: NDArray[np.bool_]
+    status: NDArray[np.int64]
 
     @property
     def stable_fraction(self) -> float:
-        """Fraction of draws that did not diverge."""
-        return float(np.mean(~self.diverged))
+        """Fraction of draws whose plant was neither lost nor diverged."""
+        return float(np.mean(~self.failed))
+
+    def status_counts(self) -> dict[str, int]:
+        """How many draws were ``ok``, ``lost`` and ``diverged``."""
+        return {
+            name: int(np.count_nonzero(self.status == code))
+            for code, name in L.STATUS_NAMES.items()
+        }
 
     def quantiles(self, values: NDArray[np.float64]) -> dict[str, float | None]:
         """q05, q50, q95 (empirical, ``inverted_cdf``) and max; None where +inf."""
@@ -204,8 +214,9 @@ class RobustnessResult(_DrawStatistics):
     nominal_params: dict[str, float]
     itae: NDArray[np.float64]  # +inf where diverged
     isu: NDArray[np.float64]
-    diverged: NDArray[np.bool_]
-    diverged_at: NDArray[np.float64]
+    failed: NDArray[np.bool_]  # lost or diverged
+    stopped_at: NDArray[np.float64]
+    status: NDArray[np.int64]  # aiofl.layout.STATUS_*
     nominal: dict[str, Any]
     t: NDArray[np.float64]
     error: NDArray[np.float32]  # (K, P)
@@ -215,16 +226,17 @@ class RobustnessResult(_DrawStatistics):
     #: the box corners run with the draws (:func:`aiofl.uncertainty.corner_draws`), or None
     corners: Draws | None = None
     corner_itae: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
-    corner_diverged: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
-    corner_diverged_at: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    corner_failed: NDArray[np.bool_] = field(default_factory=lambda: np.zeros(0, bool))
+    corner_stopped_at: NDArray[np.float64] = field(default_factory=lambda: np.zeros(0))
+    corner_status: NDArray[np.int64] = field(default_factory=lambda: np.zeros(0, np.int64))
     #: records added to :meth:`to_dict` (:func:`aiofl.analysis.corners.run_box_robustness`)
     extra: dict[str, Any] = field(default_factory=dict)
 
     def worst_index(self) -> int:
         """The worst draw: largest ITAE; a diverged draw (earliest first) beats any finite."""
-        if self.diverged.any():
-            idx = np.flatnonzero(self.diverged)
-            return int(idx[np.argmin(self.diverged_at[idx])])
+        if self.failed.any():
+            idx = np.flatnonzero(self.failed)
+            return int(idx[np.argmin(self.stopped_at[idx])])
         return int(np.argmax(self.itae))
 
     def influence(self) -> list[tuple[str, float | None]]:
@@ -247,7 +259,8 @@ class RobustnessResult(_DrawStatistics):
             "draw": w,
             "itae": _num(self.itae[w]),
             "isu": _num(self.isu[w]),
-            "diverged_at": float(self.diverged_at[w]) if self.diverged[w] else None,
+            "status": L.STATUS_NAMES[int(self.status[w])],
+            "stopped_at": float(self.stopped_at[w]) if self.failed[w] else None,
             "factors": {k: float(v[w]) for k, v in self.draws.factors.items()},
             "parameters": {
                 k: float(v[w]) * self.nominal_params[k] for k, v in self.draws.factors.items()
@@ -262,9 +275,14 @@ class RobustnessResult(_DrawStatistics):
             "seed": self.draws.seed,
             "uncertainty": self.uncertainty,
             "stable_fraction": self.stable_fraction,
-            "diverged": [
-                {"draw": int(i), "t": float(self.diverged_at[i])}
-                for i in np.flatnonzero(self.diverged)
+            "status_counts": self.status_counts(),
+            "failed": [
+                {
+                    "draw": int(i),
+                    "status": L.STATUS_NAMES[int(self.status[i])],
+                    "t": float(self.stopped_at[i]),
+                }
+                for i in np.flatnonzero(self.failed)
             ],
             "itae": self.quantiles(self.itae),
             "isu": self.quantiles(self.isu),
@@ -276,8 +294,9 @@ class RobustnessResult(_DrawStatistics):
             "nominal": self.nominal,
             "influence": [{"name": n, "spearman_itae": r} for n, r in self.influence()],
             "notes": (
-                "quantiles: numpy inverted_cdf over all draws, a diverged draw counting as "
-                "+inf; null = the value falls on a diverged draw (infeasible)"
+                "quantiles: numpy inverted_cdf over all draws, a draw whose plant was lost "
+                "or whose numbers diverged counting as +inf; null = the value falls on such "
+                "a draw (infeasible); stable = neither lost nor diverged"
             ),
             **self.extra,
         }
@@ -313,15 +332,16 @@ def run_robustness(
         cfg, d if corners is None else d.concat(corners), client=client, chunks=chunks
     )
     seconds = time.perf_counter() - t0
-    m, div = runs.metrics, runs.diverged
+    m, div = runs.metrics, runs.failed
     itae = np.where(div, np.inf, m[:, L.METRIC_NAMES.index("itae")])
     isu = np.where(div, np.inf, m[:, L.METRIC_NAMES.index("isu")])
     k_end = len(div) - n_c  # members 1..K are the draws, then the corners
     nominal = {
         "itae": _num(itae[0]),
         "isu": _num(isu[0]),
-        "diverged": bool(div[0]),
-        "diverged_at": float(runs.diverged_at[0]) if div[0] else None,
+        "status": L.STATUS_NAMES[int(runs.status[0])],
+        "failed": bool(div[0]),
+        "stopped_at": float(runs.stopped_at[0]) if div[0] else None,
     }
     spec = cfg.uncertainty.model_dump(exclude_none=True)
     spec.update(draws=len(d), seed=d.seed)
@@ -331,8 +351,9 @@ def run_robustness(
         nominal_params=dict(cfg.plant.params),
         itae=itae[1:k_end],
         isu=isu[1:k_end],
-        diverged=div[1:k_end],
-        diverged_at=runs.diverged_at[1:k_end],
+        failed=div[1:k_end],
+        stopped_at=runs.stopped_at[1:k_end],
+        status=runs.status[1:k_end],
         nominal=nominal,
         t=runs.t,
         error=runs.error[1:k_end],
@@ -341,8 +362,9 @@ def run_robustness(
         uncertainty=spec,
         corners=corners,
         corner_itae=itae[k_end:],
-        corner_diverged=div[k_end:],
-        corner_diverged_at=runs.diverged_at[k_end:],
+        corner_failed=div[k_end:],
+        corner_stopped_at=runs.stopped_at[k_end:],
+        corner_status=runs.status[k_end:],
     )
 
 
@@ -355,8 +377,9 @@ class DesignDraws(_DrawStatistics):
     draws: Draws
     itae: NDArray[np.float64]  # +inf where diverged
     isu: NDArray[np.float64]
-    diverged: NDArray[np.bool_]
-    diverged_at: NDArray[np.float64]
+    failed: NDArray[np.bool_]
+    stopped_at: NDArray[np.float64]
+    status: NDArray[np.int64]
     group: int  # designs of one group ran in the same engine call(s)
     engine_calls: int  # the calls of its group
 
@@ -367,7 +390,8 @@ class DesignDraws(_DrawStatistics):
             "draws": len(self.draws),
             "seed": self.draws.seed,
             "stable_fraction": self.stable_fraction,
-            "diverged": int(np.count_nonzero(self.diverged)),
+            "failed": int(np.count_nonzero(self.failed)),
+            "status_counts": self.status_counts(),
             "itae": self.quantiles(self.itae),
             "isu": self.quantiles(self.isu),
         }
@@ -436,8 +460,9 @@ def simulate_designs(cfgs: Sequence[Any], draws: Draws) -> list[DesignDraws]:
             parts.append(
                 (
                     res.metrics.reshape(len(idx), b - a, -1),
-                    res.diverged.reshape(len(idx), b - a),
-                    res.diverged_at.reshape(len(idx), b - a),
+                    res.failed.reshape(len(idx), b - a),
+                    res.stopped_at.reshape(len(idx), b - a),
+                    res.status.reshape(len(idx), b - a),
                 )
             )
         metrics = np.concatenate([p[0] for p in parts], axis=1)
@@ -448,8 +473,9 @@ def simulate_designs(cfgs: Sequence[Any], draws: Draws) -> list[DesignDraws]:
                 draws=draws,
                 itae=np.where(div[j], np.inf, metrics[j, :, L.METRIC_NAMES.index("itae")]),
                 isu=np.where(div[j], np.inf, metrics[j, :, L.METRIC_NAMES.index("isu")]),
-                diverged=div[j].copy(),
-                diverged_at=t_div[j].copy(),
+                failed=div[j].copy(),
+                stopped_at=t_div[j].copy(),
+                status=np.concatenate([p[3] for p in parts], axis=1)[j].copy(),
                 group=g,
                 engine_calls=len(parts),
             )
@@ -503,7 +529,7 @@ def _mark_corners(ax: Any, res: RobustnessResult, xname: str, top: float) -> Non
     """The box corners on an ITAE-against-parameter panel: black squares, a diverged
     corner a red square at the top."""
     xc = res.corners.columns()[xname]  # type: ignore[union-attr]
-    ok = ~res.corner_diverged
+    ok = ~res.corner_failed
     if ok.any():
         top = max(top, 2.0 * float(res.corner_itae[ok].max()))
     if ok.any():
@@ -550,7 +576,7 @@ def robustness_figure(res: RobustnessResult) -> Any:
 
     ax = axes[2]
     err = res.error.astype(np.float64)
-    ok = ~res.diverged
+    ok = ~res.failed
     if ok.any():
         e = err[ok]
         lo, hi = np.quantile(e, [0.05, 0.95], axis=0)
@@ -595,7 +621,7 @@ def robustness_figure(res: RobustnessResult) -> Any:
     corners = ""
     if res.corners is not None:
         n_c = len(res.corners)
-        corners = f"; corners stable {n_c - int(res.corner_diverged.sum())} of {n_c}"
+        corners = f"; corners stable {n_c - int(res.corner_failed.sum())} of {n_c}"
     fig.suptitle(  # the config's name: plain text, never mathtext
         f"{res.name}: stable {100 * res.stable_fraction:.1f} % of {k} draws "
         f"(seed {res.draws.seed}){corners}",

@@ -12,8 +12,9 @@ candidate of every config of one plant is a member of one engine call) and finds
      ZOH of the plant's continuous linearisation closed with the engine's discrete
      controller update, linearised by finite differences; skipped, and said so, where
      there is no linearisation, e.g. the IOFL law);
-  2. *bounded*: the simulation over the scenario's horizon does not diverge (the engine's
-     test: non-finite or beyond ``divergence_threshold``);
+  2. *bounded*: the simulation over the scenario's horizon neither loses the plant (its
+     envelope, :mod:`aiofl.engine.loop`) nor diverges (non-finite, or a plant state beyond
+     ``divergence_threshold``);
   3. *off the saturation*: :math:`|u|` sits at its limit (``law.u_max``/``law.u_min``)
      for at most ``saturation_allowance`` (5 %) of the horizon more than the continuous
      design does (a loop held by a saturated command is bounded whatever its
@@ -101,25 +102,25 @@ class SamplingPoint:
 
     ts: float
     itae: float | None
-    diverged: bool
-    diverged_at: float | None
+    failed: bool
+    stopped_at: float | None
     saturated: float | None
     radius: float | None
     omega0_ts: float | None
 
-    def __iter__(self) -> Any:  # (ts, itae, diverged, diverged_at) unpacking, as before
-        return iter((self.ts, self.itae, self.diverged, self.diverged_at))
+    def __iter__(self) -> Any:  # (ts, itae, diverged, stopped_at) unpacking, as before
+        return iter((self.ts, self.itae, self.failed, self.stopped_at))
 
     def __getitem__(self, i: int) -> Any:
-        return (self.ts, self.itae, self.diverged, self.diverged_at)[i]
+        return (self.ts, self.itae, self.failed, self.stopped_at)[i]
 
     def failures(self, sat_continuous: float, allowance: float) -> list[str]:
         """Which stability criteria this run fails (empty: stable)."""
         out = []
         if self.radius is not None and not self.radius < 1.0:
             out.append("linearisation")
-        if self.diverged or self.itae is None:
-            out.append("diverged")
+        if self.failed or self.itae is None:
+            out.append("lost or diverged")
         if self.saturated is not None and self.saturated > sat_continuous + allowance:
             out.append("saturation")
         return out
@@ -202,8 +203,8 @@ class SamplingLimits:
                     "ts": p.ts,
                     "omega0_ts": p.omega0_ts,
                     "itae": p.itae,
-                    "diverged": p.diverged,
-                    "diverged_at": p.diverged_at,
+                    "failed": p.failed,
+                    "stopped_at": p.stopped_at,
                     "saturated_fraction": p.saturated,
                     "spectral_radius": p.radius,
                     "fails": p.failures(sat_c, self.saturation_allowance),
@@ -219,7 +220,7 @@ def _finite(v: float | None) -> float | None:
     return v if v is None or math.isfinite(v) else None
 
 
-# (itae, diverged, diverged_at, saturated fraction)
+# (itae, diverged, stopped_at, saturated fraction)
 _Run = tuple[float | None, bool, float | None, float | None]
 
 
@@ -232,7 +233,7 @@ class _Search:
     results: dict[int, _Run] = field(default_factory=dict)
     radius: dict[int, float | None] = field(default_factory=dict)
     itae_c: float | None = None
-    cont_diverged: bool = False
+    cont_failed: bool = False
     sat_c: float | None = None
     linear: Any = None
 
@@ -346,7 +347,7 @@ def sampling_limits_many(
             on_round(rnd, sum(len(v) for v in todo.values()))
         todo = {}
         for i, s in enumerate(searches):
-            if s.cont_diverged:
+            if s.cont_failed:
                 continue
             ks: set[int] = set()
             for perf in (True, False):
@@ -373,12 +374,12 @@ def _limits(s: _Search, tolerance: float, calls: int, seconds: float) -> Samplin
         if lin is None
         else (lin.reason if not lin.available else "")
     )
-    if lin_stable is False and not s.cont_diverged:
+    if lin_stable is False and not s.cont_failed:
         note = (
             "the continuous loop's linearisation is unstable (it stayed bounded over the "
             "horizon): no sampled limits"
         )
-    dead = s.cont_diverged or lin_stable is False
+    dead = s.cont_failed or lin_stable is False
     bm = s.bracket(True, tolerance) if not dead else (None, None)
     bs = s.bracket(False, tolerance) if not dead else (None, None)
     w0 = _omega0(cfg)
@@ -460,12 +461,12 @@ def _run_round(searches: list[_Search], todo: dict[int, list[int]]) -> int:
         u_col = res.columns.index("u")
         for j, (i, k) in enumerate(members):
             s = searches[i]
-            div = bool(res.diverged[j])
+            div = bool(res.failed[j])
             val = None if div or not math.isfinite(itae[j]) else float(itae[j])
-            at = float(res.diverged_at[j]) if div else None
+            at = float(res.stopped_at[j]) if div else None
             sat = None if div else _saturated(res.trajectories[j, :, u_col], s.cfg)
             if k == 0:
-                s.itae_c, s.cont_diverged, s.sat_c = val, div, sat
+                s.itae_c, s.cont_failed, s.sat_c = val, div, sat
             else:
                 s.results[k] = (val, div, at, sat)
                 if s.linear is not None and s.linear.available:

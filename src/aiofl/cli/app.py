@@ -377,11 +377,12 @@ def simulate_command(
 ) -> None:
     """Simulate one config: metrics.json, trajectory.csv and figure.png in OUT.
 
-    A run that diverges is reported as diverged with the time (metrics null); it is not
-    an error.  An existing non-empty OUT is refused unless --force (then it is replaced
-    as a whole).  --dt, --t-final and --method pass the same checks as the config's values.
-    With --ts (or a [controller.discrete] table) the controller runs sampled.  --check
-    only validates CONFIG, the overrides and OUT (if given) and prints what would run.
+    A run whose plant leaves its envelope is reported as lost, one whose numbers blow up
+    as diverged, each with the time (metrics null); neither is an error.  An existing
+    non-empty OUT is refused unless --force (then it is replaced as a whole).  --dt,
+    --t-final and --method pass the same checks as the config's values.  With --ts (or a
+    [controller.discrete] table) the controller runs sampled.  --check only validates
+    CONFIG, the overrides and OUT (if given) and prints what would run.
     """
     import json
 
@@ -443,6 +444,15 @@ def simulate_command(
         )
         atomic_write_bytes(stage / "figure.png", figure_png(fig))
     _print_records([record], title=f"aiofl simulate {config}")
+    from aiofl.reporting.verdict import command_text, step_text, verdict_text
+
+    typer.echo(f"verdict: {verdict_text(cfg, result)}")
+    for line in (
+        step_text(result, cfg.plant.output_unit),
+        command_text(result, cfg.scenario.t_final, cfg.plant.input_unit),
+    ):
+        if line:
+            typer.echo(line)
     typer.echo(f"sensor: {cfg.sensor.describe()}")
     typer.echo(f"wrote {out}/metrics.json, trajectory.csv, figure.png")
     note = units_note(cfg.plant)
@@ -480,7 +490,7 @@ def _print_records(records: list[dict[str, Any]], title: str) -> None:
     for col in ("#", "structure", "source", "ITAE", "ISU", "IAU", "OPI", "status"):
         table.add_column(col, justify="right" if col.isupper() else "left", no_wrap=True)
     for r in records:
-        status = f"[red]diverged {r['diverged_at']:.2f} s[/red]" if r["diverged"] else "ok"
+        status = f"[red]{r['status']} {r['stopped_at']:.2f} s[/red]" if r["failed"] else "ok"
         table.add_row(
             str(r["scenario"]) if r["scenario"] is not None else "—",
             str(r["structure"]),
@@ -567,6 +577,8 @@ register_feature("tune", "aiofl.cli.tune:tune_command")
 register_feature("analyze", "aiofl.cli.analyze:analyze_command")
 register_feature("export", "aiofl.cli.export:export_command")
 register_feature("robustness", "aiofl.cli.robustness:robustness_command")
+register_feature("trim", "aiofl.cli.trim:trim_command")
+register_feature("design", "aiofl.cli.design:design_command")
 
 
 def _finish_commands() -> None:

@@ -31,6 +31,7 @@ from typing import Annotated, Any, Literal
 
 import typer
 
+from aiofl import layout as L
 from aiofl.cli.errors import _check_out, bad_input_exits
 
 __all__ = ["FORMATS", "export_command"]
@@ -195,21 +196,23 @@ def _loop_checks(own_cfg: Any, cfg: Any, sampling: Any, config: str, tolerance: 
         )
     except (PlantError, ValueError) as exc:
         return [f"{config}: could not simulate the design before export ({exc})"]
-    if own.diverged:
+    if own.failed:
         how = f"sampled at Ts = {own_cfg.sampling.ts:g} s" if own_cfg.sampling else "continuous"
         raise ValueError(
-            f"{config} diverges at {own.diverged_at:.3g} s in its own simulation ({how}, "
-            f"{own_cfg.scenario.t_final:g}-s scenario): a controller that diverges is not exported"
+            f"{config} is {own.status} at {own.stopped_at:.3g} s in its own simulation ({how}, "
+            f"{own_cfg.scenario.t_final:g}-s scenario): a controller that loses its plant or "
+            "diverges is not exported"
         )
     out = []
     itae = res.metric("itae")
     at = f"at Ts = {sampling.ts:g} s"
-    if res.diverged[1]:
+    if res.failed[1]:
         out.append(
-            f"{config} sampled {at} diverges at {res.diverged_at[1]:.3g} s "
+            f"{config} sampled {at} is {L.STATUS_NAMES[int(res.status[1])]} at "
+            f"{res.stopped_at[1]:.3g} s "
             "(aiofl simulate --ts): choose a shorter Ts or re-tune"
         )
-    elif not res.diverged[0] and itae[1] > (1.0 + tolerance) * itae[0]:
+    elif not res.failed[0] and itae[1] > (1.0 + tolerance) * itae[0]:
         out.append(
             f"{config} sampled {at} has ITAE {itae[1]:.4g} against {itae[0]:.4g} continuous, "
             f"more than the {100 * tolerance:g} % allowance (aiofl analyze --sampling)"
@@ -217,7 +220,7 @@ def _loop_checks(own_cfg: Any, cfg: Any, sampling: Any, config: str, tolerance: 
     try:
         from aiofl.analysis.sampled_loop import SampledLoop
 
-        radius = SampledLoop(cfg).spectral_radius(sampling.ts) if not res.diverged[1] else None
+        radius = SampledLoop(cfg).spectral_radius(sampling.ts) if not res.failed[1] else None
     except (ValueError, ArithmeticError, NotImplementedError):
         radius = None
     if radius is not None and radius > 1.0:

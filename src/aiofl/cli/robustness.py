@@ -46,7 +46,7 @@ def _client(scheduler: str | None, dask_workers: int | None) -> tuple[Any, list[
 
 
 def _fmt(x: float | None) -> str:
-    return "diverged" if x is None else f"{x:.4g}"
+    return "lost or diverged" if x is None else f"{x:.4g}"
 
 
 def _point(p: dict[str, float]) -> str:
@@ -64,14 +64,15 @@ def _box_text(info: dict[str, Any]) -> str:
     out = [
         f"corners_stable {c['corners_stable']:.4g} ({c['stable']} of {c['count']}; {c['design']})"
     ]
-    for d in c["diverged"][:8]:
-        out.append(f"  corner {d['corner']} diverged at t = {d['t']:.3g} s: {_point(d['point'])}")
-    if len(c["diverged"]) > 8:
-        out.append(f"  ... {len(c['diverged']) - 8} more diverged corners in robustness.json")
+    for d in c["failed"][:8]:
+        how = d.get("status", "failed")
+        out.append(f"  corner {d['corner']} {how} at t = {d['t']:.3g} s: {_point(d['point'])}")
+    if len(c["failed"]) > 8:
+        out.append(f"  ... {len(c['failed']) - 8} more failed corners in robustness.json")
     w = info.get("worst_case")
     if w is not None:
         what = (
-            f"diverged at t = {w['diverged_at']:.3g} s"
+            f"{w.get('status', 'failed')} at t = {w['stopped_at']:.3g} s"
             if w["itae"] is None
             else f"ITAE {w['itae']:.4g}"
         )

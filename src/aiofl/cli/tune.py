@@ -179,7 +179,8 @@ def summary_text(result: Any, summary: dict[str, Any], out: Path) -> str:
 
     rate = result.evals_per_second
     speed = f"{rate:.1f} eval/s" if math.isfinite(rate) else "all replayed from the checkpoint"
-    counts = f"({result.n_evaluations} evaluations, {int(result.diverged.sum())} diverged, {speed})"
+    failed = int(result.failed.sum())
+    counts = f"({result.n_evaluations} evaluations, {failed} lost or diverged, {speed})"
     front = result.front
     if front is None:
         head = f"best objective {result.best_objective:.6g} {counts}"
@@ -200,8 +201,8 @@ def summary_text(result: Any, summary: dict[str, Any], out: Path) -> str:
     full = summary["full_horizon"]
     if full is None:
         status = "not computed (see the note)"
-    elif full["diverged"]:
-        status = f"diverged at {full['diverged_at']:.3g} s"
+    elif full["failed"]:
+        status = f"{full.get('status', 'failed')} at {full['stopped_at']:.3g} s"
     else:
         status = (
             f"ITAE {full['itae']:.4g}, ISU {full['isu']:.4g}, IAU {full['iau']:.4g}, "

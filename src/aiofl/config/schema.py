@@ -91,6 +91,25 @@ class ScenarioModel(_Model):
     # transport delays [s] (sampled controllers; integer multiples of simulation.dt)
     input_delay: Annotated[float, Field(ge=0, le=DELAY_MAX, allow_inf_nan=False)] = 0.0
     output_delay: Annotated[float, Field(ge=0, le=DELAY_MAX, allow_inf_nan=False)] = 0.0
+    # the operating envelope: |y - r| above it makes a run lost (inf: none; absent: ten
+    # times the scenario's output scale, aiofl.scenario.Scenario.envelope)
+    envelope: Annotated[float, Field(gt=0)] | None = None
+    # ISU and IAU of u - u_ref; "trim": the holding input at the reference's first value
+    # (aiofl.plants.operating_point)
+    u_ref: Finite | Literal["trim"] = 0.0
+    # the steady-state window's start [s] (absent: the last 20 % of the horizon)
+    steady_from: NonNegFloat | None = None
+
+    @model_validator(mode="after")
+    def _envelope_not_nan(self) -> ScenarioModel:
+        if self.envelope is not None and math.isnan(self.envelope):
+            raise ValueError("scenario.envelope = nan; allowed: a number > 0 (inf: no envelope)")
+        if self.steady_from is not None and self.steady_from >= self.t_final:
+            raise ValueError(
+                f"scenario.steady_from = {self.steady_from:g} s; allowed: 0 <= steady_from < "
+                f"t_final = {self.t_final:g} s"
+            )
+        return self
 
     @model_validator(mode="after")
     def _events_within_horizon(self) -> ScenarioModel:
@@ -113,6 +132,8 @@ class ScenarioModel(_Model):
         ref = Reference(**{**self.reference.model_dump(), "samples": tuple(self.reference.samples)})
         data = self.model_dump(exclude={"reference"})
         data["x0"] = tuple(self.x0)
+        if data["u_ref"] == "trim":  # resolved with the plant (aiofl.config.run_config)
+            data["u_ref"] = 0.0
         return Scenario(reference=ref, **data)
 
 

@@ -44,6 +44,10 @@ class Batch(NamedTuple):
     disc
         (B, :data:`aiofl.engine.discrete.N_DISC`) the discrete controller's rows (zeros for
         a continuous member).
+    bounds
+        (B, n + 1, 2) the plant's declared ranges, ``[low, high]``: rows 0..n-1 the
+        states, row n the output (``-inf, inf`` where none); leaving one makes a member
+        lost (:func:`aiofl.engine.loop._tpl_watch`).
     plant_table
         (:data:`aiofl.engine.plant_table.N_TABLE`,) the addresses of the plant's functions
         a plant-independent instance calls (:mod:`aiofl.engine.plant_table`; set by
@@ -66,6 +70,7 @@ class Batch(NamedTuple):
     noise_table: NDArray[np.float64]
     noise_row: NDArray[np.int64]
     disc: NDArray[np.float64]
+    bounds: NDArray[np.float64]
     plant_table: NDArray[np.int64]
     dt: float
     n_steps: int
@@ -77,12 +82,14 @@ class Batch(NamedTuple):
 
 class Outputs(NamedTuple):
     """What the time loop writes, per member: ``metrics`` (B, :data:`aiofl.layout.N_METRIC`)
-    at the end or at the divergence, ``status`` (B,) :data:`aiofl.layout.STATUS_OK` or
-    ``STATUS_DIVERGED``, ``t_div`` (B,) the divergence time (NaN if none) and ``traj``
-    (B, T, C) the stored trajectory (rows after a divergence set to NaN; T = 0 when not
-    stored)."""
+    at the end or where the member stopped, ``status`` (B,) :data:`aiofl.layout.STATUS_OK`,
+    ``STATUS_LOST`` or ``STATUS_DIVERGED``, ``t_stop`` (B,) the time it was lost or
+    diverged (NaN if neither), ``stats`` (B, :data:`aiofl.layout.N_STAT`) what the loop
+    watched (peaks, saturation, step response, steady-state window) and ``traj`` (B, T, C)
+    the stored trajectory (rows after the stop set to NaN; T = 0 when not stored)."""
 
     metrics: NDArray[np.float64]
     status: NDArray[np.int64]
-    t_div: NDArray[np.float64]
+    t_stop: NDArray[np.float64]
+    stats: NDArray[np.float64]
     traj: NDArray[np.float64]

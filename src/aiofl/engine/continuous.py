@@ -32,6 +32,7 @@ from aiofl.engine.loop import (
     S_NOISE,
     S_RFF,
     S_U,
+    S_UREF,
     S_V,
     S_Y,
     S_YM,
@@ -163,7 +164,8 @@ def _tpl_deriv(fns, t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cove
     if dany:
         _BLK_DISTURBANCE(fns, z, p, s[S_D], dx)
     m0 = _N
-    _BLK_METRICS(t, s[S_Y], r, u, dz[m0], dz[m0 + 1], dz[m0 + 2], dz[m0 + 3], dz[m0 + 4])
+    du = dz[m0 : m0 + L.N_METRIC]
+    _BLK_METRICS(t, s[S_Y], r, u, s[S_UREF], du[0], du[1], du[2], du[3], du[4])
 
 
 def _tpl_setup(lanes, batch, q, qt, iq, ctrl, nper):  # pragma: no cover - compiled

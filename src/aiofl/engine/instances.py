@@ -253,7 +253,14 @@ def recipe(
             templates.append(tpl(name.upper(), fn, {**block_opts, **(_LIGHT if light else {})}))
     inline = {"inline": "always", **opts}
     templates.append(tpl("_KEEP_ALIVE", loop._tpl_keep_alive))
-    for name in ("assign_lanes", "load_lanes", "start_members", "stop_lane", "finish_lanes"):
+    for name in (
+        "assign_lanes",
+        "load_lanes",
+        "start_members",
+        "stop_lane",
+        "finish_lanes",
+        "watch",
+    ):
         templates.append(tpl(f"_{name.upper()}", getattr(loop, f"_tpl_{name}"), opts))
     templates += [
         tpl("_STEP_INPUTS", loop._tpl_step_inputs, inline),

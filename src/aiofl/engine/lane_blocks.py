@@ -24,6 +24,9 @@ from aiofl.engine.member import (
     SWITCH_RTOL,
 )
 
+FLOAT_MAX = 1.7976931348623157e308
+"""The largest finite float64: ``abs(x) <= FLOAT_MAX`` is false for inf and NaN alike."""
+
 # Placeholders for what an instance binds (see aiofl.engine.instances).
 _W = 32
 _N = 1
@@ -262,15 +265,18 @@ def _blk_disturbance(fns, z, p, d, dx):  # pragma: no cover - compiled
             dx[k] = dx[k] + bdx[i] * d[l] if d[l] != 0.0 else dx[k]
 
 
-def _blk_metrics(t, y, r, u, itae, iae, ise, isu, iau):  # pragma: no cover - compiled
-    """The integrands of ITAE, IAE, ISE, ISU, IAU (eq. 22), every lane."""
+def _blk_metrics(t, y, r, u, u_ref, itae, iae, ise, isu, iau):  # pragma: no cover - compiled
+    """The integrands of ITAE, IAE, ISE, ISU, IAU (eq. 22), every lane; ISU and IAU of
+    :math:`u - u_{ref}` (``scenario.u_ref``: 0, or the holding input at the operating
+    point, so that holding the plant there costs nothing)."""
     for l in range(_W):
         err = abs(y[l] - r[l])
+        du = u[l] - u_ref[l]
         itae[l] = t * err
         iae[l] = err
         ise[l] = err * err
-        isu[l] = u[l] * u[l]
-        iau[l] = abs(u[l])
+        isu[l] = du * du
+        iau[l] = abs(du)
 
 
 def _blk_stage(z, zt, kd, acc, nza, first, last, h, w, scale):  # pragma: no cover
@@ -301,10 +307,15 @@ def _blk_stage(z, zt, kd, acc, nza, first, last, h, w, scale):  # pragma: no cov
                 zt[j, l] = z[j, l] + h * kd[j, l]
 
 
-def _blk_out_of_range(z, nza, threshold, bad):  # pragma: no cover - compiled
-    """bad[l] = the number of entries of lane l's state with |z| >= threshold (or NaN)."""
+def _blk_out_of_range(z, n_plant, nza, threshold, bad):  # pragma: no cover - compiled
+    """bad[l] = the number of entries of lane l's state out of range: the plant's first
+    ``n_plant`` with |z| >= threshold (or NaN), the rest (integrals, controller states)
+    when no longer finite."""
     for l in range(_W):
         bad[l] = 0.0
-    for j in range(nza):
+    for j in range(n_plant):
         for l in range(_W):
             bad[l] += 0.0 if abs(z[j, l]) < threshold else 1.0
+    for j in range(n_plant, nza):
+        for l in range(_W):
+            bad[l] += 0.0 if abs(z[j, l]) <= FLOAT_MAX else 1.0

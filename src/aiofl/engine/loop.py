@@ -27,10 +27,14 @@ at 0, the ESO at 0 or (``eso.init = "output"``) with :math:`\hat\xi_1(0) = y_m(0
 (``"bumpless"``: and the differentiator's :math:`r_1(0) = y_m(0)`).
 Piecewise-constant inputs take their value at the start of a step for all its stages, so
 the integrator never straddles a jump: a switch on the time grid is exact, one between grid
-points acts from the next step (:data:`aiofl.engine.member.SWITCH_RTOL`).  A member whose
-state (and, sampled, whose command, ESO prediction or differentiator) leaves
-``|z| < threshold`` or becomes NaN is reported as diverged at that step with its integrals
-so far, and its lane is masked; the group stops when every real lane has diverged.  A
+points acts from the next step (:data:`aiofl.engine.member.SWITCH_RTOL`).  At every step
+the plant is watched (:func:`_tpl_watch`): a member whose output leaves its envelope
+around the reference, or whose output or a state leaves its declared range, is *lost* at
+that step; one whose plant state leaves ``|x| < threshold`` or whose integrals or
+controller states (the ESO, the differentiator, sampled: the command and the ESO's
+prediction) stop being finite is *diverged* (numerical blow-up).  The observer's states
+never make a member lost.  Either way it is reported with its time and its integrals and
+statistics so far, and its lane is masked; the group stops when no real lane is live.  A
 partial group is padded with copies of its first member, whose results are discarded.
 Trajectories are stored every ``decimation``-th step when asked for.
 
@@ -102,7 +106,9 @@ S_UC = 14  #: sampled, input delay: the controller's held command (S_U is the de
 S_YD = 15  #: sampled, output delay: y(t_k - τ_out), what the ADC reads (plus noise)
 S_YDON = 16  #: sampled: 1 in a lane with an output delay, else 0
 S_YS = 17  #: sampled: y + noise at this step, what a lane due to sample reads
-N_S = 18
+S_UREF = 18  #: the command ISU and IAU are measured about (scenario.u_ref)
+S_LOST = 19  #: 1 when the lane's plant left its envelope at this step (_tpl_watch)
+N_S = 20
 
 # Placeholders for what an instance binds (see aiofl.engine.instances).
 _W = WIDTH
@@ -114,7 +120,7 @@ _PH = None
 _UNMANAGED = _KEEP_ALIVE = _RHS = _SETUP = _SAMPLE = _CONTROLLER_BAD = None
 _STORE_ROW = _STORE_CONTROLLER = _REFERENCE = _STEP_INPUTS = None
 _DELAY_SETUP = _DELAY_OUTPUT = _DELAY_INPUT = None
-_ASSIGN_LANES = _LOAD_LANES = _START_MEMBERS = _STOP_LANE = _FINISH_LANES = None
+_ASSIGN_LANES = _LOAD_LANES = _START_MEMBERS = _STOP_LANE = _FINISH_LANES = _WATCH = None
 _BLK_STAGE = _BLK_OUT_OF_RANGE = _BLK_COPY = _BLK_FILL = _BLK_INPUTS = None
 _BLK_SINE = _BLK_SINE_DERIVATIVE = _BLK_STEP = None
 
@@ -189,6 +195,17 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
     _SETUP(lanes, batch, q, qt, iq, ctrl, nper)
     _LOAD_LANES(lanes, batch, pp, sc, rrow, nrow, zz)
     _START_MEMBERS(lanes, real, out)
+    # what the loop watches per lane (aiofl.layout ST_*): peaks, saturation, step response,
+    # the steady-state window; the first-crossing times start undefined (NaN)
+    st_owner = np.zeros((L.N_STAT, _W))
+    stv = _UNMANAGED(st_owner)
+    alone = np.zeros(_W, dtype=np.bool_)  # one lane's mask, to store its last point
+    for l in range(_W):
+        s[S_UREF, l] = sc[L.S_U_REF, l]
+        stv[L.ST_STEP_PEAK, l] = -np.inf
+        stv[L.ST_T10, l] = np.nan
+        stv[L.ST_T90, l] = np.nan
+        stv[L.ST_T_OUT, l] = np.nan
     # transport delays (sampled): ring buffers of the held commands and of y, per lane
     dsteps = np.zeros((2, _W), dtype=np.int64)  # input, output delay in steps
     nbuf = 1
@@ -255,36 +272,49 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
             ri = int(2.0 * c)  # the reference slot of t_k + c dt: 0, 1 (mid-step), 2 (end)
             _RHS(fns, (k + c) * dt, zt, kd, iq, q, p, pn, rrs, ri, s, dany)
             if st == 0:
-                if store and save_in == 0:
+                stored = store and save_in == 0
+                if stored:
                     _STORE_ROW(row, t, lanes, live, rows, z, s, rrs, iq, ctrl, tr)
                     row += 1
                     save_in = decimation
                 save_in -= 1
-                if k == n_steps:
+                # the plant at t_k: watched, and stopped as lost when out of its envelope
+                # (its trajectory ends with this point, stored if the decimation skipped it)
+                _WATCH(t, dt, k < n_steps, lanes, live, s, z, rrs, sc, batch, stv)
+                for l in range(_W):
+                    if live[l] and s[S_LOST, l] != 0.0:
+                        if store and not stored and row < tr.shape[1]:
+                            alone[l] = True
+                            _STORE_ROW(row, t, lanes, alone, rows, z, s, rrs, iq, ctrl, tr)
+                            alone[l] = False
+                        _STOP_LANE(l, t, L.STATUS_LOST, lanes, live, z, stv, out)
+                        n_live -= 1
+                if k == n_steps or n_live == 0:
                     break
             last = st == n_stages - 1
             next_h = STAGE_NEXT[method, st] * dt
             _BLK_STAGE(z, zt, kd, acc, nza, st == 0, last, next_h, STAGE_WEIGHT[method, st], scale)
-        if k == n_steps:
+        if k == n_steps or n_live == 0:
             break
         if n_stages > 1:
             for j in range(nd_stage + 1):
                 _BLK_COPY(rrs[2, j], rrs[0, j])
-        # divergence, lane by lane: |z| < threshold fails (also for NaN)
-        _BLK_OUT_OF_RANGE(z, nza, threshold, s[S_BAD])
+        # divergence, lane by lane: a plant state's |x| < threshold fails (also for NaN);
+        # the integrals and the controller's states only when they are no longer finite
+        _BLK_OUT_OF_RANGE(z, _N, nza, threshold, s[S_BAD])
         if _SAMPLED:
-            _CONTROLLER_BAD(rho, iq[IQ_NTD], threshold, s, ctrl)
+            _CONTROLLER_BAD(rho, iq[IQ_NTD], s, ctrl)
         for l in range(_W):
             if live[l] and s[S_BAD, l] != 0.0:
-                _STOP_LANE(l, (k + 1) * dt, lanes, live, z, out)
+                _STOP_LANE(l, (k + 1) * dt, L.STATUS_DIVERGED, lanes, live, z, stv, out)
                 n_live -= 1
         if n_live == 0:
             break
-    _FINISH_LANES(lanes, real, live, rows, row, z, out)
+    _FINISH_LANES(lanes, real, live, rows, row, z, stv, out)
     _KEEP_ALIVE(lane_owner, real_owner, live_owner, rows_owner, switched_owner, iq_owner)
     _KEEP_ALIVE(q_owner, qt_owner, ctrl_owner, rl_owner, z_owner, p_owner)
     _KEEP_ALIVE(sc_owner, s_owner, rr_owner, rrow_owner, nrow_owner, nrow_owner)
-    _KEEP_ALIVE(dsteps, ring, nper_owner, next_owner, due_owner, ring)
+    _KEEP_ALIVE(dsteps, ring, nper_owner, next_owner, due_owner, st_owner)
 
 
 def _tpl_store_row(row, t, lanes, live, rows, z, s, rrs, iq, ctrl, tr):  # pragma: no cover
@@ -416,32 +446,102 @@ def _tpl_load_lanes(lanes, batch, pp, sc, rrow, nrow, zz):  # pragma: no cover -
 
 
 def _tpl_start_members(lanes, real, out):  # pragma: no cover - compiled
-    """The real lanes' members: status OK, no divergence time (yet)."""
+    """The real lanes' members: status OK, no stop time (yet)."""
     for l in range(_W):
         if real[l]:
             out.status[lanes[l]] = L.STATUS_OK
-            out.t_div[lanes[l]] = np.nan
+            out.t_stop[lanes[l]] = np.nan
 
 
-def _tpl_stop_lane(l, t, lanes, live, z, out):  # pragma: no cover - compiled
-    """Lane l's member diverged at t: reported with its integrals so far, lane masked."""
+def _tpl_watch(t, dt, counted, lanes, live, s, z, rrs, sc, batch, stv):  # pragma: no cover
+    r"""Every live lane's plant at step start :math:`t_k`, after the step's first stage
+    (``s[S_Y]`` = :math:`y = h(x_k)`, ``s[S_U]`` the command over the step, ``rrs[0, 0]``
+    = :math:`r(t_k)`): the statistics ``stv`` (:data:`aiofl.layout.ST_U_PEAK` ..; the
+    saturation time and the steady-state window count a step only when ``counted``, i.e.
+    one follows), and ``s[S_LOST]`` = 1 when the plant is out of its envelope:
+    :math:`|y - r|` above ``scenario.envelope``, y or a state outside the range its
+    member's ``batch.bounds`` declares (rows 0..n-1 the states, row n the output).  A
+    NaN compares false: a non-finite plant is diverged, not lost."""
+    for l in range(_W):
+        if not live[l]:
+            continue
+        mi = lanes[l]
+        y = s[S_Y, l]
+        r = rrs[0, 0, l]
+        u = s[S_U, l]
+        e = y - r
+        ae = abs(e)
+        au = abs(u)
+        if au > stv[L.ST_U_PEAK, l]:
+            stv[L.ST_U_PEAK, l] = au
+        if ae > stv[L.ST_E_PEAK, l]:
+            stv[L.ST_E_PEAK, l] = ae
+        if counted:
+            u_max = batch.floats[mi, L.F_UMAX]
+            u_min = batch.floats[mi, L.F_UMIN]
+            u_min = -u_max if u_min != u_min else u_min  # NaN: a symmetric range
+            if u >= u_max or u <= u_min:
+                stv[L.ST_T_SAT, l] += dt
+        if sc[L.S_REF_KIND, l] == L.REF_STEP:  # step metrics, from the step on
+            a = sc[L.S_REF_A, l]
+            r0 = sc[L.S_REF_OFFSET, l]
+            if a != 0.0 and abs(r - r0) >= 0.5 * abs(a):
+                prog = (y - r0) if a > 0.0 else (r0 - y)  # progress towards r0 + A
+                if prog > stv[L.ST_STEP_PEAK, l]:
+                    stv[L.ST_STEP_PEAK, l] = prog
+                if stv[L.ST_T10, l] != stv[L.ST_T10, l] and prog >= 0.1 * abs(a):
+                    stv[L.ST_T10, l] = t
+                if stv[L.ST_T90, l] != stv[L.ST_T90, l] and prog >= 0.9 * abs(a):
+                    stv[L.ST_T90, l] = t
+                if not ae < 0.02 * abs(a):
+                    stv[L.ST_T_OUT, l] = t
+        if counted and t >= sc[L.S_STEADY_FROM, l]:
+            if stv[L.ST_SS_N, l] == 0.0:
+                stv[L.ST_SS_U0, l] = u
+                stv[L.ST_U_LAST, l] = u
+            du = u - stv[L.ST_SS_U0, l]
+            stv[L.ST_SS_N, l] += 1.0
+            stv[L.ST_SS_SU, l] += du
+            stv[L.ST_SS_SU2, l] += du * du
+            stv[L.ST_SS_SE, l] += e
+            jump = u - stv[L.ST_U_LAST, l]  # the command's step-to-step change
+            if jump != 0.0:
+                stv[L.ST_SS_DU2, l] += jump * jump
+                stv[L.ST_SS_NDU, l] += 1.0
+            stv[L.ST_U_LAST, l] = u
+        stv[L.ST_Y_END, l] = e
+        lost = ae > sc[L.S_ENVELOPE, l]
+        lost = lost or y < batch.bounds[mi, _N, 0] or y > batch.bounds[mi, _N, 1]
+        for j in range(_N):
+            xj = z[j, l]
+            lost = lost or xj < batch.bounds[mi, j, 0] or xj > batch.bounds[mi, j, 1]
+        s[S_LOST, l] = 1.0 if lost else 0.0
+
+
+def _tpl_stop_lane(l, t, status, lanes, live, z, stv, out):  # pragma: no cover - compiled
+    """Lane l's member was lost or diverged (``status``) at t: reported with its integrals
+    and statistics so far, lane masked."""
     live[l] = False
     mi = lanes[l]
-    out.status[mi] = L.STATUS_DIVERGED
-    out.t_div[mi] = t
+    out.status[mi] = status
+    out.t_stop[mi] = t
     for j in range(L.N_METRIC):
         out.metrics[mi, j] = z[_N + j, l]
+    for j in range(L.N_STAT):
+        out.stats[mi, j] = stv[j, l]
 
 
-def _tpl_finish_lanes(lanes, real, live, rows, row, z, out):  # pragma: no cover - compiled
-    """After the horizon: the live lanes' integrals; stored rows after each member's last
-    one (its divergence) set to NaN."""
+def _tpl_finish_lanes(lanes, real, live, rows, row, z, stv, out):  # pragma: no cover
+    """After the horizon: the live lanes' integrals and statistics; stored rows after each
+    member's last one (where it was lost or diverged) set to NaN."""
     tr = out.traj
     for l in range(_W):
         if live[l]:
             mi = lanes[l]
             for j in range(L.N_METRIC):
                 out.metrics[mi, j] = z[_N + j, l]
+            for j in range(L.N_STAT):
+                out.stats[mi, j] = stv[j, l]
             rows[l] = row
     if tr.shape[1] > 0:
         for l in range(_W):

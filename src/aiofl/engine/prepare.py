@@ -104,6 +104,7 @@ def probe(plant: Plant) -> tuple[NDArray[np.int64], Batch, Outputs]:
         noise_table=np.zeros((1, 1)),
         noise_row=one.copy(),
         disc=np.zeros((1, N_DISC)),
+        bounds=np.zeros((1, n + 1, 2)),
         plant_table=np.zeros(N_TABLE, dtype=np.int64),
         dt=1e-3,
         n_steps=1,
@@ -115,7 +116,8 @@ def probe(plant: Plant) -> tuple[NDArray[np.int64], Batch, Outputs]:
     out = Outputs(
         metrics=np.zeros((1, L.N_METRIC)),
         status=np.zeros(1, dtype=np.int64),
-        t_div=np.zeros(1),
+        t_stop=np.zeros(1),
+        stats=np.zeros((1, L.N_STAT)),
         traj=np.empty((1, 0, len(L.trajectory_columns(n)))),
     )
     return np.zeros((1, 1), dtype=np.int64), batch, out

@@ -72,7 +72,19 @@ from aiofl.engine.discrete import (
     Sampling,
     sampling_rows,
 )
-from aiofl.engine.loop import S_BAD, S_D, S_NOISE, S_U, S_UC, S_Y, S_YD, S_YDON, S_YM, S_YS
+from aiofl.engine.loop import (
+    S_BAD,
+    S_D,
+    S_NOISE,
+    S_U,
+    S_UC,
+    S_UREF,
+    S_Y,
+    S_YD,
+    S_YDON,
+    S_YM,
+    S_YS,
+)
 from aiofl.engine.member import (
     IQ_EINIT,
     IQ_ESO,
@@ -346,19 +358,21 @@ def _tpl_plant_deriv(fns, t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: n
         _BLK_DISTURBANCE(fns, z, p, s[S_D], dx)
     m0 = _N
     r = rr[ri, 0]
-    _BLK_METRICS(t, s[S_Y], r, s[S_U], dz[m0], dz[m0 + 1], dz[m0 + 2], dz[m0 + 3], dz[m0 + 4])
+    du = dz[m0 : m0 + L.N_METRIC]
+    _BLK_METRICS(t, s[S_Y], r, s[S_U], s[S_UREF], du[0], du[1], du[2], du[3], du[4])
 
 
-def _tpl_controller_bad(rho, ntd, threshold, s, ctrl):  # pragma: no cover - compiled
+def _tpl_controller_bad(rho, ntd, s, ctrl):  # pragma: no cover - compiled
     """Adds to ``s[S_BAD, l]`` when lane l's command, ESO prediction or differentiator
-    state leaves ``|.| < threshold`` (or is NaN)."""
+    state is no longer finite (a large but finite controller state is not a verdict: the
+    plant's own state and envelope decide, :func:`aiofl.engine.loop._tpl_watch`)."""
     for l in range(_W):
         cs = ctrl[1, l]
-        bad = not abs(s[S_U, l]) < threshold
+        bad = not abs(s[S_U, l]) < np.inf
         for j in range(C_P, C_P + rho + 1):  # (the first is p_1 - y)
-            bad = bad or not abs(cs[j]) < threshold
+            bad = bad or not abs(cs[j]) < np.inf
         for j in range(ntd):
-            bad = bad or not abs(cs[C_TD + j]) < threshold
+            bad = bad or not abs(cs[C_TD + j]) < np.inf
         if bad:
             s[S_BAD, l] += 1.0
 

@@ -8,16 +8,19 @@ plant's compiled instance of the time loop (:mod:`aiofl.engine.loop`,
 batch of one.  The closed loop (plant, tracking differentiator, ESO, state error feedback,
 linearizing law and the performance integrals, RK4 or forward Euler) is described in
 :mod:`aiofl.engine.continuous` and, sampled, :mod:`aiofl.engine.sampled`.  A member that
-diverges (its state non-finite or beyond ``divergence_threshold``) is reported as such with
-the time, the others carry on; results come back as a :class:`BatchResult` (or a
-:class:`SimulationResult` per member).
+is *lost* (its plant left the operating envelope: the output's distance from the reference
+or a declared range of the output or a state) or *diverged* (its numbers blew up: a plant
+state non-finite or beyond ``divergence_threshold``, a controller state non-finite) is
+reported as such with the time, the others carry on; results come back as a
+:class:`BatchResult` (or a :class:`SimulationResult` per member), with the step metrics,
+the noise in u and the saturation time of :mod:`aiofl.engine.response`.
 :func:`closed_loop_rhs` evaluates the compiled right-hand side once, for cross-checks.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -34,6 +37,7 @@ from aiofl.engine.lane_choice import lanes_worth_it
 from aiofl.engine.loop import WIDTH
 from aiofl.engine.observer_gains import model_jacobians, with_model_gains
 from aiofl.engine.plant_table import N_TABLE
+from aiofl.engine.response import response_figures
 from aiofl.limits import DT_MAX, MAX_STEPS, MAX_TRAJECTORY_BYTES, check_run_size
 from aiofl.plants.base import Plant
 from aiofl.scenario import Scenario, noise_sequence
@@ -49,19 +53,46 @@ class SimulationResult:
     Attributes
     ----------
     metrics
-        ``itae, iae, ise, isu, iau`` over the horizon (None if diverged).
-    diverged, diverged_at
-        Whether the member diverged, and when [s].
+        ``itae, iae, ise, isu, iau`` over the horizon (None if lost or diverged).
+    status
+        What the run did: ``"ok"``, ``"lost"`` (the plant left its envelope) or
+        ``"diverged"`` (numerical blow-up) (:data:`aiofl.layout.STATUS_NAMES`).
+    stopped_at
+        When it was lost or diverged [s] (None if ok).
     t, signals
         Saved time points and a dict of signals by column name (``r, y, y_meas, u, d,
         x1.., xi_hat1.., r1..``); empty if trajectories were not stored.
+    response
+        The figures of :data:`aiofl.engine.response.RESPONSE_NAMES` (step metrics, noise
+        in u, peaks, saturation time; NaN where they do not apply).
     """
 
     metrics: dict[str, float] | None
-    diverged: bool
-    diverged_at: float | None
+    status: str
+    stopped_at: float | None
     t: NDArray[np.float64]
     signals: dict[str, NDArray[np.float64]]
+    response: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def diverged(self) -> bool:
+        """Whether the numbers blew up (status ``"diverged"``)."""
+        return self.status == "diverged"
+
+    @property
+    def lost(self) -> bool:
+        """Whether the plant left its envelope (status ``"lost"``)."""
+        return self.status == "lost"
+
+    @property
+    def failed(self) -> bool:
+        """Lost or diverged: the run has no metrics."""
+        return self.status != "ok"
+
+    @property
+    def diverged_at(self) -> float | None:
+        """When the run diverged [s] (None unless diverged)."""
+        return self.stopped_at if self.diverged else None
 
     def opi(self, weights: OPIWeights | None = None) -> float | None:
         """OPI (eq. 22) of this run, or None if it diverged."""
@@ -77,44 +108,69 @@ class SimulationResult:
 @dataclass(frozen=True)
 class BatchResult:
     """Results of a batch: ``metrics`` (B, 5) by :data:`aiofl.layout.METRIC_NAMES`,
-    ``diverged`` (B,), ``diverged_at`` (B,) [s, NaN if not], ``trajectories`` (B, T, C)
-    or None, with ``columns`` naming C."""
+    ``status`` (B,) (:data:`aiofl.layout.STATUS_OK`, ``STATUS_LOST``, ``STATUS_DIVERGED``),
+    ``stopped_at`` (B,) when a member was lost or diverged [s, NaN if ok], ``response``
+    the figures of :data:`aiofl.engine.response.RESPONSE_NAMES` (each (B,)),
+    ``trajectories`` (B, T, C) or None, with ``columns`` naming C."""
 
     metrics: NDArray[np.float64]
-    diverged: NDArray[np.bool_]
-    diverged_at: NDArray[np.float64]
+    status: NDArray[np.int64]
+    stopped_at: NDArray[np.float64]
     trajectories: NDArray[np.float64] | None
     columns: tuple[str, ...]
     dt: float
+    response: dict[str, NDArray[np.float64]] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.metrics.shape[0])
 
+    @property
+    def diverged(self) -> NDArray[np.bool_]:
+        """(B,) the members whose numbers blew up."""
+        return np.asarray(self.status == L.STATUS_DIVERGED)
+
+    @property
+    def lost(self) -> NDArray[np.bool_]:
+        """(B,) the members whose plant left its envelope."""
+        return np.asarray(self.status == L.STATUS_LOST)
+
+    @property
+    def failed(self) -> NDArray[np.bool_]:
+        """(B,) lost or diverged: the members without metrics."""
+        return np.asarray(self.status != L.STATUS_OK)
+
+    @property
+    def diverged_at(self) -> NDArray[np.float64]:
+        """(B,) when a member diverged [s] (NaN unless diverged)."""
+        return np.where(self.diverged, self.stopped_at, np.nan)
+
     def metric(self, name: str) -> NDArray[np.float64]:
-        """One metric for every member (NaN where the member diverged)."""
+        """One metric for every member (NaN where the member was lost or diverged)."""
         col = self.metrics[:, L.METRIC_NAMES.index(name)].copy()
-        col[self.diverged] = np.nan
+        col[self.failed] = np.nan
         return col
 
     def opi(self, weights: OPIWeights | None = None) -> NDArray[np.float64]:
-        """OPI (eq. 22) of every member (NaN where the member diverged)."""
+        """OPI (eq. 22) of every member (NaN where the member was lost or diverged)."""
         return np.asarray(opi(self.metric("itae"), self.metric("isu"), self.metric("iau"), weights))
 
     def member(self, i: int) -> SimulationResult:
-        """Member ``i`` as a :class:`SimulationResult` (trajectory cut at divergence)."""
-        div = bool(self.diverged[i])
+        """Member ``i`` as a :class:`SimulationResult` (trajectory cut where it stopped)."""
+        status = L.STATUS_NAMES[int(self.status[i])]
+        ok = status == "ok"
         mets = (
-            None
-            if div
-            else {k: float(v) for k, v in zip(L.METRIC_NAMES, self.metrics[i], strict=True)}
+            {k: float(v) for k, v in zip(L.METRIC_NAMES, self.metrics[i], strict=True)}
+            if ok
+            else None
         )
-        t_div = float(self.diverged_at[i]) if div else None
+        stop = None if ok else float(self.stopped_at[i])
+        resp = {k: float(v[i]) for k, v in self.response.items()}
         if self.trajectories is None:
-            return SimulationResult(mets, div, t_div, np.empty(0), {})
+            return SimulationResult(mets, status, stop, np.empty(0), {}, resp)
         tr = self.trajectories[i]
         tr = tr[~np.isnan(tr[:, 0])]
         sig = {c: tr[:, j] for j, c in enumerate(self.columns) if c != "t"}
-        return SimulationResult(mets, div, t_div, tr[:, 0], sig)
+        return SimulationResult(mets, status, stop, tr[:, 0], sig, resp)
 
 
 # ------------------------------------------------------------------------------- API
@@ -301,11 +357,14 @@ def simulate_batch(
     run_plan(plant, plan(rec, engine, plant), rec, out, engine)
     return BatchResult(
         metrics=out.metrics,
-        diverged=out.status == L.STATUS_DIVERGED,
-        diverged_at=out.t_div,
+        status=out.status,
+        stopped_at=out.t_stop,
         trajectories=out.traj if store else None,
         columns=L.trajectory_columns(plant.n_states),
         dt=float(dt),
+        response=response_figures(
+            out.stats, rec.scen, out.status, out.t_stop, float(dt), rec.n_steps * float(dt)
+        ),
     )
 
 
@@ -361,6 +420,9 @@ def pack(
             ref_d[j, : len(s.reference.samples)] = s.reference.samples
             ref_d[j, len(s.reference.samples) :] = s.reference.samples[-1]
 
+    for j, s in enumerate(distinct):  # the default envelope counts y(0) = h(x0)
+        if s.envelope is None:
+            scen_d[j, L.S_ENVELOPE] = s.default_envelope(_output_at(plant, x0_d[j], p_before_d[j]))
     check_delays(scen_d[rows], disc, dt)  # transport delays: sampled, k·dt, bounded
     n_save = n_steps // decimation + 1 if store else 0
     n_cols = len(L.trajectory_columns(n))
@@ -377,6 +439,7 @@ def pack(
         noise_table=noise_d,
         noise_row=rows,
         disc=disc if disc is not None else np.zeros((b, N_DISC)),
+        bounds=np.ascontiguousarray(np.repeat(plant.bounds_array()[None], b, axis=0)),
         plant_table=np.zeros(N_TABLE, dtype=np.int64),
         dt=float(dt),
         n_steps=int(n_steps),
@@ -388,10 +451,20 @@ def pack(
     out = Outputs(
         metrics=np.zeros((b, L.N_METRIC)),
         status=np.zeros(b, dtype=np.int64),
-        t_div=np.zeros(b),
+        t_stop=np.zeros(b),
+        stats=np.zeros((b, L.N_STAT)),
         traj=np.empty((b, n_save, n_cols)),  # rows after a divergence are set to NaN
     )
     return rec, out
+
+
+def _output_at(plant: Plant, x: NDArray[np.float64], p: NDArray[np.float64]) -> float:
+    """y = h(x) on the host (0 when the plant's h cannot say: the engine will)."""
+    try:
+        y = float(plant.h(np.asarray(x, dtype=np.float64), np.asarray(p, dtype=np.float64)))
+    except Exception:  # a plant that raises here is reported by the engine
+        return 0.0
+    return y if np.isfinite(y) else 0.0
 
 
 def plan(

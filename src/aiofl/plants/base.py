@@ -35,6 +35,7 @@ enables the classical IOFL baseline law.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -85,6 +86,21 @@ def _zero_bd(x: NDArray[np.float64], p: NDArray[np.float64]) -> Any:  # pragma: 
     return x * 0.0
 
 
+def _range_pair(field_name: str, pair: Any) -> tuple[float, float]:
+    """``(low, high)`` as floats, low < high, neither NaN (±inf or None leaves a side open)."""
+    allowed = "allowed: a pair (low, high) of numbers with low < high (±inf leaves a side open)"
+    if isinstance(pair, (str, bytes)) or not hasattr(pair, "__len__") or len(pair) != 2:
+        raise PlantError(f"{field_name} = {pair!r}; {allowed}")
+    try:
+        lo = -math.inf if pair[0] is None else float(pair[0])
+        hi = math.inf if pair[1] is None else float(pair[1])
+    except (TypeError, ValueError):
+        raise PlantError(f"{field_name} = {pair!r}; {allowed}") from None
+    if isinstance(pair[0], bool) or isinstance(pair[1], bool) or not lo < hi:
+        raise PlantError(f"{field_name} = {pair!r}; {allowed}")
+    return lo, hi
+
+
 @dataclass(frozen=True, eq=False)
 class Plant:
     r"""A SISO plant :math:`\dot x = f(x,p) + g(x,p)u + b_d(x,p)\tau_d`, :math:`y = h(x,p)`.
@@ -120,6 +136,12 @@ class Plant:
         declared.  Figures, CSV headers and report tables label signals with them.
     state_units
         One unit per state (``"rad/s"``); empty strings when not declared.
+    state_bounds
+        Physical ranges of some states, ``{name: (low, high)}`` (±inf leaves a side open):
+        a run whose state leaves its range is *lost* (a levitated ball on the magnet or on
+        the floor, a joint past its stop; :mod:`aiofl.engine.loop`).
+    output_range
+        The output's physical range ``(low, high)``, or None; leaving it makes a run lost.
     """
 
     name: str
@@ -139,6 +161,8 @@ class Plant:
     input_unit: str = ""
     state_units: tuple[str, ...] = ()
     disturbance_unit: str = ""
+    state_bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    output_range: tuple[float, float] | None = None
     _checked: dict[str, bool] = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
@@ -161,6 +185,34 @@ class Plant:
         for key in ("output_unit", "input_unit", "disturbance_unit"):
             if not isinstance(getattr(self, key), str):
                 raise PlantError(f"plant {self.name!r}: {key} must be a string (e.g. 'rad')")
+        if not isinstance(self.state_bounds, Mapping):
+            raise PlantError(
+                f"plant {self.name!r}: state_bounds must map state names to (low, high)"
+            )
+        bounds = {}
+        for key, pair in self.state_bounds.items():
+            if key not in self.state_names:
+                raise PlantError(
+                    f"plant {self.name!r}: state_bounds names {key!r}; allowed: one of the "
+                    f"states {', '.join(self.state_names)}"
+                )
+            bounds[key] = _range_pair(f"plant {self.name!r}: state_bounds.{key}", pair)
+        object.__setattr__(self, "state_bounds", MappingProxyType(bounds))
+        if self.output_range is not None:
+            pair = _range_pair(f"plant {self.name!r}: output_range", self.output_range)
+            object.__setattr__(self, "output_range", pair)
+
+    def bounds_array(self) -> NDArray[np.float64]:
+        """The declared ranges as the engine reads them: (n + 1, 2) ``[low, high]`` rows,
+        the states then the output, ``[-inf, inf]`` where none is declared."""
+        out = np.empty((self.n_states + 1, 2))
+        out[:, 0] = -np.inf
+        out[:, 1] = np.inf
+        for key, (lo, hi) in self.state_bounds.items():
+            out[self.state_names.index(key)] = (lo, hi)
+        if self.output_range is not None:
+            out[self.n_states] = self.output_range
+        return out
 
     def state_label(self, i: int) -> str:
         """Name and unit of state ``i`` (0-based), e.g. ``"theta [rad]"``."""

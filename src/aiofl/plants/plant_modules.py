@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import hashlib
 import importlib.util
+import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -62,8 +63,16 @@ _FIELDS = (
     "input_unit",
     "state_units",
     "disturbance_unit",
+    "state_bounds",
+    "output_range",
 )
 """The Plant fields a module records besides its functions."""
+
+
+def _open_side(pair: tuple[float, float]) -> tuple[float | None, float | None]:
+    """A range as a module writes it: an infinite side as None (``inf`` is no literal)."""
+    lo, hi = pair
+    return (lo if math.isfinite(lo) else None, hi if math.isfinite(hi) else None)
 
 
 def generator_digest() -> str:
@@ -91,6 +100,9 @@ def module_source(functions: Sequence[str], plant: Plant, key: str, origin: str)
     code = hashlib.sha256(f"{FORMAT}|{'|'.join(functions)}".encode()).hexdigest()[:24]
     fields = {name: getattr(plant, name) for name in _FIELDS}
     fields["params"] = dict(plant.params)
+    fields["state_bounds"] = {k: _open_side(v) for k, v in plant.state_bounds.items()}
+    if plant.output_range is not None:
+        fields["output_range"] = _open_side(plant.output_range)
     body = "".join(
         [
             f"{_MODULE_LINE}aiofl_plant_{code}\n",

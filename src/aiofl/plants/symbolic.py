@@ -106,6 +106,8 @@ class SymbolicPlant:
     input_unit: str = ""
     disturbance_unit: str = ""
     state_units: tuple[str, ...] = ()
+    state_bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    output_range: tuple[float, float] | None = None
     _cache: dict[str, Any] = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
@@ -226,11 +228,16 @@ class SymbolicPlant:
         input_unit: str = "",
         disturbance_unit: str = "",
         state_units: Sequence[str] | Mapping[str, str] | None = None,
+        bounds: Mapping[str, Sequence[float]] | None = None,
+        output_range: Sequence[float] | None = None,
     ) -> SymbolicPlant:
         """Build a plant from expression strings (parsed by :mod:`aiofl.plants.expressions`).
 
         ``states`` is a list of names or a mapping name -> label; ``params`` maps names to
-        nominal values; ``state_units`` is a list of n units or a mapping state -> unit.
+        nominal values; ``state_units`` is a list of n units or a mapping state -> unit;
+        ``bounds`` maps state names to their physical ``[low, high]`` and ``output_range``
+        is the output's (:attr:`aiofl.plants.base.Plant.state_bounds`: a run that leaves
+        one is lost).
         """
         if isinstance(states, str) or not isinstance(states, (Sequence, Mapping)):
             raise SymbolicPlantError(f"plant {name!r}: states must be a list of names")
@@ -303,11 +310,16 @@ class SymbolicPlant:
             input_unit=input_unit,
             disturbance_unit=disturbance_unit,
             state_units=_state_units(name, names, state_units),
+            state_bounds=_bounds(name, names, bounds),
+            output_range=(
+                None if output_range is None else _pair(name, "output_range", output_range)
+            ),
         )
 
     _KEYS = frozenset(
         {"name", "description", "states", "params", "f", "g", "h", "bd", "eta", "equilibrium"}
         | {"output_unit", "input_unit", "disturbance_unit", "state_units"}
+        | {"bounds", "output_range"}
     )
 
     @classmethod
@@ -329,11 +341,14 @@ class SymbolicPlant:
             input_unit = "N·m"                   #   headers and tables; states take the
             state_units = ["rad", "rad/s"]       #   units in their labels' [brackets]
             # disturbance_unit = "N·m"
-            [params]
+            # output_range = [-3.2, 3.2]         # optional physical ranges: a run that
+            [params]                             #   leaves one is *lost*
             m = 1.0
             l = 0.5
             c = 0.1
             g = 9.81
+            [bounds]                             # optional: states' [low, high]
+            theta = [-3.2, 3.2]
 
         (Top-level keys must come before the ``[params]`` table in TOML.)
         """
@@ -362,6 +377,8 @@ class SymbolicPlant:
             input_unit=data.get("input_unit", ""),
             disturbance_unit=data.get("disturbance_unit", ""),
             state_units=data.get("state_units"),
+            bounds=data.get("bounds"),
+            output_range=data.get("output_range"),
         )
 
     @classmethod
@@ -466,6 +483,8 @@ class SymbolicPlant:
             self.input_unit,
             self.disturbance_unit,
             self.state_units,
+            tuple(sorted(self.state_bounds.items())),
+            self.output_range,
         )
         text = f"{generator_digest()}|{parts!r}"
         return "py_" + hashlib.sha256(text.encode()).hexdigest()[:24]
@@ -497,7 +516,37 @@ class SymbolicPlant:
             input_unit=self.input_unit,
             state_units=self.state_units,
             disturbance_unit=self.disturbance_unit,
+            state_bounds=self.state_bounds,
+            output_range=self.output_range,
         )
+
+
+def _pair(name: str, key: str, value: Any) -> tuple[float, float]:
+    """A ``[low, high]`` of numbers with low < high (±inf leaves a side open)."""
+    ok = isinstance(value, Sequence) and not isinstance(value, str) and len(value) == 2
+    ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+    if not ok or not float(value[0]) < float(value[1]) or math.isnan(float(value[0])):
+        raise SymbolicPlantError(
+            f"plant {name!r}: {key} = {value!r:.60}; allowed: [low, high], two numbers with "
+            "low < high (inf leaves a side open)"
+        )
+    return float(value[0]), float(value[1])
+
+
+def _bounds(name: str, states: Sequence[str], table: Any) -> dict[str, tuple[float, float]]:
+    """The TOML table ``[bounds]``: state name -> ``[low, high]``."""
+    if table is None:
+        return {}
+    if not isinstance(table, Mapping):
+        raise SymbolicPlantError(f"plant {name!r}: bounds must be a table: state = [low, high]")
+    out = {}
+    for key, value in table.items():
+        if key not in states:
+            raise SymbolicPlantError(
+                f"plant {name!r}: bounds.{key!s:.40}; allowed: a state name ({', '.join(states)})"
+            )
+        out[key] = _pair(name, f"bounds.{key}", value)
+    return out
 
 
 def _state_units(

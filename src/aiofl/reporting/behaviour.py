@@ -79,7 +79,7 @@ class Behaviour:
 
     kind: Kind
     window: float
-    diverged_at: float | None = None
+    stopped_at: float | None = None
     max_abs_error: float | None = None
     error_amplitude: float | None = None
     error_offset: float | None = None
@@ -121,8 +121,8 @@ def measure(
     y: ArrayLike,
     r: ArrayLike,
     *,
-    diverged: bool = False,
-    diverged_at: float | None = None,
+    failed: bool = False,
+    stopped_at: float | None = None,
     window: float = WINDOW,
     tolerance: float = TOLERANCE,
 ) -> Behaviour:
@@ -132,7 +132,7 @@ def measure(
     ----------
     t, y, r
         Stored time points [s], output and reference (same length).
-    diverged, diverged_at
+    diverged, stopped_at
         The engine's divergence flag and time [s].
     window
         Length of the final window [s].
@@ -143,8 +143,8 @@ def measure(
     -------
     Behaviour
     """
-    if diverged:
-        return Behaviour("diverged", window, diverged_at=diverged_at)
+    if failed:
+        return Behaviour("diverged", window, stopped_at=stopped_at)
     t = np.asarray(t, dtype=np.float64)
     e = np.asarray(y, dtype=np.float64) - np.asarray(r, dtype=np.float64)
     r_abs = np.abs(np.asarray(r, dtype=np.float64))
@@ -182,8 +182,8 @@ def measure_result(result: SimulationResult, t_final: float) -> Behaviour:
         result.t,
         result["y"] if result.t.size else (),
         result["r"] if result.t.size else (),
-        diverged=result.diverged,
-        diverged_at=result.diverged_at,
+        failed=result.failed,
+        stopped_at=result.stopped_at,
         window=window_for(t_final),
     )
 
@@ -295,8 +295,8 @@ def simulation_text(b: Behaviour, unit: str, tolerance: float = TOLERANCE) -> st
     """What the run did, as a clause (``"the simulation tracks: max |e| ... = 0.01 rad"``)."""
     u = f" {unit}" if unit and unit != "-" else ""
     w = f"over the last {_g(b.window)} s"
-    if b.kind == "diverged":
-        at = f" at t = {b.diverged_at:.2f} s" if b.diverged_at is not None else ""
+    if b.kind == "failed":
+        at = f" at t = {b.stopped_at:.2f} s" if b.stopped_at is not None else ""
         return f"the simulation diverges{at}"
     assert b.max_abs_error is not None and b.error_amplitude is not None
     rel = b.relative_error

@@ -153,9 +153,9 @@ class CaseRun:
     opi: float | None
 
     @property
-    def diverged(self) -> bool:
-        """Whether the run diverged."""
-        return self.result.diverged
+    def failed(self) -> bool:
+        """Whether the run was lost or diverged."""
+        return self.result.failed
 
     @property
     def record(self) -> dict[str, Any]:
@@ -261,10 +261,13 @@ def computed_record(
     opi: float | None,
     extra: bool = False,
 ) -> dict[str, Any]:
-    """The metrics record of one computed run (metrics null if it diverged).
+    """The metrics record of one computed run (metrics null if it was lost or diverged).
 
-    Keys: ``scenario, structure, source, itae, isu, iau, opi, diverged, diverged_at``;
-    with ``extra`` also ``iae`` and ``ise``.
+    Keys: ``scenario, structure, source, itae, isu, iau, opi, status`` (``"ok"``,
+    ``"lost"``, ``"diverged"``), ``failed`` (not ok), ``stopped_at`` (when it was lost or
+    diverged) and the step metrics and noise in u of
+    :data:`aiofl.engine.response.RESPONSE_NAMES` (null where they do not apply); with
+    ``extra`` also ``iae`` and ``ise``.
     """
     m = result.metrics
     rec: dict[str, Any] = {
@@ -275,8 +278,10 @@ def computed_record(
         "isu": _num(m["isu"]) if m else None,
         "iau": _num(m["iau"]) if m else None,
         "opi": _num(opi) if m else None,
-        "diverged": bool(result.diverged),
-        "diverged_at": _num(result.diverged_at) if result.diverged else None,
+        "status": result.status,
+        "failed": bool(result.failed),
+        "stopped_at": _num(result.stopped_at) if result.failed else None,
+        **{k: _num(v) for k, v in result.response.items()},
     }
     if extra:
         rec["iae"] = _num(m["iae"]) if m else None
@@ -295,8 +300,9 @@ def paper_records() -> list[dict[str, Any]]:
             "isu": vals["isu"],
             "iau": None,
             "opi": None,
-            "diverged": False,
-            "diverged_at": None,
+            "status": "ok",
+            "failed": False,
+            "stopped_at": None,
         }
         for s, table in PAPER_TABLES.items()
         for structure, vals in table.items()
@@ -383,7 +389,7 @@ def output_ratio(run: CaseRun, window: float = 5.0) -> float | None:
     About 1 for good tracking of a sine, near 0 when the output barely moves.
     """
     res = run.result
-    if res.diverged or res.t.size == 0:
+    if res.failed or res.t.size == 0:
         return None
     sel = res.t >= res.t[-1] - window
     r_peak = float(np.max(np.abs(res["r"][sel])))
@@ -565,7 +571,7 @@ def compute(
     # in worker processes, the likely slowest first, while this process computes the
     # sampling limits (engine threads): a core an orbit worker leaves idle has work meanwhile
     configs = {c.preset: c.config for c in cases}
-    live = [r.case.preset for r in runs if not r.result.diverged]
+    live = [r.case.preset for r in runs if not r.result.failed]
     order = sorted(live, key=lambda name: -orbit_cost_rank(configs[name]))
     pool = ThreadPoolExecutor(max_workers=1)  # its workers are processes
     orbits = pool.submit(_timed_case_verdicts, order, ts)
@@ -575,7 +581,7 @@ def compute(
     verdicts = {
         r.case.preset: closed_loop_verdict(r.case.config, orbit=False)
         for r in runs
-        if r.result.diverged
+        if r.result.failed
     }
     stage("sampling limits (largest Ts per design, batched)")
     from aiofl.reporting.sampling_note import case_limits

@@ -155,7 +155,7 @@ def _draw_row(axes: Sequence[Axes], p: Panel, letters: Sequence[str]) -> None:
     )
     ax_e.set_title(f"({letters[1]}) tracking error", fontsize=9.5, loc="left")
     ax_u.set_title(f"({letters[2]}) control signal", fontsize=9.5, loc="left")
-    if res.diverged:
+    if res.failed:
         r_amp = float(np.max(np.abs(r))) if r.size else 1.0
         lim = 3.0 * (r_amp if r_amp > 0 else 1.0)
         y_peak = float(np.max(np.abs(y))) if y.size else 0.0
@@ -172,7 +172,7 @@ def _draw_row(axes: Sequence[Axes], p: Panel, letters: Sequence[str]) -> None:
         if u_peak > 100.0:
             _symlog_ticks(ax_u, u_peak)
             ax_u.set_ylabel(unit_label("u", p.input_unit) + " (symlog)", parse_math=False)
-        at = res.diverged_at if res.diverged_at is not None else float(t[-1]) if t.size else 0.0
+        at = res.stopped_at if res.stopped_at is not None else float(t[-1]) if t.size else 0.0
         for ax in (ax_y, ax_e, ax_u):
             ax.axvline(at, **DIVERGED_STYLE)
         for ax in (ax_e, ax_u):
@@ -204,7 +204,7 @@ def _legend_entries(panels: Sequence[Panel]) -> tuple[list[Any], list[str]]:
     for key, drawn in seen.items():
         handles.append(Line2D([], [], **EVENT_STYLE) if drawn else Line2D([], [], lw=0))
         labels.append(key if drawn else f"{key} (outside 0–{horizon:g} s, not drawn)")
-    if any(p.result.diverged for p in panels):
+    if any(p.result.failed for p in panels):
         handles.append(Line2D([], [], **DIVERGED_STYLE))
         labels.append("divergence (run stops)")
     return handles, labels

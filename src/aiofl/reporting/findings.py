@@ -42,13 +42,17 @@ def _printed_divergence(rep: Reproduction, recs: dict[str, dict[str, Any]]) -> s
     printed = [r for r in rep.runs if r.case.source == "printed"]
     if not printed:
         return None
-    div = [r for r in printed if recs[r.case.preset]["diverged"]]
+    div = [r for r in printed if recs[r.case.preset]["failed"]]
     if not div:
         return f"None of the {len(printed)} paper cases diverges with the printed parameters."
-    times = [f"{r.case.preset} at t = {recs[r.case.preset]['diverged_at']:.2f} s" for r in div]
+    times = [
+        f"{r.case.preset} {recs[r.case.preset]['status']} at t = "
+        f"{recs[r.case.preset]['stopped_at']:.2f} s"
+        for r in div
+    ]
     return (
         f"With the paper's printed parameters {len(div)} of the {len(printed)} paper cases "
-        f"diverge: {_join(times)}."
+        f"fail (the plant lost, or the numbers diverged): {_join(times)}."
     )
 
 
@@ -57,7 +61,7 @@ def _printed_vs_paper(rep: Reproduction, recs: dict[str, dict[str, Any]]) -> str
     for r in rep.runs:
         rec = recs[r.case.preset]
         paper = PAPER_TABLES.get(r.case.scenario, {}).get(r.case.structure)
-        if r.case.source != "printed" or rec["diverged"] or not paper:
+        if r.case.source != "printed" or rec["failed"] or not paper:
             continue
         parts.append(
             f"{r.case.preset} ITAE {fmt(rec['itae'], 5)} (paper {fmt(paper['itae'], 5)}), "
@@ -183,8 +187,8 @@ def _iofl(rep: Reproduction, recs: dict[str, dict[str, Any]]) -> str | None:
     parts = []
     for r in runs:
         rec = recs[r.case.preset]
-        if rec["diverged"]:
-            parts.append(f"{r.case.preset} diverges at t = {rec['diverged_at']:.2f} s")
+        if rec["failed"]:
+            parts.append(f"{r.case.preset} {rec['status']} at t = {rec['stopped_at']:.2f} s")
             continue
         err = _err(r, rec)
         parts.append(f"{r.case.preset} ITAE {fmt(rec['itae'], 5)}" + (f", {err}" if err else ""))
@@ -200,7 +204,7 @@ def _best_eso(rep: Reproduction, recs: dict[str, dict[str, Any]]) -> str | None:
         cands = [
             r
             for r in rep.scenario_runs(s)
-            if controller_access(r.case.config) is None and not recs[r.case.preset]["diverged"]
+            if controller_access(r.case.config) is None and not recs[r.case.preset]["failed"]
         ]
         if cands:
             best = min(cands, key=lambda r: recs[r.case.preset]["itae"])

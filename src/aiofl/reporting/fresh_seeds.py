@@ -124,12 +124,12 @@ def compute_fresh_seeds(
         k = len(seeds)
         for j, c in enumerate(members):
             sl = slice(j * k, (j + 1) * k)
-            div = np.asarray(res.diverged[sl], dtype=bool)
+            div = np.asarray(res.failed[sl], dtype=bool)
             m = np.asarray(res.metrics[sl], dtype=np.float64)
             results[c.preset] = {
                 "itae": np.where(div, np.nan, m[:, i_itae]),
                 "isu": np.where(div, np.nan, m[:, i_isu]),
-                "diverged": div,
+                "failed": div,
                 "sensor": c.config.sensor.describe(),
             }
     return FreshSeeds(
@@ -165,11 +165,11 @@ def fresh_rows(rep: Reproduction) -> list[list[str]]:
             continue
         rec = run.record
         seed0 = (
-            [f"diverged at t = {rec['diverged_at']:.2f} s", DASH]
-            if rec["diverged"]
+            [f"diverged at t = {rec['stopped_at']:.2f} s", DASH]
+            if rec["failed"]
             else [fmt(rec["itae"], 3), fmt(rec["isu"], 3)]
         )
-        div = got["diverged"]
+        div = got["failed"]
         ok = ~div
         n = len(div)
         stats = (

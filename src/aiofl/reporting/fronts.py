@@ -358,8 +358,8 @@ def front_rows(rep: Reproduction, scenario: int) -> list[list[str]]:
             rec = run.record
             got = table.results.get(run.case.preset) if table is not None else None
             nominal = (
-                f"diverged at t = {rec['diverged_at']:.2f} s"
-                if rec["diverged"]
+                f"{rec['status']} at t = {rec['stopped_at']:.2f} s"
+                if rec["failed"]
                 else f"ITAE {fmt(rec['itae'], 3)} at ISU {fmt(rec['isu'], 4)}"
             )
             if got is not None:
@@ -405,8 +405,8 @@ def _preset_sentences(rep: Reproduction, scenario: int, b: str, budget: float) -
     nominal, robust, outside = [], [], []
     for st, run in presets.items():
         rec = run.record
-        if rec["diverged"]:
-            outside.append(f"{run.case.preset} (diverged at t = {rec['diverged_at']:.2f} s)")
+        if rec["failed"]:
+            outside.append(f"{run.case.preset} ({rec['status']} at t = {rec['stopped_at']:.2f} s)")
             continue
         if rec["isu"] > budget:
             outside.append(f"{run.case.preset} (ISU {fmt(rec['isu'], 4)})")
@@ -535,9 +535,9 @@ def front_figure(rep: Reproduction, scenario: int, isu_floor: float | None) -> A
     not_shown = []
     for run in rep.scenario_runs(scenario):
         rec = run.record
-        if run.case.source in ("printed", "robust") and rec["diverged"]:
-            not_shown.append(f"{run.case.preset} diverged at t = {rec['diverged_at']:.2f} s")
-        if rec["diverged"] or not rec["itae"] or not rec["isu"]:
+        if run.case.source in ("printed", "robust") and rec["failed"]:
+            not_shown.append(f"{run.case.preset} {rec['status']} at t = {rec['stopped_at']:.2f} s")
+        if rec["failed"] or not rec["itae"] or not rec["isu"]:
             continue
         st = run.case.structure.lower()
         if run.case.source == "printed":

@@ -177,8 +177,8 @@ def _verdict_cell(run: CaseRun, sentence: str) -> _Raw:
     run did and whether the two agree."""
     kind = run.behaviour.kind
     did = (
-        f"diverges at t = {run.behaviour.diverged_at:.2f} s"
-        if kind == "diverged" and run.behaviour.diverged_at is not None
+        f"diverges at t = {run.behaviour.stopped_at:.2f} s"
+        if kind == "diverged" and run.behaviour.stopped_at is not None
         else kind
     )
     tail = sentence.rsplit(" — ", 1)[1] if " — " in sentence else ""

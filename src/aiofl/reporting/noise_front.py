@@ -355,7 +355,7 @@ def noise_markers(rep: Reproduction) -> list[tuple[str, float, float | None, flo
         if run.case.source not in ("robust", "assisted", "retuned"):
             continue
         rec = run.record
-        if rec["diverged"] or not rec["isu"] or rec["isu"] > NOISE_BUDGET:
+        if rec["failed"] or not rec["isu"] or rec["isu"] > NOISE_BUDGET:
             continue
         got = table.results.get(run.case.preset) if table is not None else None
         q95 = None if got is None else got["itae"]["q95"]

@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from aiofl import layout as L
 from aiofl.reporting.cases import Case, Reproduction, controller_access
 from aiofl.reporting.tables import DASH, fmt
 from aiofl.uncertainty import UncertaintyModel, corner_draws, sample_draws
@@ -171,21 +172,24 @@ def compute_robustness(
                 draws=d,
                 itae=r.itae[:draws],
                 isu=r.isu[:draws],
-                diverged=r.diverged[:draws],
-                diverged_at=r.diverged_at[:draws],
+                failed=r.failed[:draws],
+                stopped_at=r.stopped_at[:draws],
+                status=r.status[:draws],
             )
             results[c.preset] = own.to_dict()
             if cd is not None:
                 cols = cd.columns()
-                div = r.diverged[draws:]
-                t_div = r.diverged_at[draws:]
+                div = r.failed[draws:]
+                t_div = r.stopped_at[draws:]
+                how = r.status[draws:]
                 results[c.preset]["corners"] = {
                     "count": len(cd),
                     "stable": int(len(cd) - div.sum()),
                     "corners_stable": float(np.mean(~div)),
-                    "diverged": [
+                    "failed": [
                         {
                             "corner": int(i),
+                            "status": L.STATUS_NAMES[int(how[i])],
                             "t": float(t_div[i]),
                             "point": {n: float(v[i]) for n, v in cols.items()},
                         }
@@ -245,8 +249,8 @@ def robust_rows(rep: Reproduction) -> list[list[str]]:
         preset = run.case.preset
         rec = run.record
         nominal = (
-            f"diverged at t = {rec['diverged_at']:.2f} s"
-            if rec["diverged"]
+            f"{rec['status']} at t = {rec['stopped_at']:.2f} s"
+            if rec["failed"]
             else (fmt(rec["itae"], 3))
         )
         got = table.results.get(preset)
@@ -254,7 +258,7 @@ def robust_rows(rep: Reproduction) -> list[list[str]]:
             why = table.skipped.get(preset, "not run")
             rows.append([str(run.case.scenario), run.case.label, preset, nominal, why, *[DASH] * 5])
             continue
-        k, n_div = got["draws"], got["diverged"]
+        k, n_div = got["draws"], got["failed"]
         q = got["itae"]
         rows.append(
             [
@@ -274,12 +278,13 @@ def robust_rows(rep: Reproduction) -> list[list[str]]:
 
 
 def _corner_cell(rec: dict[str, Any] | None) -> str:
-    """ "16/16", or "15/16 (first diverged at t = 0.43 s)"."""
+    """ "16/16", or "15/16 (first lost at t = 0.43 s)"."""
     if rec is None:
         return DASH
     text = f"{rec['stable']}/{rec['count']}"
-    if rec["diverged"]:
-        text += f" (first diverged at t = {min(d['t'] for d in rec['diverged']):.2g} s)"
+    if rec["failed"]:
+        first = min(rec["failed"], key=lambda d: d["t"])
+        text += f" (first {first.get('status', 'failed')} at t = {first['t']:.2g} s)"
     return text
 
 
@@ -340,7 +345,7 @@ def robust_notes(rep: Reproduction) -> list[str]:
             for r in rep.scenario_runs(s)
             if r.case.preset in table.results
         ]
-        full = [(r, g) for r, g in cands if g["diverged"] == 0 and g["itae"]["q95"] is not None]
+        full = [(r, g) for r, g in cands if g["failed"] == 0 and g["itae"]["q95"] is not None]
         if not cands:
             continue
         text = (

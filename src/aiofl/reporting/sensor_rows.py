@@ -68,7 +68,7 @@ class SensorTable:
     Attributes
     ----------
     results
-        By preset, by column key: ``{"itae", "isu", "diverged", "diverged_at", "sensor"}``
+        By preset, by column key: ``{"itae", "isu", "diverged", "stopped_at", "sensor"}``
         (``itae``/``isu`` None when diverged; ``sensor`` the one-line description).
     skipped
         By preset and column, why a case could not run with that sensor.
@@ -110,8 +110,8 @@ def _entry(itae: Any, isu: Any, diverged: bool, at: Any, sensor: str) -> dict[st
     return {
         "itae": None if diverged else float(itae),
         "isu": None if diverged else float(isu),
-        "diverged": bool(diverged),
-        "diverged_at": float(at) if diverged else None,
+        "failed": bool(diverged),
+        "stopped_at": float(at) if diverged else None,
         "sensor": sensor,
     }
 
@@ -126,7 +126,7 @@ def compute_sensor_table(
     :func:`~aiofl.engine.simulation.simulate_batch` call per group of members sharing the
     plant, horizon, step, method and divergence threshold (one call for the SLFJM cases).
 
-    ``ideal`` (by preset: ``itae``, ``isu``, ``diverged``, ``diverged_at``) gives runs
+    ``ideal`` (by preset: ``itae``, ``isu``, ``diverged``, ``stopped_at``) gives runs
     already made (the report's own runs of the presets, the numbers of ``aiofl
     simulate``): they fill the ideal column of the presets whose shipped measurement *is*
     the ideal one (continuous, no quantum), so those are not run twice; a sampled preset's
@@ -146,8 +146,8 @@ def compute_sensor_table(
             results.setdefault(case.preset, {})["ideal"] = _entry(
                 known["itae"],
                 known["isu"],
-                known["diverged"],
-                known["diverged_at"],
+                known["failed"],
+                known["stopped_at"],
                 cfgs["ideal"].sensor.describe(),
             )
             cfgs.pop("ideal")
@@ -180,8 +180,8 @@ def compute_sensor_table(
             results.setdefault(preset, {})[key] = _entry(
                 m[L.METRIC_NAMES.index("itae")],
                 m[L.METRIC_NAMES.index("isu")],
-                bool(res.diverged[j]),
-                res.diverged_at[j],
+                bool(res.failed[j]),
+                res.stopped_at[j],
                 cfg.sensor.describe(),
             )
     order = [k for k, _, _ in SENSOR_COLUMNS]
@@ -209,7 +209,7 @@ def survives(got: dict[str, Any] | None, ideal: dict[str, Any] | None) -> bool:
     stable, ITAE <= max(:data:`ITAE_FACTOR` × ideal, ideal + :data:`ITAE_SLACK`), ISU <=
     :data:`ISU_FACTOR` × ideal (a loop that stops tracking or saturates the actuator
     with quantisation chatter does not count as surviving)."""
-    if got is None or ideal is None or got["diverged"] or ideal["diverged"]:
+    if got is None or ideal is None or got["failed"] or ideal["failed"]:
         return False
     itae, isu = got["itae"], got["isu"]
     if not (np.isfinite(itae) and np.isfinite(isu)):
@@ -221,7 +221,7 @@ def survives(got: dict[str, Any] | None, ideal: dict[str, Any] | None) -> bool:
 def verdict(by_column: dict[str, dict[str, Any]]) -> str:
     """The best sensor a design survives (:func:`survives`), as one phrase."""
     ideal = by_column.get("ideal")
-    if ideal is None or ideal["diverged"]:
+    if ideal is None or ideal["failed"]:
         return "diverges even with the ideal sensor"
     if survives(by_column.get("encoder-12bit"), ideal):
         return "survives a 12-bit encoder"
@@ -245,8 +245,8 @@ def with_sensors(records: Sequence[dict[str, Any]], table: SensorTable | None) -
 def _cells(got: dict[str, Any] | None) -> list[str]:
     if got is None:
         return [DASH, DASH]
-    if got["diverged"]:
-        return [f"diverged at t = {got['diverged_at']:.2f} s", DASH]
+    if got["failed"]:
+        return [f"diverged at t = {got['stopped_at']:.2f} s", DASH]
     return [fmt(got["itae"], 3), fmt(got["isu"], 3)]
 
 

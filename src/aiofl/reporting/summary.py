@@ -61,7 +61,7 @@ def _candidates(rep: Reproduction, scenario: int, structure: str | None) -> list
         for r in rep.scenario_runs(scenario)
         if (structure is None or r.case.structure == structure)
         and (structure is not None or controller_access(r.case.config) is None)
-        and not recs[r.case.preset]["diverged"]
+        and not recs[r.case.preset]["failed"]
         and recs[r.case.preset]["itae"] is not None
     ]
 
@@ -94,9 +94,7 @@ def most_robust(rep: Reproduction, scenario: int) -> Pick | None:
     cands = [
         (r, rec)
         for r, rec in _candidates(rep, scenario, None)
-        if (rob := rec.get("robustness"))
-        and rob["diverged"] == 0
-        and rob["itae"]["q95"] is not None
+        if (rob := rec.get("robustness")) and rob["failed"] == 0 and rob["itae"]["q95"] is not None
     ]
     return min(cands, key=lambda p: p[1]["robustness"]["itae"]["q95"]) if cands else None
 
@@ -112,8 +110,8 @@ def paper_winner(scenario: int) -> tuple[str, str] | None:
 
 def _does(run: CaseRun, rec: dict[str, Any]) -> str:
     """What a run does, briefly: ``diverges at t = 12.42 s``, ``tracks (max |e| 0.002 rad)``."""
-    if rec["diverged"]:
-        return f"diverges at t = {rec['diverged_at']:.2f} s"
+    if rec["failed"]:
+        return f"diverges at t = {rec['stopped_at']:.2f} s"
     tr = rec.get("tracking") or {}
     kind, err = tr.get("behaviour"), tr.get("max_abs_error")
     what = {"tracks": "tracks", "bounded": "stays bounded", "growing": "grows"}.get(kind, "runs")
@@ -130,7 +128,7 @@ def _printed(rep: Reproduction, scenario: int) -> str:
             continue
         rec = recs[run.case.preset]
         text = f"{run.case.structure} {_does(run, rec)}"
-        if not rec["diverged"]:
+        if not rec["failed"]:
             p = paper.get(run.case.structure)
             ref = [f"paper {fmt(p['itae'], 4)}"] if p else []
             ref.append(f"y ≡ 0: {fmt(rep.trivial[scenario], 4)}")
@@ -179,7 +177,7 @@ def claim_text(rep: Reproduction, scenario: int) -> str:
 
     def alive(structure: str) -> Pick | None:
         p = printed.get(structure)
-        return p if p is not None and not p[1]["diverged"] else None
+        return p if p is not None and not p[1]["failed"] else None
 
     parts = []
     if w in printed and lo in printed:
@@ -205,7 +203,7 @@ def _pick_text(pick: Pick | None, *, robust: bool = False) -> str:
         return f"{run.case.preset}: ITAE 95 % {fmt(rob['itae']['q95'], 3)}"  # type: ignore[index]
     text = f"{run.case.preset}: ITAE {fmt(rec['itae'], 3)}, ISU {fmt(rec['isu'], 4)}"
     if rob:
-        text += f"; stable on {rob['draws'] - rob['diverged']}/{rob['draws']} draws"
+        text += f"; stable on {rob['draws'] - rob['failed']}/{rob['draws']} draws"
     return text
 
 

@@ -171,7 +171,9 @@ def table_rows(rep: Reproduction, scenario: int) -> list[list[str]]:
             else {}
         )
         itae = (
-            f"diverged at t = {rec['diverged_at']:.2f} s" if rec["diverged"] else fmt(rec["itae"])
+            f"{rec['status']} at t = {rec['stopped_at']:.2f} s"
+            if rec["failed"]
+            else fmt(rec["itae"])
         )
         rows.append(
             [
@@ -258,11 +260,12 @@ def scenario_notes(rep: Reproduction, scenario: int) -> list[str]:
         name = f"{run.case.label} [{run.case.preset}]"
         p = paper.get(run.case.structure) if run.case.source == "printed" else None
         extra = [n for n in (_itd_note(run), _observer_note(run)) if n]
-        if rec["diverged"]:
+        if rec["failed"]:
             tail = f" The paper reports ITAE {fmt(p['itae'])}." if p else ""
             more = "".join(f" {n[0].upper()}{n[1:]}." for n in extra)
-            at = f"{rec['diverged_at']:.2f}"
-            notes.append(f"{name}: the loop diverges at t = {at} s.{tail}{more}")
+            at = f"{rec['stopped_at']:.2f}"
+            what = "the plant is lost" if rec["status"] == "lost" else "the loop diverges"
+            notes.append(f"{name}: {what} at t = {at} s.{tail}{more}")
             continue
         parts = [f"{name}: ITAE {fmt(rec['itae'], 5)}"]
         if p:

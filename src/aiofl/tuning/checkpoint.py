@@ -28,6 +28,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from aiofl import layout as L
+
 __all__ = [
     "CHECKPOINT",
     "CHECKPOINT_FORMAT",
@@ -45,7 +47,7 @@ def save_checkpoint(path: Path, fingerprint: str, gens: list[dict[str, Any]]) ->
     aiofl output directory, :func:`aiofl.outputs.ensure_output_dir`).
 
     Each generation is a dict with arrays ``s`` (unit-cube members), ``metrics``,
-    ``diverged``, ``diverged_at`` and the float ``seconds``; other keys are not stored.
+    ``diverged``, ``stopped_at`` and the float ``seconds``; other keys are not stored.
     """
     from aiofl.outputs import atomic_write_bytes, ensure_output_dir
 
@@ -57,7 +59,7 @@ def save_checkpoint(path: Path, fingerprint: str, gens: list[dict[str, Any]]) ->
         )
     }
     for i, g in enumerate(gens):
-        for key in ("s", "metrics", "diverged", "diverged_at"):
+        for key in ("s", "metrics", "diverged", "stopped_at"):
             arrays[f"g{i}_{key}"] = g[key]
         arrays[f"g{i}_seconds"] = np.array(g["seconds"])
     buf = io.BytesIO()
@@ -90,7 +92,7 @@ def load_checkpoint(path: Path, fingerprint: str) -> list[dict[str, Any]]:
                 )
             gens = []
             for i in range(int(meta["generations"])):
-                g = {k: data[f"g{i}_{k}"] for k in ("s", "metrics", "diverged", "diverged_at")}
+                g = {k: data[f"g{i}_{k}"] for k in ("s", "metrics", "diverged", "stopped_at")}
                 g["seconds"] = float(data[f"g{i}_seconds"])
                 _check_shapes(g, i + 1)
                 gens.append(g)
@@ -113,11 +115,11 @@ def _check_shapes(g: dict[str, Any], generation: int) -> None:
         n >= 0
         and m.ndim in (2, 3)
         and m.shape[0] == n
-        and m.shape[-1] == 5
-        and g["diverged"].shape == m.shape[:-1]
-        and g["diverged_at"].shape == m.shape[:-1]
-        and g["diverged"].dtype == np.bool_
-        and all(np.issubdtype(a.dtype, np.floating) for a in (s, m, g["diverged_at"]))
+        and m.shape[-1] == L.N_SCORE
+        and g["failed"].shape == m.shape[:-1]
+        and g["stopped_at"].shape == m.shape[:-1]
+        and g["failed"].dtype == np.bool_
+        and all(np.issubdtype(a.dtype, np.floating) for a in (s, m, g["stopped_at"]))
     )
     if not ok:
         raise ValueError(f"generation {generation} has arrays of the wrong shape or type")

@@ -26,6 +26,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from aiofl import layout as L
+
 __all__ = [
     "CONNECT_TIMEOUT",
     "DaskEvaluator",
@@ -100,23 +102,25 @@ class EvalSpec:
 
 @dataclass(frozen=True)
 class PopulationResult:
-    """Engine results of a population: ``metrics`` (B, 5), ``diverged``, ``diverged_at`` (B,).
+    """Engine results of a population: ``metrics`` (B, :data:`aiofl.layout.N_SCORE`),
+    the integrals then the response figures (:data:`aiofl.layout.SCORE_NAMES`), ``failed``
+    (lost or diverged) and ``stopped_at`` (B,).
 
-    In a robust run (K draws) the shapes are (B, K+1, 5) and (B, K+1), column 0 being the
-    nominal plant.
+    In a robust run (K draws) the shapes are (B, K+1, N_SCORE) and (B, K+1), column 0
+    being the nominal plant.
     """
 
     metrics: NDArray[np.float64]
-    diverged: NDArray[np.bool_]
-    diverged_at: NDArray[np.float64]
+    failed: NDArray[np.bool_]
+    stopped_at: NDArray[np.float64]
 
     @staticmethod
     def concatenate(parts: list[PopulationResult]) -> PopulationResult:
         """Join chunk results in order."""
         return PopulationResult(
             np.concatenate([p.metrics for p in parts]),
-            np.concatenate([p.diverged for p in parts]),
-            np.concatenate([p.diverged_at for p in parts]),
+            np.concatenate([p.failed for p in parts]),
+            np.concatenate([p.stopped_at for p in parts]),
         )
 
 
@@ -180,7 +184,8 @@ def evaluate_chunk(spec: EvalSpec, values: NDArray[np.float64]) -> PopulationRes
     r = spec.noise_realisations
     shape = (values.shape[0], k1) if spec.draws else (values.shape[0],)
     if values.shape[0] == 0:
-        return PopulationResult(np.zeros((*shape, 5)), np.zeros(shape, dtype=bool), np.zeros(shape))
+        empty = np.zeros((*shape, L.N_SCORE))
+        return PopulationResult(empty, np.zeros(shape, dtype=bool), np.zeros(shape))
     with _LOCK:
         plant, controller, scenarios, sampling = _build(spec)
         if spec.expected_candidates:
@@ -201,17 +206,19 @@ def evaluate_chunk(spec: EvalSpec, values: NDArray[np.float64]) -> PopulationRes
             # a [controller.discrete] table tunes the sampled controller
             sampling=sampling * values.shape[0] if isinstance(sampling, list) else sampling,
         )
+    # the integrals, then the response figures (aiofl.layout.SCORE_NAMES)
+    scores = np.column_stack([res.metrics, *(res.response[k] for k in L.RESPONSE_NAMES)])
     if r > 1:  # (B, [K+1,] R): the mean over the realisations
         m, d, t = _mean_over_realisations(
-            res.metrics.reshape(*shape, r, 5),
-            res.diverged.reshape(*shape, r),
-            res.diverged_at.reshape(*shape, r),
+            scores.reshape(*shape, r, L.N_SCORE),
+            res.failed.reshape(*shape, r),
+            res.stopped_at.reshape(*shape, r),
         )
         return PopulationResult(m, d, t)
     return PopulationResult(
-        res.metrics.reshape(*shape, 5).copy(),
-        res.diverged.reshape(shape).copy(),
-        res.diverged_at.reshape(shape).copy(),
+        scores.reshape(*shape, L.N_SCORE).copy(),
+        res.failed.reshape(shape).copy(),
+        res.stopped_at.reshape(shape).copy(),
     )
 
 

@@ -100,7 +100,7 @@ def _csv_float(v: float) -> str:
 def _evaluations_csv(result: TuneResult) -> str:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["generation", "member", *result.names, "objective", "diverged"])
+    w.writerow(["generation", "member", *result.names, "objective", "failed"])
     member = 0
     last = 0
     for i in range(result.n_evaluations):
@@ -113,7 +113,7 @@ def _evaluations_csv(result: TuneResult) -> str:
                 member,
                 *(_csv_float(float(v)) for v in result.values[i]),
                 _csv_float(float(result.objective[i])),
-                int(result.diverged[i]),
+                int(result.failed[i]),
             ]
         )
     return buf.getvalue()
@@ -147,7 +147,7 @@ def convergence_figure(result: TuneResult) -> Any:
     ax.grid(True, alpha=0.3)
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     handles, labels = ax.get_legend_handles_labels()
-    diverged = [r["diverged"] for r in h]
+    diverged = [r["failed"] for r in h]
     if any(diverged):
         ax2 = ax.twinx()
         ax2.bar(gen, diverged, alpha=0.15, color="red", label="diverged")
@@ -183,8 +183,9 @@ def full_horizon_record(result: TuneResult) -> dict[str, Any]:
     sim = cfg.simulate(store=False)
     rec: dict[str, Any] = {
         "t_final": cfg.scenario.t_final,
-        "diverged": sim.diverged,
-        "diverged_at": sim.diverged_at,
+        "status": sim.status,
+        "failed": sim.failed,
+        "stopped_at": sim.stopped_at,
     }
     rec.update(sim.metrics or dict.fromkeys(L.METRIC_NAMES))
     rec["opi"] = sim.opi(cfg.weights)
@@ -313,8 +314,8 @@ def reference_markers(
             )
             if res is None:
                 continue
-            if res.diverged[0]:
-                notes.append(f"{name} diverged over {tf:g} s")
+            if res.failed[0]:
+                notes.append(f"{name} failed (lost or diverged) over {tf:g} s")
                 continue
             m = dict(zip(L.METRIC_NAMES, res.metrics[0], strict=True))
             markers.append((name, float(m[metric[1]]), float(m[metric[0]])))
@@ -378,7 +379,7 @@ def write_outputs(result: TuneResult, out: str | Path, *, header: str = "") -> d
         "tuning_horizon_metrics": result.best_metrics,
         "full_horizon": None,  # step 2
         "evaluations": result.n_evaluations,
-        "diverged": int(result.diverged.sum()),
+        "failed": int(result.failed.sum()),
         "live_evaluations": result.live_evaluations,
         "live_seconds": result.live_seconds,
         "evals_per_second": result.evals_per_second,

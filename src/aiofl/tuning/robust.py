@@ -128,15 +128,17 @@ class Constraint:
 def parse_quantity(text: str) -> Quantity:
     """Parse ``METRIC`` or ``METRIC:AGGREGATE`` (no eval: a regular expression).
 
-    METRIC is one of :data:`aiofl.layout.METRIC_NAMES`, ``stable_fraction`` (the
-    fraction of the K+1 members that did not diverge) or a margin ``pm``, ``gm``, ``dm``,
+    METRIC is one of :data:`aiofl.layout.SCORE_NAMES` (the integrals of eq. 22, then the
+    step metrics and the command's figures of :mod:`aiofl.engine.response`; one that does
+    not apply, or a step that never settled, counts as +inf), ``stable_fraction`` (the
+    fraction of the K+1 members neither lost nor diverged) or a margin ``pm``, ``gm``, ``dm``,
     ``ms`` (of the nominal plant's linearised loop, :mod:`aiofl.tuning.margins`); those
     take no aggregate (a margin ``:nominal`` is allowed).  AGGREGATE one of ``mean``,
     ``worst``, ``cvar``, ``nominal``.  Raises ``ValueError`` naming the
     allowed values.
     """
     m = _QUANTITY.match(text) if isinstance(text, str) else None
-    allowed = (*L.METRIC_NAMES, *EXTRA_QUANTITIES)
+    allowed = (*L.SCORE_NAMES, *EXTRA_QUANTITIES)
     if m is None:
         raise ValueError(
             f"{text!r} is not METRIC or METRIC:AGGREGATE; METRIC one of {', '.join(allowed)}, "
@@ -190,29 +192,29 @@ def _as_draws(
 def quantity_values(
     q: Quantity,
     metrics: NDArray[np.float64],
-    diverged: NDArray[np.bool_],
+    failed: NDArray[np.bool_],
     default: str,
     alpha: float,
     margins: Mapping[str, NDArray[np.float64]] | None = None,
 ) -> NDArray[np.float64]:
     """Per candidate value (B,) of quantity ``q`` (``default``: the run's aggregate;
     ``margins``: :func:`aiofl.tuning.margins.candidate_margins`, needed for a margin)."""
-    m, d = _as_draws(metrics, diverged)
+    m, d = _as_draws(metrics, failed)
     if q.is_margin:
         if margins is None:
             raise ValueError(f"{q.text()}: the candidates' margins were not computed")
         return np.asarray(margins[q.metric], dtype=np.float64)
     if q.metric == "stable_fraction":
         return 1.0 - d.mean(axis=1)
-    col = m[:, :, L.METRIC_NAMES.index(q.metric)]
+    col = m[:, :, L.SCORE_NAMES.index(q.metric)]
     col = np.where(d, np.inf, col)
     return aggregate(col, q.aggregate or default, alpha)
 
 
 def robust_objective(
     metrics: NDArray[np.float64],
-    diverged: NDArray[np.bool_],
-    diverged_at: NDArray[np.float64],
+    failed: NDArray[np.bool_],
+    stopped_at: NDArray[np.float64],
     coefficients: NDArray[np.float64],
     penalty: float,
     t_final: float,
@@ -227,10 +229,10 @@ def robust_objective(
     any feasible :math:`J < P`, and better the more draws stay stable and the later the
     others diverge.  With K = 0 this is :func:`aiofl.tuning.space.objective_values`.
     """
-    m, d = _as_draws(metrics, diverged)
-    t = np.asarray(diverged_at, dtype=np.float64).reshape(d.shape)
+    m, d = _as_draws(metrics, failed)
+    t = np.asarray(stopped_at, dtype=np.float64).reshape(d.shape)
     with np.errstate(all="ignore"):
-        per = m @ coefficients  # (B, K+1)
+        per = m[..., : L.N_METRIC] @ coefficients  # (B, K+1)
     per = np.where(d, np.inf, per)
     j = aggregate(per, kind, alpha)
     frac = np.where(d, np.clip(np.nan_to_num(t / t_final, nan=0.0), 0.0, 1.0), 1.0)
@@ -243,7 +245,7 @@ def objective_matrix(
     objectives: Sequence[Quantity],
     constraints: Sequence[Constraint],
     metrics: NDArray[np.float64],
-    diverged: NDArray[np.bool_],
+    failed: NDArray[np.bool_],
     default: str,
     alpha: float,
     cap: float,
@@ -261,18 +263,15 @@ def objective_matrix(
     infeasible through ``G[:, 0]``, an infinite margin (no crossover, −inf in minimisation
     form) stays the best.
     """
-    _, d = _as_draws(metrics, diverged)
+    _, d = _as_draws(metrics, failed)
     f = np.column_stack(
-        [
-            q.sign * quantity_values(q, metrics, diverged, default, alpha, margins)
-            for q in objectives
-        ]
+        [q.sign * quantity_values(q, metrics, failed, default, alpha, margins) for q in objectives]
     )
     raw = np.zeros((f.shape[0], len(constraints)))
     g = np.zeros((f.shape[0], 1 + len(constraints)))
     g[:, 0] = d.sum(axis=1).astype(np.float64)
     for i, c in enumerate(constraints):
-        v = quantity_values(c.quantity, metrics, diverged, default, alpha, margins)
+        v = quantity_values(c.quantity, metrics, failed, default, alpha, margins)
         raw[:, i] = v
         viol = v - c.bound if c.upper else c.bound - v
         # an infinite margin (no crossover) satisfies any bound: -inf stays feasible

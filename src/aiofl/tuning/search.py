@@ -110,7 +110,7 @@ class TuneResult:
     values: NDArray[np.float64]
     objective: NDArray[np.float64]
     generation: NDArray[np.int64]
-    diverged: NDArray[np.bool_]
+    failed: NDArray[np.bool_]
     history: list[dict[str, float]]
     config: dict[str, Any]
     source: str = ""
@@ -164,13 +164,13 @@ class TuneResult:
                 f"Tuned by `aiofl tune` from {self.source or 'a config'}: {s.budget()}, "
                 f"objectives {', '.join(f.objectives)}{cons} over t_f = {s.t_final:g} s{rob}.\n"
                 f"Chosen from the {f.F.shape[0]}-design Pareto front by {f.rule}: {chosen} "
-                f"({self.n_evaluations} evaluations, {int(self.diverged.sum())} diverged)."
+                f"({self.n_evaluations} evaluations, {int(self.failed.sum())} lost or diverged)."
             )
         return (
             f"Tuned by `aiofl tune` from {self.source or 'a config'}: {s.budget()}, "
             f"objective {obj} over t_f = {s.t_final:g} s{rob}.\n"
             f"Best objective {self.best_objective:.6g} after {self.n_evaluations} evaluations "
-            f"({int(self.diverged.sum())} diverged)."
+            f"({int(self.failed.sum())} lost or diverged)."
         )
 
 
@@ -426,7 +426,7 @@ def _generation_row(
         "mean": float(ok.mean()) if ok.size else float("nan"),
         "median": float(np.median(ok)) if ok.size else float("nan"),
         "best_so_far": best_so_far,
-        "diverged": int(div.sum()),
+        "failed": int(div.sum()),
         "seconds": seconds,
     }
 
@@ -504,11 +504,11 @@ def tune(
         if g < len(cached):
             c = cached[g]
             check_replay(c, s, g + 1)
-            res_m, res_d, res_t, secs = c["metrics"], c["diverged"], c["diverged_at"], c["seconds"]
+            res_m, res_d, res_t, secs = c["metrics"], c["failed"], c["stopped_at"], c["seconds"]
             live = False
         else:
             res: PopulationResult = ev(spec, space.decode(s))
-            res_m, res_d, res_t = res.metrics, res.diverged, res.diverged_at
+            res_m, res_d, res_t = res.metrics, res.failed, res.stopped_at
             secs = time.perf_counter() - t0
             live = True
         scores = _scores(prep, res_m, res_d, res_t, space.decode(s))
@@ -517,8 +517,8 @@ def tune(
             {
                 "s": s.copy(),
                 "metrics": res_m,
-                "diverged": res_d,
-                "diverged_at": res_t,
+                "failed": res_d,
+                "stopped_at": res_t,
                 "seconds": secs,
                 **scores,
             }
@@ -577,7 +577,10 @@ def tune(
     best_metrics = (
         None
         if div_all[ib]
-        else {k: float(v) for k, v in zip(L.METRIC_NAMES, met_all[ib], strict=True)}
+        else {
+            k: float(v) if np.isfinite(v) else None
+            for k, v in zip(L.SCORE_NAMES, met_all[ib], strict=True)
+        }
     )
     config = config_with_values(prep.config.raw, prep.config.controller, best_values)
     return TuneResult(
@@ -589,7 +592,7 @@ def tune(
         values=values,
         objective=obj_all,
         generation=gen_idx.astype(np.int64),
-        diverged=div_all,
+        failed=div_all,
         history=history,
         config=config,
         source=prep.source,
@@ -603,8 +606,8 @@ def tune(
 def _scores(
     prep: _Prepared,
     metrics: NDArray[np.float64],
-    diverged: NDArray[np.bool_],
-    diverged_at: NDArray[np.float64],
+    failed: NDArray[np.bool_],
+    stopped_at: NDArray[np.float64],
     values: NDArray[np.float64] | None = None,
 ) -> dict[str, NDArray[Any]]:
     """Per-candidate objective (and for NSGA-II ``F``, ``G``, constraint values).
@@ -615,7 +618,7 @@ def _scores(
     from aiofl.tuning.robust import objective_matrix, robust_objective
 
     st = prep.settings
-    cand_div = diverged.any(axis=1) if diverged.ndim == 2 else diverged
+    cand_div = failed.any(axis=1) if failed.ndim == 2 else failed
     kind, alpha = (st.robust.aggregate, st.robust.alpha) if st.robust else ("nominal", 0.9)
     if prep.objectives:
         cap = 2.0 * st.divergence_penalty
@@ -624,23 +627,23 @@ def _scores(
         if values is not None and any(q.is_margin for q in named):
             from aiofl.tuning.margins import candidate_margins
 
-            nominal_div = diverged[:, 0] if diverged.ndim == 2 else diverged
+            nominal_div = failed[:, 0] if failed.ndim == 2 else failed
             margins = candidate_margins(prep.config, prep.space.names, values, nominal_div)
         F, G, raw = objective_matrix(
-            prep.objectives, prep.constraints, metrics, diverged, kind, alpha, cap, margins
+            prep.objectives, prep.constraints, metrics, failed, kind, alpha, cap, margins
         )
         feasible = (G <= 0).all(axis=1)
         obj = np.where(feasible, F[:, 0], cap)  # history: the first objective when feasible
         return {"objective": obj, "candidate_diverged": cand_div, "F": F, "G": G, "raw": raw}
     if st.robust is None:
         obj = objective_values(
-            metrics, diverged, diverged_at, prep.coefficients, st.divergence_penalty, st.t_final
+            metrics, failed, stopped_at, prep.coefficients, st.divergence_penalty, st.t_final
         )
     else:
         obj = robust_objective(
             metrics,
-            diverged,
-            diverged_at,
+            failed,
+            stopped_at,
             prep.coefficients,
             st.divergence_penalty,
             st.t_final,

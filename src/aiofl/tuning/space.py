@@ -304,8 +304,8 @@ def objective_coefficients(settings: TuneSettings, config: RunConfig) -> NDArray
 
 def objective_values(
     metrics: NDArray[np.float64],
-    diverged: NDArray[np.bool_],
-    diverged_at: NDArray[np.float64],
+    failed: NDArray[np.bool_],
+    stopped_at: NDArray[np.float64],
     coefficients: NDArray[np.float64],
     penalty: float,
     t_final: float,
@@ -315,10 +315,10 @@ def objective_values(
     A non-finite :math:`c^T m` also scores :math:`2P`.  Every value is finite.
     """
     with np.errstate(all="ignore"):
-        j = metrics @ coefficients
-    frac = np.clip(np.nan_to_num(diverged_at / t_final, nan=0.0), 0.0, 1.0)
+        j = metrics[..., : L.N_METRIC] @ coefficients  # the integrals (SCORE_NAMES' first)
+    frac = np.clip(np.nan_to_num(stopped_at / t_final, nan=0.0), 0.0, 1.0)
     pen = penalty * (2.0 - frac)
-    j = np.where(diverged, pen, j)
+    j = np.where(failed, pen, j)
     return np.where(np.isfinite(j), j, 2.0 * penalty)
 
 
