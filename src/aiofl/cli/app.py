@@ -579,6 +579,7 @@ register_feature("export", "aiofl.cli.export:export_command")
 register_feature("robustness", "aiofl.cli.robustness:robustness_command")
 register_feature("trim", "aiofl.cli.trim:trim_command")
 register_feature("design", "aiofl.cli.design:design_command")
+register_feature("report", "aiofl.cli.report:report_command")
 
 
 def _finish_commands() -> None:

@@ -48,7 +48,7 @@ __all__ = [
     "window_for",
 ]
 
-Kind = Literal["diverged", "tracks", "bounded", "growing"]
+Kind = Literal["lost", "diverged", "tracks", "bounded", "growing"]
 
 WINDOW = 5.0
 """Default measurement window [s]: the last 5 s of the run."""
@@ -123,6 +123,7 @@ def measure(
     *,
     failed: bool = False,
     stopped_at: float | None = None,
+    status: str = "diverged",
     window: float = WINDOW,
     tolerance: float = TOLERANCE,
 ) -> Behaviour:
@@ -132,8 +133,9 @@ def measure(
     ----------
     t, y, r
         Stored time points [s], output and reference (same length).
-    diverged, stopped_at
-        The engine's divergence flag and time [s].
+    failed, stopped_at, status
+        Whether the engine stopped the run, when [s], and why (``"lost"``: the plant left
+        its envelope; ``"diverged"``: the numbers blew up).
     window
         Length of the final window [s].
     tolerance
@@ -144,7 +146,7 @@ def measure(
     Behaviour
     """
     if failed:
-        return Behaviour("diverged", window, stopped_at=stopped_at)
+        return Behaviour("lost" if status == "lost" else "diverged", window, stopped_at=stopped_at)
     t = np.asarray(t, dtype=np.float64)
     e = np.asarray(y, dtype=np.float64) - np.asarray(r, dtype=np.float64)
     r_abs = np.abs(np.asarray(r, dtype=np.float64))
@@ -184,6 +186,7 @@ def measure_result(result: SimulationResult, t_final: float) -> Behaviour:
         result["r"] if result.t.size else (),
         failed=result.failed,
         stopped_at=result.stopped_at,
+        status=result.status,
         window=window_for(t_final),
     )
 
@@ -295,9 +298,10 @@ def simulation_text(b: Behaviour, unit: str, tolerance: float = TOLERANCE) -> st
     """What the run did, as a clause (``"the simulation tracks: max |e| ... = 0.01 rad"``)."""
     u = f" {unit}" if unit and unit != "-" else ""
     w = f"over the last {_g(b.window)} s"
-    if b.kind == "failed":
+    if b.kind in ("lost", "diverged"):
         at = f" at t = {b.stopped_at:.2f} s" if b.stopped_at is not None else ""
-        return f"the simulation diverges{at}"
+        what = "loses the plant" if b.kind == "lost" else "diverges"
+        return f"the simulation {what}{at}"
     assert b.max_abs_error is not None and b.error_amplitude is not None
     rel = b.relative_error
     share = f", {_pct(rel)} of the reference peak" if rel is not None else ""
@@ -361,7 +365,7 @@ def reconcile(verdict: Mapping[str, Any], behaviour: Behaviour, unit: str = "") 
         first = str(verdict["orbit"]["verdict"])
         if stable_orbit and k == "tracks":
             why = "they agree: the run follows the stable orbit"
-        elif not stable_orbit and k in ("diverged", "growing"):
+        elif not stable_orbit and k in ("lost", "diverged", "growing"):
             why = "they agree"
         elif stable_orbit and k == "bounded":
             why = "no contradiction: a stable orbit need not be within the tracking tolerance"
@@ -377,12 +381,14 @@ def reconcile(verdict: Mapping[str, Any], behaviour: Behaviour, unit: str = "") 
     near = "near the operating point (constant r" + (
         f", secant gains at error amplitude ε = {_g(float(eps))})" if eps is not None else ")"
     )
-    agree = (v == "unstable" and k in ("diverged", "growing")) or (v == "stable" and k == "tracks")
+    agree = (v == "unstable" and k in ("lost", "diverged", "growing")) or (
+        v == "stable" and k == "tracks"
+    )
     if agree:
         why = "they agree"
     elif v == "unstable":
         why = f"they differ: the verdict holds {near}; the run follows a moving reference"
-    elif v == "stable" and k in ("diverged", "growing"):
+    elif v == "stable" and k in ("lost", "diverged", "growing"):
         why = f"they differ: the verdict holds {near}; the run leaves that neighbourhood"
     elif v == "stable":
         why = "no contradiction: a loop stable near its operating point need not track"

@@ -176,7 +176,8 @@ def _draw_row(axes: Sequence[Axes], p: Panel, letters: Sequence[str]) -> None:
         for ax in (ax_y, ax_e, ax_u):
             ax.axvline(at, **DIVERGED_STYLE)
         for ax in (ax_e, ax_u):
-            ax.set_title(f"diverged at t = {at:.2f} s", fontsize=8.5, loc="right", color="crimson")
+            title = f"{res.status} at t = {at:.2f} s"
+            ax.set_title(title, fontsize=8.5, loc="right", color="crimson")
     for t_ev, _text in p.events:
         if _inside(t_ev, p.t_final):
             for ax in (ax_y, ax_e, ax_u):

@@ -99,6 +99,8 @@ def _how_runs_end(rep: Reproduction, recs: dict[str, dict[str, Any]]) -> str | N
         if kind in groups:
             items = [f"{r.case.preset} ({_err(r, rec)})" for r, rec in groups[kind]]
             parts.append(f"{len(items)} {what}: {', '.join(items)}")
+    if "lost" in groups:
+        parts.append(f"{len(groups['lost'])} lose the plant (leave its envelope)")
     if "diverged" in groups:
         parts.append(f"{len(groups['diverged'])} diverge")
     tol = fmt(first["tolerance"], 3)
@@ -134,7 +136,7 @@ def _verdict_vs_simulation(rep: Reproduction, recs: dict[str, dict[str, Any]]) -
             reconciled.append(f"{r.case.preset} (μ = {fmt(mu, 2)}{cyc})")
         elif lin["verdict"] == "unstable" and beh in ("tracks", "bounded"):
             unstable_bounded.append((r, beh, mr))
-        elif lin["verdict"] == "stable" and beh in ("diverged", "growing"):
+        elif lin["verdict"] == "stable" and beh in ("lost", "diverged", "growing"):
             stable_diverged.append((r, beh, mr))
     parts = []
     if reconciled:

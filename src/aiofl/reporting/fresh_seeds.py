@@ -165,7 +165,7 @@ def fresh_rows(rep: Reproduction) -> list[list[str]]:
             continue
         rec = run.record
         seed0 = (
-            [f"diverged at t = {rec['stopped_at']:.2f} s", DASH]
+            [f"{rec['status']} at t = {rec['stopped_at']:.2f} s", DASH]
             if rec["failed"]
             else [fmt(rec["itae"], 3), fmt(rec["isu"], 3)]
         )

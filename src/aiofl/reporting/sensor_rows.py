@@ -106,12 +106,14 @@ def _key(cfg: Any) -> tuple[Any, ...]:
     return (id(cfg.plant), cfg.scenario.t_final, cfg.dt, cfg.method, cfg.divergence_threshold)
 
 
-def _entry(itae: Any, isu: Any, diverged: bool, at: Any, sensor: str) -> dict[str, Any]:
+def _entry(itae: Any, isu: Any, status: str, at: Any, sensor: str) -> dict[str, Any]:
+    failed = status != "ok"
     return {
-        "itae": None if diverged else float(itae),
-        "isu": None if diverged else float(isu),
-        "failed": bool(diverged),
-        "stopped_at": float(at) if diverged else None,
+        "itae": None if failed else float(itae),
+        "isu": None if failed else float(isu),
+        "status": status,
+        "failed": failed,
+        "stopped_at": float(at) if failed else None,
         "sensor": sensor,
     }
 
@@ -146,7 +148,7 @@ def compute_sensor_table(
             results.setdefault(case.preset, {})["ideal"] = _entry(
                 known["itae"],
                 known["isu"],
-                known["failed"],
+                known.get("status", "diverged" if known["failed"] else "ok"),
                 known["stopped_at"],
                 cfgs["ideal"].sensor.describe(),
             )
@@ -180,7 +182,7 @@ def compute_sensor_table(
             results.setdefault(preset, {})[key] = _entry(
                 m[L.METRIC_NAMES.index("itae")],
                 m[L.METRIC_NAMES.index("isu")],
-                bool(res.failed[j]),
+                L.STATUS_NAMES[int(res.status[j])],
                 res.stopped_at[j],
                 cfg.sensor.describe(),
             )
@@ -246,7 +248,7 @@ def _cells(got: dict[str, Any] | None) -> list[str]:
     if got is None:
         return [DASH, DASH]
     if got["failed"]:
-        return [f"diverged at t = {got['stopped_at']:.2f} s", DASH]
+        return [f"{got.get('status', 'failed')} at t = {got['stopped_at']:.2f} s", DASH]
     return [fmt(got["itae"], 3), fmt(got["isu"], 3)]
 
 

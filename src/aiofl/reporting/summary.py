@@ -109,9 +109,11 @@ def paper_winner(scenario: int) -> tuple[str, str] | None:
 
 
 def _does(run: CaseRun, rec: dict[str, Any]) -> str:
-    """What a run does, briefly: ``diverges at t = 12.42 s``, ``tracks (max |e| 0.002 rad)``."""
+    """What a run does, briefly: ``diverges at t = 12.42 s``, ``loses the plant at t = 0.43
+    s``, ``tracks (max |e| 0.002 rad)``."""
     if rec["failed"]:
-        return f"diverges at t = {rec['stopped_at']:.2f} s"
+        verb = "loses the plant" if rec.get("status") == "lost" else "diverges"
+        return f"{verb} at t = {rec['stopped_at']:.2f} s"
     tr = rec.get("tracking") or {}
     kind, err = tr.get("behaviour"), tr.get("max_abs_error")
     what = {"tracks": "tracks", "bounded": "stays bounded", "growing": "grows"}.get(kind, "runs")

@@ -1,0 +1,280 @@
+"""A report for any design (``aiofl report CONFIG``): the page ``aiofl reproduce`` writes for
+the paper, for the user's own config.
+
+:func:`design_report` runs and measures the design and :func:`design_html` renders it:
+
+- the verdict (:mod:`aiofl.engine.loop`: ok, lost or diverged, with the time and, for a lost
+  plant, the bound it left), the integrals of eq. (22), the step metrics and the command's
+  figures (peak, noise at steady state, saturation: :mod:`aiofl.engine.response`);
+- the trajectory figure (output and reference, error, command);
+- the operating point (:func:`aiofl.plants.operating_point.trim` at r(0));
+- the margins of the linearised continuous loop
+  (:func:`aiofl.analysis.linearize.closed_loop_verdict`) and, for a sampled design, the
+  spectral radius of its linearised sampled loop
+  (:class:`aiofl.analysis.sampled_loop.SampledLoop`), each labelled: the continuous figures
+  of a sampled design are a limit, not what the processor runs;
+- the design with its own sensor beside the ideal one (a limit), and on 16- and 12-bit
+  encoders when the output is an angle;
+- with an ``[uncertainty]`` table, its draws and box corners
+  (:func:`aiofl.analysis.corners.run_box_robustness`, without the worst-case search and
+  the β/b0 range, which ``aiofl robustness`` adds).
+
+Every part that cannot be computed for a design says why instead of failing the report.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+from aiofl import layout as L
+from aiofl.reporting.page import details, escape, html_table, img, item_list, page
+from aiofl.reporting.verdict import command_text, step_text, verdict_text
+
+__all__ = ["DesignReport", "design_html", "design_report"]
+
+#: encoder presets a design whose output is an angle is also measured with
+ENCODERS = ("encoder-16bit", "encoder-12bit")
+
+
+@dataclass
+class DesignReport:
+    """What :func:`design_report` measured (plain data, ready for JSON but ``figure``)."""
+
+    label: str
+    record: dict[str, Any]
+    verdict: str
+    lines: list[str]
+    figure: bytes
+    operating_point: dict[str, Any] | None
+    operating_text: str
+    margins: list[tuple[str, str]]
+    sensors: list[list[str]]
+    robustness: dict[str, Any] | None
+    notes: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The report's numbers (``report.json``)."""
+        return {
+            "config": self.label,
+            "run": self.record,
+            "verdict": self.verdict,
+            "operating_point": self.operating_point,
+            "margins": dict(self.margins),
+            "sensors": self.sensors,
+            "robustness": self.robustness,
+            "notes": self.notes,
+        }
+
+
+def _r0(cfg: Any) -> float:
+    ref = cfg.scenario.reference
+    if ref.kind == "sine":
+        return float(ref.offset + ref.amplitude * math.sin(ref.phase))
+    if ref.kind == "step":
+        return float(ref.offset)
+    return float(ref.samples[0]) if ref.samples else 0.0
+
+
+def _fmt(x: Any, digits: int = 4) -> str:
+    if x is None or (isinstance(x, float) and not math.isfinite(x)):
+        return "—"
+    return f"{x:.{digits}g}" if isinstance(x, float) else str(x)
+
+
+def _margins(cfg: Any) -> tuple[list[tuple[str, str]], list[str]]:
+    """The labelled margin rows, and notes on what could not be computed."""
+    from aiofl.analysis.linearize import closed_loop_verdict
+
+    rows: list[tuple[str, str]] = []
+    notes: list[str] = []
+    cont = "continuous loop" + (" (the controller unsampled: a limit)" if cfg.sampling else "")
+    try:
+        v = closed_loop_verdict(cfg)
+        rows += [
+            (f"{cont}: verdict", str(v.get("verdict"))),
+            (f"{cont}: gain margin [dB]", _fmt(v.get("gain_margin_db"))),
+            (f"{cont}: phase margin [deg]", _fmt(v.get("phase_margin_deg"))),
+            (f"{cont}: delay margin [s]", _fmt(v.get("delay_margin_s"))),
+            (f"{cont}: Ms", _fmt(v.get("ms"))),
+        ]
+    except Exception as exc:  # a loop the linearisation cannot take: said, not fatal
+        notes.append(f"continuous linearisation not computed ({type(exc).__name__}: {exc})")
+    if cfg.sampling is not None:
+        from aiofl.analysis.sampled_loop import SampledLoop
+
+        try:
+            loop = SampledLoop(cfg)
+            rho = loop.spectral_radius(cfg.sampling.ts)
+            word = "n/a" if rho is None else ("stable" if rho < 1.0 else "unstable")
+            rows.append(
+                (
+                    f"sampled loop at Ts = {cfg.sampling.ts:g} s: spectral radius",
+                    f"{_fmt(rho, 6)} ({word})",
+                )
+            )
+        except Exception as exc:  # as above
+            notes.append(f"sampled linearisation not computed ({type(exc).__name__}: {exc})")
+    return rows, notes
+
+
+def _sensor_rows(cfg: Any) -> list[list[str]]:
+    """The design with its own sensor, the ideal one and, for an angle, the encoders."""
+    from dataclasses import replace
+
+    runs: list[tuple[str, Any]] = [(f"its own: {cfg.sensor.describe()}", cfg)]
+    if not cfg.sensor.is_ideal or cfg.sampling is not None:
+        ideal = replace(cfg, sampling=None)
+        ideal = replace(ideal, scenario=replace(ideal.scenario, noise_variance=0.0))
+        runs.append(("ideal sensor, continuous controller (a limit)", ideal))
+    if cfg.plant.output_unit == "rad":
+        for preset in ENCODERS:
+            try:
+                runs.append((preset, cfg.with_sensor(preset)))
+            except Exception:  # a config the preset contradicts: left out
+                continue
+    rows = []
+    for label, c in runs:
+        r = c.simulate(store=False)
+        m = r.metrics or {}
+        resp = r.response
+        rows.append(
+            [
+                label,
+                r.status + (f" at {r.stopped_at:.3g} s" if r.failed else ""),
+                _fmt(m.get("itae")),
+                _fmt(m.get("isu")),
+                _fmt(resp.get("u_peak")),
+                _fmt(resp.get("u_noise")),
+            ]
+        )
+    return rows
+
+
+def design_report(cfg: Any, label: str, *, draws: int | None = None) -> DesignReport:
+    """Run and measure ``cfg`` (a :class:`~aiofl.config.RunConfig`) for its report."""
+    from aiofl.plants.operating_point import trim
+    from aiofl.reporting.cases import computed_record
+    from aiofl.reporting.figures import figure_png, result_figure, scenario_events
+
+    result = cfg.simulate(store=True)
+    record = computed_record(
+        result,
+        scenario=None,
+        structure=cfg.controller.structure,
+        source="config",
+        opi=result.opi(cfg.weights),
+        extra=True,
+    )
+    lines = [
+        t
+        for t in (
+            step_text(result, cfg.plant.output_unit),
+            command_text(result, cfg.scenario.t_final, cfg.plant.input_unit),
+        )
+        if t
+    ]
+    fig = result_figure(
+        result,
+        f"{label}: output vs reference, tracking error and control signal",
+        cfg.scenario.t_final,
+        cfg.controller.structure,
+        cfg.scenario.reference.evaluate,
+        scenario_events(cfg.scenario, cfg.plant.disturbance_unit),
+        output_unit=cfg.plant.output_unit,
+        input_unit=cfg.plant.input_unit,
+    )
+    notes: list[str] = []
+    try:
+        point = trim(cfg.plant, _r0(cfg), x_guess=cfg.scenario.x0 or None)
+        op, op_text = point.to_dict(), point.text(cfg.plant.output_unit, cfg.plant.input_unit)
+    except ValueError as exc:
+        op, op_text = None, f"no operating point: {exc}"
+    margins, why = _margins(cfg)
+    notes += why
+    robust = None
+    if cfg.uncertainty is not None:
+        from aiofl.analysis.corners import run_box_robustness
+
+        res = run_box_robustness(cfg, draws=draws, search=False, beta=False)
+        robust = res.to_dict()
+    return DesignReport(
+        label=label,
+        record=record,
+        verdict=verdict_text(cfg, result),
+        lines=lines,
+        figure=figure_png(fig),
+        operating_point=op,
+        operating_text=op_text,
+        margins=margins,
+        sensors=_sensor_rows(cfg),
+        robustness=robust,
+        notes=notes,
+    )
+
+
+def _robust_html(rob: dict[str, Any]) -> list[str]:
+    counts = rob.get("status_counts", {})
+    q = rob["itae"]
+    rows = [
+        ["draws", str(rob["draws"])],
+        ["stable (neither lost nor diverged)", f"{100 * rob['stable_fraction']:.1f} %"],
+        [
+            "ok / lost / diverged",
+            " / ".join(str(counts.get(k, 0)) for k in L.STATUS_NAMES.values()),
+        ],
+        ["ITAE q50 / q95 / max", " / ".join(_fmt(q[k]) for k in ("q50", "q95", "max"))],
+    ]
+    w = rob["worst"]
+    rows.append(
+        [
+            "worst draw",
+            f"{w['status']}"
+            + (f" at {w['stopped_at']:.3g} s" if w.get("stopped_at") is not None else "")
+            + f", ITAE {_fmt(w['itae'])}, factors "
+            + ", ".join(f"{k} × {v:.3g}" for k, v in w["factors"].items()),
+        ]
+    )
+    c = rob.get("corners")
+    if c is not None:
+        rows.append(["box corners stable", f"{c['stable']} of {c['count']} ({c['design']})"])
+    table = html_table(["", ""], rows, cls="settings")
+    return ["<h2>Robustness over the [uncertainty] draws</h2>", table]
+
+
+def design_html(rep: DesignReport, description: str = "") -> str:
+    """``report.html`` of a design (one self-contained page, :mod:`aiofl.reporting.page`)."""
+    now = _dt.datetime.now().astimezone().strftime("%Y-%m-%d %H:%M %Z")
+    rec = rep.record
+    body = [
+        f"<h1>Design report: {escape(rep.label)}</h1>",
+        f'<p class="muted">{escape(description)} Generated by <code>aiofl report</code> on '
+        f"{escape(now)}.</p>",
+        "<h2>What the plant did</h2>",
+        f"<p><strong>{escape(rep.verdict)}</strong></p>",
+        html_table(
+            ["ITAE", "IAE", "ISE", "ISU", "IAU", "OPI"],
+            [[_fmt(rec.get(k)) for k in ("itae", "iae", "ise", "isu", "iau", "opi")]],
+        ),
+        item_list(rep.lines, "notes"),
+        *img({"figure.png": rep.figure}, "figure.png", "output, error and command"),
+        "<h2>Operating point</h2>",
+        f"<pre>{escape(rep.operating_text)}</pre>",
+        "<h2>Margins (each labelled with the loop it is of)</h2>",
+        html_table(["Loop and figure", "Value"], [list(r) for r in rep.margins], cls="settings")
+        if rep.margins
+        else "<p>none computed</p>",
+        "<h2>Sensors</h2>",
+        html_table(
+            ["Sensor", "Verdict", "ITAE", "ISU", "peak |u|", "noise in u"],
+            rep.sensors,
+            cls="settings",
+        ),
+    ]
+    if rep.robustness is not None:
+        body += _robust_html(rep.robustness)
+    if rep.notes:
+        body.append(details("Notes", [item_list(rep.notes, "notes")], heading=True))
+    return page(f"aiofl design report: {rep.label}", body)

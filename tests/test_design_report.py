@@ -1,0 +1,70 @@
+"""aiofl report: a page for any design, from the pieces reproduce's page is made of."""
+
+from __future__ import annotations
+
+import json
+from html.parser import HTMLParser
+from pathlib import Path
+
+from typer.testing import CliRunner
+
+from aiofl.cli.app import app
+
+DATA = Path(__file__).parent / "data"
+
+
+class _Tags(HTMLParser):
+    def __init__(self) -> None:
+        super().__init__()
+        self.open: list[str] = []
+        self.text: list[str] = []
+
+    def handle_starttag(self, tag: str, attrs: object) -> None:
+        if tag not in ("img", "meta", "br"):
+            self.open.append(tag)
+
+    def handle_endtag(self, tag: str) -> None:
+        assert self.open and self.open[-1] == tag, (tag, self.open[-5:])
+        self.open.pop()
+
+    def handle_data(self, data: str) -> None:
+        self.text.append(data)
+
+
+def _page_text(path: Path) -> str:
+    p = _Tags()
+    p.feed(path.read_text())
+    assert p.open == []  # every element closed, in order
+    return " ".join(p.text)
+
+
+def test_report_of_a_users_design(tmp_path):
+    out = tmp_path / "rep"
+    res = CliRunner().invoke(app, ["report", str(DATA / "maglev-ladrc.toml"), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    text = _page_text(out / "report.html")
+    assert "What the plant did" in text and "ok (the plant stayed" in text
+    assert "overshoot" in text and "Operating point" in text and "UNSTABLE" in text
+    data = json.loads((out / "report.json").read_text())
+    assert data["run"]["status"] == "ok"
+    assert data["margins"]["continuous loop: verdict"] == "stable"
+    assert data["operating_point"]["open_loop_unstable"] is True
+    assert (out / "figure.png").read_bytes()[:4] == b"\x89PNG"
+    # an existing OUT is refused without --force, as by every command
+    res = CliRunner().invoke(app, ["report", str(DATA / "maglev-ladrc.toml"), "-o", str(out)])
+    assert res.exit_code == 2 and "--force" in res.output
+
+
+def test_report_of_a_sampled_design_with_uncertainty(tmp_path):
+    out = tmp_path / "rep"
+    res = CliRunner().invoke(app, ["report", "assisted-s1-ladrc", "-o", str(out), "--draws", "4"])
+    assert res.exit_code == 0, res.output
+    text = _page_text(out / "report.html")
+    assert "(the controller unsampled: a limit)" in text
+    assert "sampled loop at Ts = 0.001 s: spectral radius" in text
+    assert "Robustness over the [uncertainty] draws" in text
+    data = json.loads((out / "report.json").read_text())
+    assert data["robustness"]["draws"] == 4
+    assert sum(data["robustness"]["status_counts"].values()) == 4
+    labels = [row[0] for row in data["sensors"]]
+    assert labels[1].startswith("ideal sensor") and "encoder-12bit" in labels
