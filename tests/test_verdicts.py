@@ -198,3 +198,27 @@ def test_a_quantised_command_that_screams_is_ok_and_flagged_not_diverged():
     assert res.response["u_peak"] > 1e4
     assert screaming(res.response)
     assert "SCREAMING" in command_text(res, cfg.scenario.t_final, "V")
+
+
+def test_response_figures_are_tuning_quantities():
+    from aiofl import layout as L
+    from aiofl.tuning.robust import parse_constraint, parse_quantity, quantity_values
+    from aiofl.tuning.space import objective_values
+
+    q = parse_quantity("overshoot:worst")
+    c = parse_constraint("settling_time <= 0.3")
+    assert q.metric == "overshoot" and c.quantity.metric == "settling_time"
+    # two candidates, two draws each (nominal first): the scores of SCORE_NAMES
+    m = np.full((2, 2, L.N_SCORE), np.nan)
+    m[..., : L.N_METRIC] = 1.0
+    over = L.SCORE_NAMES.index("overshoot")
+    m[0, :, over] = [5.0, 9.0]
+    m[1, :, over] = [2.0, np.nan]  # a step metric that does not apply counts as +inf
+    failed = np.zeros((2, 2), dtype=bool)
+    got = quantity_values(q, m, failed, "mean", 0.9)
+    assert got[0] == 9.0 and got[1] == math.inf
+    # the integrals' objective ignores the figures' NaN columns
+    coef = np.zeros(L.N_METRIC)
+    coef[L.METRIC_NAMES.index("itae")] = 1.0
+    j = objective_values(m[:, 0, :], failed[:, 0], np.full(2, np.nan), coef, 1e6, 1.0)
+    assert j.tolist() == [1.0, 1.0]

@@ -36,6 +36,9 @@ def trim_command(
     json_out: Annotated[
         Path | None, typer.Option("--json", help="Also write the operating point as JSON.")
     ] = None,
+    force: Annotated[
+        bool, typer.Option("--force", help="Replace an existing --json file.")
+    ] = False,
 ) -> None:
     """Solve for the equilibrium that holds the output: state, holding input, beta there,
     open-loop poles and stability.
@@ -56,6 +59,8 @@ def trim_command(
                 raise ValueError(f"--x0 = {x0!r}; allowed: n comma-separated numbers") from None
             if not all(math.isfinite(v) for v in guess):
                 raise ValueError(f"--x0 = {x0!r}; allowed: finite numbers")
+        if json_out is not None and json_out.exists() and not force:
+            raise ValueError(f"--json = {str(json_out)!r} exists; give --force to replace it")
         if y is not None and not math.isfinite(y):
             raise ValueError(f"--y = {y!r}; allowed: a finite number")
         is_config = False
