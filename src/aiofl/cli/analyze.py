@@ -152,10 +152,11 @@ def analyze_command(
                 format_linearization_text,
                 linearize_closed_loop,
             )
-            from aiofl.config import ConfigError, PlantFileGiven, load_config
+            from aiofl.cli.configs import load_run_config
+            from aiofl.config import ConfigError, PlantFileGiven
 
             try:
-                cfg = load_config(target)
+                cfg = load_run_config(target)
             except PlantFileGiven:
                 raise ConfigError(
                     f"{target} is a plant file; --closed-loop wants a run config (one that "

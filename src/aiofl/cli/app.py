@@ -389,7 +389,8 @@ def simulate_command(
     """
     import json
 
-    from aiofl.config import ConfigError, load_config
+    from aiofl.cli.configs import load_run_config
+    from aiofl.config import ConfigError
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 
     console = _stderr_console()
@@ -397,7 +398,7 @@ def simulate_command(
         out = _out_or_check(out, check)
         if out is not None:
             _check_out(out, force=force)
-        cfg = load_config(config)
+        cfg = load_run_config(config)
         if method is not None and method not in ("rk4", "euler"):
             raise ConfigError(f"--method = {method!r}; allowed: rk4, euler")
         given = {"--dt": dt, "--t-final": t_final, "--method": method}

@@ -114,7 +114,7 @@ def export_command(
     --params-only adds NAME_<params-name>.h/.c to OUT instead, typically the folder of an
     earlier export, keeping its other files; only files of the same name need --force.
     """
-    from aiofl.config import load_config
+    from aiofl.cli.configs import load_run_config
     from aiofl.export import PRECISIONS, ExportError
     from aiofl.export.c_code import MAX_INSTANCE
     from aiofl.export.c_text import c_prefix
@@ -137,7 +137,7 @@ def export_command(
             raise ValueError("--params-name applies only with --params-only")
         if not params_only:  # --params-only adds to OUT: checked per file below
             _check_out(out, force=force)
-        own = load_config(config)
+        own = load_run_config(config)
         cfg, sampling = _sampling(own, ts)
         opts: dict[str, Any] = {"precision": precision, "prefix": prefix}
         if params_only:

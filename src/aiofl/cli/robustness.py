@@ -129,7 +129,7 @@ def robustness_command(
     measures with a sensor preset.  An existing non-empty OUT is refused unless --force."""
     from aiofl.analysis.corners import run_box_robustness
     from aiofl.analysis.robustness import robustness_figure, run_robustness
-    from aiofl.config import load_config
+    from aiofl.cli.configs import load_run_config
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
     from aiofl.uncertainty import MAX_DRAWS, sample_draws
 
@@ -143,7 +143,7 @@ def robustness_command(
         if seed is not None and not 0 <= seed < 2**63:
             raise ValueError(f"--seed = {seed}; allowed: 0 <= S < 2**63")
         _check_out(out, force=force)
-        cfg = load_config(config)
+        cfg = load_run_config(config)
         if sensor:
             cfg = cfg.with_sensor(sensor, source=f"{config} with --sensor {sensor}")
         if cfg.uncertainty is None:

@@ -72,7 +72,7 @@ def run_sampling(
     rounds, :mod:`aiofl.analysis.budget`)."""
     from aiofl.analysis.budget import time_budget
     from aiofl.analysis.sampling import sampling_figure, sampling_limits
-    from aiofl.config import load_config
+    from aiofl.cli.configs import load_run_config
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 
     with bad_input_exits():
@@ -80,7 +80,7 @@ def run_sampling(
             raise ValueError(f"--tolerance = {tolerance}; allowed: > 0")
         if out is not None:
             _check_out(out, force=force)
-        cfg = load_config(target)
+        cfg = load_run_config(target)
     with bad_input_exits(run=True):
         with time_budget(budget):
             lim = sampling_limits(cfg, tolerance=tolerance)
