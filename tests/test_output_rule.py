@@ -136,3 +136,26 @@ def test_make_run_replaces_its_results_folder() -> None:
     text = (ROOT / "Makefile").read_text()
     run = [ln for ln in text.splitlines() if "aiofl reproduce" in ln and ln.startswith("\t")]
     assert run and all("--force" in ln for ln in run)
+
+
+def test_an_infeasible_nsga2_run_leaves_no_checkpoint(tmp_path: Path) -> None:
+    """Issue 34 item 6: a finished NSGA-II run with no feasible design exited 2 and left
+    OUT/checkpoint.npz behind (nothing to resume: the same run finds the same nothing)."""
+    import tomllib
+
+    from aiofl.config import preset_text
+    from aiofl.tuning.space import to_toml
+
+    data = tomllib.loads(preset_text("frontier-s1-ladrc"))
+    data["tune"].update(
+        constraints=["isu:nominal <= -1"], population=4, generations=1, t_final=0.05
+    )
+    del data["tune"]["robust"]
+    data["tune"]["objectives"] = ["itae:nominal", "isu:nominal"]
+    cfg = tmp_path / "infeasible.toml"
+    cfg.write_text(to_toml(data), encoding="utf-8")
+    out = tmp_path / "out"
+    res = _invoke("tune", str(cfg), "--out", str(out), "--quiet")
+    assert res.exit_code == 2 and "no design of the 4 evaluated" in res.stderr
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["infeasible.toml"]  # no staging

@@ -28,5 +28,5 @@ def load_run_config(config: str | Path) -> Any:
     if cfg.raw.get("tune") is not None:
         from aiofl.tuning.search import prepare
 
-        prepare(cfg)
+        prepare(config)  # as `aiofl tune CONFIG` calls it: the messages name CONFIG alike
     return cfg
