@@ -118,7 +118,6 @@ def check_quantum_range(key: str, quantum: float, scenario: Any, plant: Any = No
         )
 
 
-
 def _number(name: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ValueError(f"sensor.{name} = {value!r}; allowed: a number")
