@@ -89,7 +89,8 @@ def tune_command(
     prints the search it would run.  An existing non-empty OUT is refused unless --force
     (then it is replaced as a whole) or --resume continues the checkpoint it holds.
     """
-    from aiofl.tuning.checkpoint import CHECKPOINT, load_checkpoint
+    from aiofl.tuning.checkpoint import CHECKPOINT, discard_new_checkpoint, load_checkpoint
+    from aiofl.tuning.front import NoFeasibleDesign
     from aiofl.tuning.results import write_outputs
     from aiofl.tuning.search import prepare, tune
 
@@ -120,6 +121,7 @@ def tune_command(
     if check or out is None:
         typer.echo(f"{config}: valid; {check_text(prep)}; nothing run or written")
         return
+    found = (out.exists(), (out / CHECKPOINT).exists())  # what this run leaves is its own
     with bad_input_exits(run=True):
         try:
             result = tune(
@@ -140,6 +142,9 @@ def tune_command(
                 err=True,
             )
             raise typer.Exit(130) from None
+        except NoFeasibleDesign:  # a finished run without a result: nothing to resume
+            discard_new_checkpoint(out, found)
+            raise
         summary = write_outputs(result, out)
     for note in summary["notes"]:
         typer.echo(f"aiofl: note: {note}", err=True)

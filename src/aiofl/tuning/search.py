@@ -487,8 +487,6 @@ def tune(
     prep = prepare(run_config, tune_settings, **overrides)
     st, space, spec = prep.settings, prep.space, prep.spec
     ckpt = Path(checkpoint_dir) / CHECKPOINT if checkpoint_dir is not None else None
-    # what this run finds: a checkpoint it writes anew is removed if no design is feasible
-    found = (ckpt.parent.exists(), ckpt.exists()) if ckpt is not None else (True, True)
     cached: list[dict[str, Any]] = []
     if resume and ckpt is not None and ckpt.exists():
         cached = load_checkpoint(ckpt, prep.fingerprint)
@@ -569,13 +567,9 @@ def tune(
     values = space.decode(s_all)
     front = None
     if prep.objectives:
-        from aiofl.tuning.front import NoFeasibleDesign, front_index, front_of_run
+        from aiofl.tuning.front import front_index, front_of_run
 
-        try:
-            front = front_of_run(prep, gens, values)
-        except NoFeasibleDesign:
-            _discard_checkpoint(ckpt, *found)  # a finished run with no result to resume
-            raise
+        front = front_of_run(prep, gens, values)
         ib = front_index(front, values)
     else:
         ib = int(np.argmin(obj_all))
@@ -604,20 +598,6 @@ def tune(
         live_seconds=float(state["live_s"]),
         front=front,
     )
-
-
-def _discard_checkpoint(ckpt: Path | None, folder_existed: bool, existed: bool) -> None:
-    """Remove the checkpoint a run wrote (not one it found and continued), and its folder if
-    the run created it and nothing else is in it but the aiofl marker."""
-    if ckpt is None or existed:
-        return
-    from aiofl.outputs import MARKER
-
-    ckpt.unlink(missing_ok=True)
-    folder = ckpt.parent
-    if not folder_existed and folder.is_dir() and {p.name for p in folder.iterdir()} <= {MARKER}:
-        (folder / MARKER).unlink(missing_ok=True)
-        folder.rmdir()
 
 
 def _scores(
