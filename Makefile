@@ -16,8 +16,10 @@ $(STAMP): pyproject.toml $(CONSTRAINTS)
 	$(BIN)/pip install -q -c $(CONSTRAINTS) -e '.[test]'
 	touch $(STAMP)
 
+# --force: `make run` regenerates $(OUT) (every aiofl command refuses an existing non-empty
+# --out without it; aiofl replaces only a folder it wrote, as a whole)
 run: $(STAMP)
-	$(BIN)/aiofl reproduce --out $(OUT)
+	$(BIN)/aiofl reproduce --out $(OUT) --force
 
 # the tests run on every core (pytest-xdist; a test file stays on one worker, so its
 # fixtures are built once); they share one kernel cache (tests/conftest.py)

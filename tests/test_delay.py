@@ -143,11 +143,18 @@ omega = 20.0
 omega_c = 10.0
 [controller.law]
 b0 = 26833.0
+[controller.discrete]
+ts = 1e-3
 [simulation]
 dt = 1e-4
 """
     cfg = parse_config(tomllib.loads(text))
     assert cfg.scenario.input_delay == 0.002 and cfg.scenario.output_delay == 0.001
+    # a continuous controller cannot hold a delay: refused when read (issue 34 item 5: it
+    # was accepted, and `aiofl simulate` then failed with a traceback)
+    continuous = text.replace("[controller.discrete]\nts = 1e-3\n", "")
+    with pytest.raises(ConfigError, match=r"scenario\.input_delay = 0\.002 s needs a sampled"):
+        parse_config(tomllib.loads(continuous))
     with pytest.raises(ConfigError, match="input_delay"):
         parse_config(tomllib.loads(text.replace("input_delay = 0.002", "input_delay = -1.0")))
     with pytest.raises(ConfigError, match="output_delay"):

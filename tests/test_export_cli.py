@@ -108,7 +108,8 @@ def test_float_export_checks_that_float_holds(tmp_path, monkeypatch):
     import aiofl.export.c_check as cc
 
     monkeypatch.setattr(cc, "FLOAT_ISU_TOL", 1e-9)  # any rounding now "does not hold"
-    res = _run(["frontier-s1-ladrc", "--ts", "1e-3", "--precision", "float", "--out", str(out)])
+    args = ["frontier-s1-ladrc", "--ts", "1e-3", "--precision", "float", "--out", str(out)]
+    res = _run([*args, "--force"])
     assert res.exit_code == 0, res.output
     assert "float does not hold for frontier-s1-ladrc" in res.output
     assert "export with --precision double" in res.output

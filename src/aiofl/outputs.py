@@ -18,6 +18,15 @@ its name) is no longer alive (:func:`remove_stale`).
 An existing ``out`` is replaced only if it is empty or was written by aiofl (it holds the
 marker file :data:`MARKER`), so ``--out .`` or ``--out ~/papers`` never deletes a user's
 files: :func:`check_replaceable` refuses such a directory before any work is done.
+
+**One rule for existing outputs** (every ``aiofl`` command that writes): an existing
+non-empty ``--out`` (or an existing output file, ``aiofl analyze --figure``) is refused
+unless ``--force`` is given; with ``--force`` a folder aiofl wrote is replaced as a whole,
+a file atomically.  The commands apply it through ``check_replaceable(out, force=...)`` /
+:func:`check_file_replaceable` before any work.  The one command that adds to a folder
+instead of replacing it, ``aiofl export --params-only`` (another parameter instance beside
+an exported controller), uses :func:`add_files`: the folder's other files are kept, and
+only a file of the same name needs ``--force``.
 """
 
 from __future__ import annotations
@@ -33,9 +42,12 @@ from pathlib import Path
 __all__ = [
     "MARKER",
     "OutputDirError",
+    "add_files",
     "atomic_output_dir",
     "atomic_write_bytes",
     "atomic_write_text",
+    "check_addable",
+    "check_file_replaceable",
     "check_replaceable",
     "ensure_output_dir",
     "is_aiofl_dir",
@@ -133,6 +145,70 @@ def ensure_output_dir(out: str | Path) -> Path:
     if not (out / MARKER).exists():
         atomic_write_text(out / MARKER, _MARKER_TEXT)
     return out
+
+
+def check_file_replaceable(path: str | Path, *, force: bool, option: str = "--out") -> None:
+    """Refuse an output *file* ``path`` that must not be written (the rule of the module
+    docstring): a directory, a folder that does not exist or is not writable, or an
+    existing file without ``force``.  ``option`` names the path in the message.
+
+    Raises
+    ------
+    OutputDirError
+        Naming ``option``, ``path`` and ``--force``.
+    """
+    path = Path(path)
+    where = f"{option} {str(path)!r}"
+    if path.is_dir():
+        raise OutputDirError(f"{where} is a directory; give a file name")
+    parent = _absolute(path).parent
+    if not parent.is_dir():
+        raise OutputDirError(f"{where}: folder {str(path.parent)!r} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputDirError(f"{where}: the folder {str(parent)!r} is not writable")
+    if (path.exists() or path.is_symlink()) and not force:
+        raise OutputDirError(
+            f"{where} exists; pass --force to replace it, or choose another file name"
+        )
+
+
+def check_addable(out: str | Path, names: Iterable[str], *, force: bool) -> None:
+    """Refuse an ``out`` that :func:`add_files` cannot add the files ``names`` to: a file, a
+    non-empty folder aiofl did not write, or (without ``force``) one that already holds a
+    file of one of these names."""
+    out = Path(out)
+    check_replaceable(out, force=True)
+    present = sorted(name for name in names if (out / name).exists())
+    if present and not force:
+        raise OutputDirError(
+            f"--out {str(out)!r} already holds {', '.join(present)}; pass --force to replace "
+            "them (the folder's other files are kept), or choose other names"
+        )
+
+
+def add_files(out: str | Path, files: dict[str, str | bytes], *, force: bool) -> None:
+    """Write ``files`` (name -> text or bytes) into the folder ``out``, keeping its other
+    files (``aiofl export --params-only``).
+
+    ``out`` is created (an aiofl output folder, with :data:`MARKER`) if it does not exist;
+    an existing ``out`` must be empty or written by aiofl (:func:`check_replaceable`).  A
+    file of the same name already there is replaced only with ``force``; every name is
+    checked before anything is written, and each file is written atomically.
+
+    Raises
+    ------
+    OutputDirError
+        ``out`` cannot be used, or a file exists and ``force`` is false (naming the files
+        and ``--force``).
+    """
+    out = Path(out)
+    check_addable(out, files, force=force)
+    ensure_output_dir(out)
+    for name, data in files.items():
+        if isinstance(data, bytes):
+            atomic_write_bytes(out / name, data)
+        else:
+            atomic_write_text(out / name, data)
 
 
 _LEFTOVER = re.compile(r"^\.(?P<name>.+)\.(?:staging|trash)-(?P<pid>\d+)-[^/]*$")

@@ -43,7 +43,9 @@ from aiofl.scenario import realisation_seed
 __all__ = [
     "SENSOR_PRESETS",
     "Sensor",
+    "check_quantum_range",
     "encoder_quantum",
+    "output_range",
     "realisation_seed",
 ]
 
@@ -65,6 +67,55 @@ SENSOR_PRESETS: dict[str, dict[str, float]] = {
 FIELDS = ("ts", "quantum", "noise_variance", "noise_hold", "noise_seed")
 #: largest sample time [s] (as [controller.discrete] ts)
 TS_MAX = 1.0
+#: largest measurement quantum accepted whatever the scenario (:func:`check_quantum_range`)
+QUANTUM_MAX = 1e6
+
+
+def output_range(scenario: Any, plant: Any = None) -> float:
+    """The largest absolute value the output is asked to take in ``scenario``: the reference over
+    the horizon (4097 points, and a samples reference's values) and, given ``plant``, the
+    initial output :math:`h(x_0)`."""
+    ref = scenario.reference
+    t = np.linspace(0.0, scenario.t_final, 4097)
+    values = [float(np.max(np.abs(ref.evaluate(t))))]
+    if ref.kind == "samples":
+        n = min(len(ref.samples), int(scenario.t_final / ref.sample_dt) + 1)
+        values.append(float(np.max(np.abs(ref.samples[:n]))))
+    if plant is not None:
+        try:
+            y0 = float(plant.output(np.asarray(scenario.x0 or [0.0] * plant.n_states)))
+        except (ValueError, ArithmeticError, TypeError):
+            y0 = 0.0
+        values.append(abs(y0) if math.isfinite(y0) else 0.0)
+    return max(values)
+
+
+def check_quantum_range(key: str, quantum: float, scenario: Any, plant: Any = None) -> None:
+    """Refuse a measurement quantum larger than every value the output takes in ``scenario``
+    (:func:`output_range`; ``[sensor] quantum = 1e300`` ran, every reading 0): such a
+    sensor measures nothing.  ``key`` names the field in the message.  A scenario whose
+    output stays at 0 (regulation at 0 from rest) has no range to compare with: only
+    :data:`QUANTUM_MAX` applies.
+
+    Raises
+    ------
+    ValueError
+        Naming ``key``, its value and the allowed range.
+    """
+    span = output_range(scenario, plant)
+    limit = min(span, QUANTUM_MAX) if span > 0 else QUANTUM_MAX
+    if quantum > limit:
+        unit = f" {plant.output_unit}" if plant is not None and plant.output_unit else ""
+        why = (
+            f"larger than the output's range in this scenario (|r| and |y(0)| <= {span:.4g}"
+            f"{unit}): every reading would be 0 or one count"
+            if span > 0 and span <= QUANTUM_MAX
+            else f"larger than {QUANTUM_MAX:g}"
+        )
+        raise ValueError(
+            f"{key} = {quantum:g} is {why}; allowed: 0 (none) or {QUANTUM_MIN:g} <= quantum "
+            f"<= {limit:.4g}"
+        )
 
 
 def _number(name: str, value: Any) -> float:

@@ -227,7 +227,7 @@ def _config(
 ) -> dict[str, Any]:
     """The run config of a proposal: the LADRC, a step of ``span`` about ``y`` from rest at
     the operating point, horizon and step from the bandwidth."""
-    t_step = round(2.0 / wc, 6) or 1e-3
+    t_step = round(10.0 / wc, 6) or 1e-3  # after the start (u from 0) has settled
     dt = _dt_for(w0, ts)
     t_final = _nice_up(t_step + 40.0 / wc)
     t_final = dt * math.ceil(t_final / dt - 1e-9)

@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from aiofl.analysis.budget import BudgetExceeded, time_budget
 from aiofl.analysis.derivatives import COMPLEX_STEP
 from aiofl.analysis.orbit_loop import OrbitLoop
 from aiofl.analysis.variational import (
@@ -360,6 +361,14 @@ def reconciled_text(info: dict[str, Any], unit: str = "") -> tuple[str, str]:
         short.insert(0, "tracking diverges")
     elif info.get("orbit_error"):
         parts.append(f"tracking orbit not analysed ({info['orbit_error']})")
+    gave_up = info.get("gave_up")
+    if gave_up:
+        what = " and ".join(gave_up["parts"])
+        parts.append(
+            f"{what} not determined: gave up after {_g(gave_up['seconds'], 3)} s (the time "
+            "budget, aiofl analyze --budget)"
+        )
+        short.append(f"gave up after {_g(gave_up['seconds'], 3)} s")
     return "; ".join(parts), "; ".join(short)
 
 
@@ -380,7 +389,12 @@ linearisation alone could contradict the simulation (1–9 s per design otherwis
 
 
 def orbit_analysis(
-    cfg: Any, verdict: dict[str, Any] | None = None, *, unit: str = "", quick: bool = False
+    cfg: Any,
+    verdict: dict[str, Any] | None = None,
+    *,
+    unit: str = "",
+    quick: bool = False,
+    budget: float | None = None,
 ) -> dict[str, Any]:
     """The reconciled verdict of a run config (module docstring).
 
@@ -394,6 +408,11 @@ def orbit_analysis(
         The plant's output unit, for the sentence.
     quick
         The cheaper settings :data:`QUICK` (for ``aiofl reproduce``).
+    budget
+        Seconds the analysis may take (None: no limit; :mod:`aiofl.analysis.budget`).  A
+        part not finished when it is spent (the limit cycle, the tracking orbit) is left
+        out, ``"gave_up"`` says so (``{"seconds", "parts"}``) and the verdict calls it not
+        determined.
 
     Returns
     -------
@@ -405,13 +424,9 @@ def orbit_analysis(
         "seconds": wall time}``, and ``"notes"`` when a plant function's Jacobian came
         from finite differences (:class:`aiofl.analysis.derivatives.PlantDerivatives`).
     """
-    from aiofl.analysis.linearize import closed_loop_verdict, linearize_closed_loop
+    from aiofl.analysis.linearize import closed_loop_verdict
 
     t_start = time.perf_counter()
-    q = QUICK if quick else {}
-    simulate_cycle = q.get("simulate_cycle", True)
-    points = {k: q[k] for k in ("points",) if k in q}
-    periods = {k: q[k] for k in ("passes", "settle", "rtol") if k in q}
     v = verdict if verdict is not None else closed_loop_verdict(cfg)
     out: dict[str, Any] = {
         "equilibrium": v.get("verdict", "not analysed"),
@@ -421,6 +436,36 @@ def orbit_analysis(
         "ftle": None,
     }
     loops: list[OrbitLoop] = []
+    gave_up: list[str] = []
+    with time_budget(budget):
+        _orbit_parts(cfg, v, out, loops, gave_up, QUICK if quick else {})
+    if gave_up:
+        out["gave_up"] = {"seconds": budget, "parts": gave_up}
+    notes = list(dict.fromkeys(n for lp in loops for n in lp.derivatives.notes))
+    if notes:  # a plant function differentiated by finite differences
+        out["notes"] = notes
+    out["verdict"], out["short"] = reconciled_text(out, unit)
+    out["seconds"] = time.perf_counter() - t_start
+    return out
+
+
+def _orbit_parts(
+    cfg: Any,
+    v: dict[str, Any],
+    out: dict[str, Any],
+    loops: list[OrbitLoop],
+    gave_up: list[str],
+    q: dict[str, Any],
+) -> None:
+    """The limit cycle and the tracking orbit of :func:`orbit_analysis` (with the settings
+    ``q``: :data:`QUICK` or none), into ``out``; a part stopped by the time budget is named
+    in ``gave_up``."""
+    from aiofl.analysis.linearize import linearize_closed_loop
+
+    simulate_cycle = q.get("simulate_cycle", True)
+    points = {k: q[k] for k in ("points",) if k in q}
+    periods = {k: q[k] for k in ("passes", "settle", "rtol") if k in q}
+
     if out["equilibrium"] == "unstable":
         try:
             lin = linearize_closed_loop(cfg, amplitude=float(v.get("amplitude", 1e-3)))
@@ -438,6 +483,11 @@ def orbit_analysis(
             out["limit_cycle"] = lc
         except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
             out["limit_cycle_error"] = f"{type(exc).__name__}: {exc}"
+        except BudgetExceeded:
+            gave_up.append("limit cycle")
+    if gave_up:  # the budget is spent: the tracking orbit would give up at once
+        gave_up.append("tracking orbit")
+        return
     skip_orbit = out["equilibrium"] == "stable" and not q.get("orbit_when_stable", True)
     try:
         loop = _loop(cfg)
@@ -452,12 +502,8 @@ def orbit_analysis(
         out["orbit_diverges"] = str(exc)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:
         out["orbit_error"] = f"{type(exc).__name__}: {exc}"
-    notes = list(dict.fromkeys(n for lp in loops for n in lp.derivatives.notes))
-    if notes:  # a plant function differentiated by finite differences
-        out["notes"] = notes
-    out["verdict"], out["short"] = reconciled_text(out, unit)
-    out["seconds"] = time.perf_counter() - t_start
-    return out
+    except BudgetExceeded:
+        gave_up.append("tracking orbit")
 
 
 def format_orbit_text(info: dict[str, Any]) -> str:

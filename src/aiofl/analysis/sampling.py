@@ -62,6 +62,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from aiofl.analysis.budget import budget_spent
 from aiofl.config import RunConfig
 from aiofl.engine.discrete import Sampling
 from aiofl.engine.simulation import simulate_batch
@@ -158,6 +159,7 @@ class SamplingLimits:
     delay_ts: float | None = None
     delay_margin_sampled: float | None = None
     delay_margin_continuous: float | None = None
+    gave_up: float | None = None  # the time budget [s] that stopped the refining, if any
 
     @property
     def criteria(self) -> str:
@@ -213,6 +215,7 @@ class SamplingLimits:
             ],
             "engine_calls": self.engine_calls,
             "seconds": self.seconds,
+            "gave_up_after_s": self.gave_up,
         }
 
 
@@ -318,6 +321,12 @@ def sampling_limits_many(
         Apply criterion 1 (the linearised sampled loop's spectral radius).
     on_round
         Called as ``on_round(round, members)`` after each round.
+
+    Notes
+    -----
+    Inside a time budget (:func:`aiofl.analysis.budget.time_budget`) the refining rounds
+    stop once it is spent: the brackets are then the coarser ones found so far and
+    ``gave_up`` holds the budget (the first round, the ladder, always runs).
     """
     if not tolerance > 0:
         raise ValueError(f"tolerance = {tolerance}; allowed: > 0")
@@ -340,7 +349,12 @@ def sampling_limits_many(
     }
     calls = 0
     rnd = 0
+    gave_up = None
     while any(todo.values()):
+        if rnd > 0:
+            gave_up = budget_spent()
+            if gave_up is not None:
+                break
         calls += _run_round(searches, todo)
         rnd += 1
         if on_round is not None:
@@ -358,7 +372,7 @@ def sampling_limits_many(
             if ks:
                 todo[i] = sorted(ks)
     seconds = time.perf_counter() - t0
-    return [_limits(s, tolerance, calls, seconds) for s in searches]
+    return [replace(_limits(s, tolerance, calls, seconds), gave_up=gave_up) for s in searches]
 
 
 def _limits(s: _Search, tolerance: float, calls: int, seconds: float) -> SamplingLimits:

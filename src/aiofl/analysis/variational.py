@@ -77,6 +77,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from aiofl.analysis.budget import check_budget
+
 __all__ = [
     "OrbitDiverges",
     "Oscillation",
@@ -143,13 +145,26 @@ def trajectory(
 ) -> Any:
     r""":func:`scipy.integrate.solve_ivp` (BDF, exact Jacobian, dense output) of
     :math:`\dot z = F(t, z)`; absolute tolerance ``rtol`` × the typical magnitudes
-    ``scale`` (default :math:`|z_0|`, floored)."""
+    ``scale`` (default :math:`|z_0|`, floored).  Every evaluation of F checks the time
+    budget (:func:`aiofl.analysis.budget.check_budget`): a spent budget raises
+    :class:`~aiofl.analysis.budget.BudgetExceeded` out of the solver."""
     from scipy.integrate import solve_ivp
+
+    def budgeted(t: float, z: Vector) -> Vector:
+        check_budget()
+        return f(t, z)
 
     z0 = np.asarray(z0, dtype=np.float64)
     sc = np.abs(z0) if scale is None else np.asarray(scale, dtype=np.float64)
     sol = solve_ivp(
-        f, (t0, t1), z0, method="BDF", jac=jac, rtol=rtol, atol=_atol(sc, rtol), dense_output=True
+        budgeted,
+        (t0, t1),
+        z0,
+        method="BDF",
+        jac=jac,
+        rtol=rtol,
+        atol=_atol(sc, rtol),
+        dense_output=True,
     )
     if not sol.success:
         raise ArithmeticError(f"integration failed: {sol.message}")
@@ -207,6 +222,7 @@ def variational_flow(
         )
     )
     for a, b in itertools.pairwise(fine):
+        check_budget()
         tm = 0.5 * (a + b)
         jw = jac(tm, sol.sol(tm)) * d[None, :] / d[:, None]
         phi = expm_small((b - a) * jw) @ phi
@@ -481,6 +497,7 @@ def harmonic_balance(
     state = {"v": np.asarray(mode0, dtype=np.complex128)}
 
     def evaluate(a: float) -> tuple[complex, tuple[float, ...], tuple[float, ...]]:
+        check_budget()
         v = state["v"]
         lam, amps, gains = 0j, (), ()
         for _ in range(fixed_point):

@@ -28,10 +28,14 @@ sympy, numpy and the engine are imported inside the command, so registering it k
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated
 
 import typer
+
+from aiofl.analysis.budget import DEFAULT_BUDGET
+from aiofl.cli.errors import FORCE_OPTION
 
 __all__ = ["analyze_command"]
 
@@ -93,11 +97,22 @@ def analyze_command(
             "one reconciled verdict (aiofl.analysis.orbit).",
         ),
     ] = True,
+    budget: Annotated[
+        float,
+        typer.Option(
+            "--budget",
+            help="Seconds the orbit analysis (--closed-loop) or the refining of the sample-"
+            "time ladder (--sampling) may take; when spent it stops and the output says "
+            "what it gave up.",
+        ),
+    ] = DEFAULT_BUDGET,
+    force: Annotated[bool, FORCE_OPTION] = False,
 ) -> None:
     """Analyse a plant symbolically (Section III), a closed loop by linearisation, or the
-    sample times a design tolerates (--sampling)."""
+    sample times a design tolerates (--sampling).
+
+    An existing --figure file or non-empty --out is refused unless --force."""
     import json
-    import math
 
     from rich.console import Console
 
@@ -111,7 +126,10 @@ def analyze_command(
                 raise ValueError(
                     "--sampling is not combined with --closed-loop, --latex, --r-op, --figure"
                 )
-        run_sampling(target, as_json=as_json, out=out, tolerance=tolerance)
+            _check_budget_option(budget)
+        run_sampling(
+            target, as_json=as_json, out=out, tolerance=tolerance, force=force, budget=budget
+        )
         return
     with bad_input_exits():
         if out is not None:
@@ -123,8 +141,9 @@ def analyze_command(
             raise ValueError(f"--amplitude = {amplitude}; allowed: finite and > 0")
         if r_op is not None and not math.isfinite(r_op):
             raise ValueError(f"--r-op = {r_op}; allowed: a finite number")
+        _check_budget_option(budget)
         if figure is not None:
-            _check_figure_path(figure, closed_loop)
+            _check_figure_path(figure, closed_loop, force=force)
         if closed_loop:
             if latex:
                 raise ValueError("--latex applies to the plant analysis, not to --closed-loop")
@@ -133,10 +152,11 @@ def analyze_command(
                 format_linearization_text,
                 linearize_closed_loop,
             )
-            from aiofl.config import ConfigError, PlantFileGiven, load_config
+            from aiofl.cli.configs import load_run_config
+            from aiofl.config import ConfigError, PlantFileGiven
 
             try:
-                cfg = load_config(target)
+                cfg = load_run_config(target)
             except PlantFileGiven:
                 raise ConfigError(
                     f"{target} is a plant file; --closed-loop wants a run config (one that "
@@ -161,7 +181,7 @@ def analyze_command(
             if orbit and r_op is None:
                 from aiofl.analysis.orbit import orbit_analysis
 
-                info["orbit"] = orbit_analysis(cfg, info, unit=cfg.plant.output_unit)
+                info["orbit"] = orbit_analysis(cfg, info, unit=cfg.plant.output_unit, budget=budget)
                 info["reconciled_verdict"] = info["orbit"]["verdict"]
             if figure is not None:
                 from aiofl.analysis.frequency import loop_figure_bytes
@@ -203,9 +223,16 @@ def analyze_command(
             console.print(format_analysis_text(analysis))
 
 
-def _check_figure_path(figure: Path, closed_loop: bool) -> None:
-    """Refuse a ``--figure`` that cannot be written, before any work is done."""
+def _check_budget_option(budget: float) -> None:
+    if not (math.isfinite(budget) and budget > 0):
+        raise ValueError(f"--budget = {budget}; allowed: a finite number of seconds > 0")
+
+
+def _check_figure_path(figure: Path, closed_loop: bool, *, force: bool) -> None:
+    """Refuse a ``--figure`` that cannot be written, before any work is done: an existing
+    file without ``--force`` too (:func:`aiofl.outputs.check_file_replaceable`)."""
     from aiofl.analysis.frequency import FIGURE_FORMATS
+    from aiofl.outputs import check_file_replaceable
 
     if not closed_loop:
         raise ValueError("--figure applies only with --closed-loop")
@@ -215,7 +242,4 @@ def _check_figure_path(figure: Path, closed_loop: bool) -> None:
             f"--figure {str(figure)!r}: file type {suffix or '(none)'!r}; allowed: "
             + ", ".join(f".{f}" for f in FIGURE_FORMATS)
         )
-    if figure.is_dir():
-        raise ValueError(f"--figure {str(figure)!r} is a directory; give a file name")
-    if not figure.resolve().parent.is_dir():
-        raise ValueError(f"--figure {str(figure)!r}: folder {str(figure.parent)!r} does not exist")
+    check_file_replaceable(figure, force=force, option="--figure")

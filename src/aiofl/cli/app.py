@@ -35,7 +35,13 @@ from typing import Annotated, Any, Literal
 import typer
 from typer.core import TyperCommand, TyperGroup
 
-from aiofl.cli.errors import SENSOR_OPTION, _check_out, _out_or_check, bad_input_exits
+from aiofl.cli.errors import (
+    FORCE_OPTION,
+    SENSOR_OPTION,
+    _check_out,
+    _out_or_check,
+    bad_input_exits,
+)
 
 __all__ = ["EXAMPLES", "app", "main"]
 
@@ -356,9 +362,7 @@ def simulate_command(
         float | None,
         typer.Option("--t-final", help="Override the horizon [s] (0 < t_final <= 1e4)."),
     ] = None,
-    force: Annotated[
-        bool, typer.Option("--force", help="Replace an existing non-empty OUT.")
-    ] = False,
+    force: Annotated[bool, FORCE_OPTION] = False,
     check: Annotated[
         bool,
         typer.Option(
@@ -386,7 +390,8 @@ def simulate_command(
     """
     import json
 
-    from aiofl.config import ConfigError, load_config
+    from aiofl.cli.configs import load_run_config
+    from aiofl.config import ConfigError
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 
     console = _stderr_console()
@@ -394,7 +399,7 @@ def simulate_command(
         out = _out_or_check(out, check)
         if out is not None:
             _check_out(out, force=force)
-        cfg = load_config(config)
+        cfg = load_run_config(config)
         if method is not None and method not in ("rk4", "euler"):
             raise ConfigError(f"--method = {method!r}; allowed: rk4, euler")
         given = {"--dt": dt, "--t-final": t_final, "--method": method}
@@ -520,6 +525,7 @@ def reproduce_command(
             "the robustness rows; 0 skips them.",
         ),
     ] = 100,
+    force: Annotated[bool, FORCE_OPTION] = False,
 ) -> None:
     """Reproduce the paper: Tables I–III, Figures 3–5 and report.html in OUT.
 
@@ -529,6 +535,8 @@ def reproduce_command(
     shipped Pareto fronts.  Writes metrics.json, sampling.json, tables.md, fig3.png,
     fig4.png, fig5.png, fronts-s1.png / fronts-s3.png (when fronts are shipped),
     noise-front-s3.png (when scenario 3's noise fronts are shipped) and report.html.
+    An existing non-empty OUT is refused unless --force (then it is replaced as a whole;
+    `make run` passes it).
     """
     import time
 
@@ -537,7 +545,7 @@ def reproduce_command(
 
     t0 = time.perf_counter()
     with bad_input_exits():
-        _check_out(out)
+        _check_out(out, force=force)
     # a spinner on a terminal; one line per stage (with elapsed seconds) in a log
     with bad_input_exits(run=True), StageProgress(_stderr_console()) as progress:
         rep = reproduce(out, on_stage=progress.stage, ts=ts, draws=draws)

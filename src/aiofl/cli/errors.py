@@ -14,7 +14,7 @@ from pathlib import Path
 
 import typer
 
-__all__ = ["EXIT_BAD_INPUT", "SENSOR_OPTION", "bad_input_exits"]
+__all__ = ["EXIT_BAD_INPUT", "FORCE_OPTION", "SENSOR_OPTION", "bad_input_exits"]
 
 EXIT_BAD_INPUT = 2
 
@@ -30,12 +30,13 @@ def _input_errors(run: bool) -> tuple[type[BaseException], ...]:
     return (ConfigError, PlantError, ValueError, OSError, tomllib.TOMLDecodeError)
 
 
-def _check_out(out: Path, *, force: bool = True) -> None:
+def _check_out(out: Path, *, force: bool) -> None:
     """Reject an ``--out`` that the command could not replace, before any work.
 
-    A file, a non-empty directory aiofl did not write, or (``force=False``, ``aiofl
-    simulate`` without ``--force``) any non-empty directory, a folder that cannot be created
-    (:func:`aiofl.outputs.check_replaceable`).  The staging and trash folders that killed
+    The one rule of every command that writes a folder (:mod:`aiofl.outputs`): a file, a
+    non-empty directory aiofl did not write, without ``force`` (the command's
+    :data:`FORCE_OPTION`) any non-empty directory, and a folder that cannot be created are
+    refused (:func:`aiofl.outputs.check_replaceable`).  The staging and trash folders that killed
     runs left next to ``out`` are removed now (:func:`aiofl.outputs.remove_stale`), so a
     run that then fails still cleans up.
     """
@@ -79,3 +80,10 @@ SENSOR_OPTION = typer.Option(
     "encoder-16bit): sets the config's [sensor] preset (its noise keys kept).",
 )
 """The ``--sensor PRESET`` option of simulate, robustness and tune."""
+
+FORCE_OPTION = typer.Option(
+    "--force",
+    help="Replace an existing non-empty OUT (a folder aiofl wrote, as a whole); without it "
+    "an existing non-empty OUT is refused.",
+)
+"""The ``--force`` option of every command that writes (one rule: :mod:`aiofl.outputs`)."""

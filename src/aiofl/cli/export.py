@@ -32,7 +32,7 @@ from typing import Annotated, Any, Literal
 import typer
 
 from aiofl import layout as L
-from aiofl.cli.errors import _check_out, bad_input_exits
+from aiofl.cli.errors import FORCE_OPTION, _check_out, bad_input_exits
 
 __all__ = ["FORMATS", "export_command"]
 
@@ -107,13 +107,24 @@ def export_command(
     tolerance: Annotated[
         float, typer.Option(help="ITAE allowance of the sampled over the continuous design.")
     ] = 0.1,
+    force: Annotated[bool, FORCE_OPTION] = False,
 ) -> None:
-    """Export the config's controller, sampled at Ts, as C99 (NAME_controller.h/.c in OUT)."""
-    from aiofl.config import load_config
+    """Export the config's controller, sampled at Ts, as C99 (NAME_controller.h/.c in OUT).
+
+    An existing non-empty OUT is refused unless --force (then it is replaced as a whole).
+    --params-only adds NAME_<params-name>.h/.c to OUT instead, typically the folder of an
+    earlier export, keeping its other files; only files of the same name need --force.
+    """
+    from aiofl.cli.configs import load_run_config
     from aiofl.export import PRECISIONS, ExportError
     from aiofl.export.c_code import MAX_INSTANCE
     from aiofl.export.c_text import c_prefix
-    from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
+    from aiofl.outputs import (
+        add_files,
+        atomic_output_dir,
+        atomic_write_bytes,
+        atomic_write_text,
+    )
 
     with bad_input_exits():
         if fmt not in FORMATS:
@@ -123,8 +134,11 @@ def export_command(
         c_prefix(prefix)
         if not tolerance > 0:
             raise ValueError(f"--tolerance = {tolerance}; allowed: > 0")
-        _check_out(out)
-        own = load_config(config)
+        if params_name is not None and not params_only:
+            raise ValueError("--params-name applies only with --params-only")
+        if not params_only:  # --params-only adds to OUT: checked per file below
+            _check_out(out, force=force)
+        own = load_run_config(config)
         cfg, sampling = _sampling(own, ts)
         opts: dict[str, Any] = {"precision": precision, "prefix": prefix}
         if params_only:
@@ -138,18 +152,39 @@ def export_command(
             files = FORMATS[fmt](cfg, sampling, config, opts)
         except ExportError as exc:
             raise ValueError(f"cannot export {cfg.name!r}: {exc}") from None
+        if params_only:  # the folder and the instance's own files, before any simulation
+            _check_added(out, files, force=force)
         warnings = _loop_checks(own, cfg, sampling, config, tolerance)
     if precision == "float" and not params_only:
         warnings += _float_check(cfg, sampling, config)
-    with bad_input_exits(run=True), atomic_output_dir(out) as stage:
-        for name, data in files.items():
-            if isinstance(data, bytes):
-                atomic_write_bytes(stage / name, data)
-            else:
-                atomic_write_text(stage / name, data)
+    if params_only:
+        with bad_input_exits(run=True):
+            add_files(out, files, force=force)
+        if not (out / f"{prefix}_controller.h").is_file():
+            warnings.append(
+                f"{out} holds no {prefix}_controller.h: the parameter instance needs the "
+                f"controller exported with --prefix {prefix} (same precision, rho, Ts, options)"
+            )
+    else:
+        with bad_input_exits(run=True), atomic_output_dir(out) as stage:
+            for name, data in files.items():
+                if isinstance(data, bytes):
+                    atomic_write_bytes(stage / name, data)
+                else:
+                    atomic_write_text(stage / name, data)
     typer.echo(f"wrote {out}/{', '.join(files)} (Ts = {sampling.ts:g} s, {precision})")
     for w in warnings:
         typer.echo(f"aiofl: warning: {w}", err=True)
+
+
+def _check_added(out: Path, files: dict[str, str | bytes], *, force: bool) -> None:
+    """Refuse an ``--out`` that ``--params-only`` cannot add ``files`` to: a file, a non-empty
+    folder aiofl did not write, or (without ``force``) one that holds a file of the same
+    name (:func:`aiofl.outputs.add_files` checks the same when it writes)."""
+    from aiofl.outputs import check_addable, remove_stale
+
+    check_addable(out, files, force=force)
+    remove_stale(out)
 
 
 def _sampling(cfg: Any, ts: float | None) -> tuple[Any, Any]:

@@ -19,7 +19,7 @@ from typing import Annotated, Any
 
 import typer
 
-from aiofl.cli.errors import SENSOR_OPTION, _check_out, bad_input_exits
+from aiofl.cli.errors import FORCE_OPTION, SENSOR_OPTION, _check_out, bad_input_exits
 
 __all__ = ["robustness_command"]
 
@@ -122,14 +122,15 @@ def robustness_command(
             help="Also check the box corners, search the worst case and the beta/b0 range.",
         ),
     ] = True,
+    force: Annotated[bool, FORCE_OPTION] = False,
 ) -> None:
     """Measure a design's robustness over the draws of its [uncertainty] table.
 
     Every draw has its own measurement-noise realisation (seeded from the draw); --sensor
-    measures with a sensor preset."""
+    measures with a sensor preset.  An existing non-empty OUT is refused unless --force."""
     from aiofl.analysis.corners import run_box_robustness
     from aiofl.analysis.robustness import robustness_figure, run_robustness
-    from aiofl.config import load_config
+    from aiofl.cli.configs import load_run_config
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
     from aiofl.uncertainty import MAX_DRAWS, sample_draws
 
@@ -142,8 +143,8 @@ def robustness_command(
             raise ValueError(f"--draws = {draws}; allowed: 1 <= N <= {MAX_DRAWS}")
         if seed is not None and not 0 <= seed < 2**63:
             raise ValueError(f"--seed = {seed}; allowed: 0 <= S < 2**63")
-        _check_out(out)
-        cfg = load_config(config)
+        _check_out(out, force=force)
+        cfg = load_run_config(config)
         if sensor:
             cfg = cfg.with_sensor(sensor, source=f"{config} with --sensor {sensor}")
         if cfg.uncertainty is None:

@@ -59,20 +59,31 @@ def _point_line(lim: Any, p: Any) -> str:
     )
 
 
-def run_sampling(target: str, *, as_json: bool, out: Path | None, tolerance: float) -> None:
-    """The body of ``aiofl analyze CONFIG --sampling``."""
+def run_sampling(
+    target: str,
+    *,
+    as_json: bool,
+    out: Path | None,
+    tolerance: float,
+    force: bool = False,
+    budget: float | None = None,
+) -> None:
+    """The body of ``aiofl analyze CONFIG --sampling`` (``budget``: seconds for the refining
+    rounds, :mod:`aiofl.analysis.budget`)."""
+    from aiofl.analysis.budget import time_budget
     from aiofl.analysis.sampling import sampling_figure, sampling_limits
-    from aiofl.config import load_config
+    from aiofl.cli.configs import load_run_config
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 
     with bad_input_exits():
         if not tolerance > 0:
             raise ValueError(f"--tolerance = {tolerance}; allowed: > 0")
         if out is not None:
-            _check_out(out)
-        cfg = load_config(target)
+            _check_out(out, force=force)
+        cfg = load_run_config(target)
     with bad_input_exits(run=True):
-        lim = sampling_limits(cfg, tolerance=tolerance)
+        with time_budget(budget):
+            lim = sampling_limits(cfg, tolerance=tolerance)
         info = lim.to_dict()
         if out is not None:
             import io
@@ -131,6 +142,11 @@ def run_sampling(target: str, *, as_json: bool, out: Path | None, tolerance: flo
         f"  {len(lim.points)} sampled runs in {lim.engine_calls} engine calls, "
         f"{lim.seconds:.1f} s; Ts tried up to {lim.ts_upper:g} s",
     ]
+    if lim.gave_up is not None:
+        lines.append(
+            f"  gave up refining after {lim.gave_up:g} s (the time budget, --budget): the "
+            "limits are those of the coarser ladder above"
+        )
     if lim.ts_max is None and not lim.continuous_diverged:
         lines.append(f"  the design fails already at Ts = dt = {cfg.dt:g} s (try a smaller dt)")
     if out is not None:

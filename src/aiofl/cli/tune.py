@@ -16,7 +16,13 @@ from typing import Annotated, Any
 
 import typer
 
-from aiofl.cli.errors import SENSOR_OPTION, _check_out, _out_or_check, bad_input_exits
+from aiofl.cli.errors import (
+    FORCE_OPTION,
+    SENSOR_OPTION,
+    _check_out,
+    _out_or_check,
+    bad_input_exits,
+)
 
 __all__ = ["tune_command"]
 
@@ -66,6 +72,7 @@ def tune_command(
         ),
     ] = None,
     sensor: Annotated[str | None, SENSOR_OPTION] = None,
+    force: Annotated[bool, FORCE_OPTION] = False,
 ) -> None:
     """Tune a controller's parameters per the config's [tune] table (pymoo: GA, DE, CMA-ES
     or NSGA-II).
@@ -79,9 +86,11 @@ def tune_command(
     OUT/checkpoint.npz is updated after every generation so `--resume` continues a killed
     run with the same final result.  The results are written before the figures; a figure
     or marker that cannot be made is left out with a note.  --check only validates and
-    prints the search it would run.
+    prints the search it would run.  An existing non-empty OUT is refused unless --force
+    (then it is replaced as a whole) or --resume continues the checkpoint it holds.
     """
-    from aiofl.tuning.checkpoint import CHECKPOINT, load_checkpoint
+    from aiofl.tuning.checkpoint import CHECKPOINT, discard_new_checkpoint, load_checkpoint
+    from aiofl.tuning.front import NoFeasibleDesign
     from aiofl.tuning.results import write_outputs
     from aiofl.tuning.search import prepare, tune
 
@@ -93,8 +102,8 @@ def tune_command(
         out = _out_or_check(out, check)
         if resume and out is None:
             raise ValueError("--resume needs --out (the folder holding checkpoint.npz)")
-        if out is not None:
-            _check_out(out)
+        if out is not None:  # --resume continues the run whose checkpoint OUT holds
+            _check_out(out, force=force or (resume and (out / CHECKPOINT).is_file()))
         target: Any = config
         if sensor or ts is not None:  # the sampled controller is tuned (and written)
             from aiofl.config import load_config
@@ -112,6 +121,7 @@ def tune_command(
     if check or out is None:
         typer.echo(f"{config}: valid; {check_text(prep)}; nothing run or written")
         return
+    found = (out.exists(), (out / CHECKPOINT).exists())  # what this run leaves is its own
     with bad_input_exits(run=True):
         try:
             result = tune(
@@ -132,6 +142,9 @@ def tune_command(
                 err=True,
             )
             raise typer.Exit(130) from None
+        except NoFeasibleDesign:  # a finished run without a result: nothing to resume
+            discard_new_checkpoint(out, found)
+            raise
         summary = write_outputs(result, out)
     for note in summary["notes"]:
         typer.echo(f"aiofl: note: {note}", err=True)

@@ -106,7 +106,7 @@ from aiofl.limits import (
 )
 from aiofl.plants.base import Plant, PlantError
 from aiofl.scenario import Scenario
-from aiofl.sensor import Sensor
+from aiofl.sensor import Sensor, check_quantum_range
 from aiofl.uncertainty import UncertaintyModel
 
 __all__ = [
@@ -458,6 +458,8 @@ def parse_config(
     except ValidationError as exc:
         raise ConfigError(_format_error(exc, source) + note) from None
     sim, sc = model.simulation, model.scenario
+    if sensor_table is not None:  # its ts fills noise_hold: name it before noise_hold is checked
+        _check_sensor_ts(sensor_table.build().ts, sim.dt, source)
     try:
         check_run_size(sc.t_final, sim.dt, noise_hold=sc.noise_hold)
     except ValueError as exc:
@@ -472,8 +474,12 @@ def parse_config(
         scenario = model.scenario.build()
         discrete = model.controller.discrete
         sampling = discrete.build() if discrete is not None else None
-        for key in ("input_delay", "output_delay"):  # k·dt, bounded (held by sampled runs)
-            delay_steps(key, getattr(scenario, key), sim.dt, sampled=True)
+        for key in ("input_delay", "output_delay"):  # k·dt, bounded, held by sampled runs only
+            delay_steps(key, getattr(scenario, key), sim.dt, sampled=sampling is not None)
+        if sampling is not None and sampling.y_quantum > 0:  # a quantum the output can use
+            from_sensor = sensor_table is not None and sensor_table.build().quantum > 0
+            quantum_key = "sensor.quantum" if from_sensor else "controller.discrete.y_quantum"
+            check_quantum_range(quantum_key, sampling.y_quantum, scenario, plant)
         # the default r of Kalman observer gains: this run's measurement noise
         noise_r = measurement_noise_intensity(scenario, sampling)
         controller = model.controller.build(plant.relative_degree or 1, measurement_r=noise_r)
@@ -537,6 +543,16 @@ def _holding_input(plant: Any, scenario: Any) -> float:
         return trim(plant, float(r0), x_guess=scenario.x0 or None).u
     except ValueError as exc:
         raise ValueError(f'scenario.u_ref = "trim": {exc}') from None
+
+
+def _check_sensor_ts(ts: float | None, dt: float, source: str) -> None:
+    """Refuse a ``[sensor]`` sample time shorter than the step (e.g. 5e-324), naming
+    ``sensor.ts`` (it also becomes the noise hold, whose own check would name that)."""
+    if ts is not None and ts < dt * (1 - 1e-9):
+        raise ConfigError(
+            f"invalid config {source}:\n  sensor.ts = {ts!r} s is shorter than the step "
+            f"simulation.dt = {dt:g} s; allowed: an integer multiple of dt, dt <= ts <= 1 s"
+        )
 
 
 _SENSOR_NOISE = ("noise_variance", "noise_hold", "noise_seed")

@@ -126,6 +126,16 @@ class ScenarioModel(_Model):
                     f"scenario.{key} = {t:g} s is after the horizon t_final = "
                     f"{self.t_final:g} s; allowed: 0 <= {key} <= t_final"
                 )
+        # a delay as long as the horizon: no command (input) or no measurement (output)
+        # ever arrives within the run
+        for key in ("input_delay", "output_delay"):
+            tau = getattr(self, key)
+            if tau > 0 and tau >= self.t_final:
+                raise ValueError(
+                    f"scenario.{key} = {tau:g} s is not shorter than the horizon t_final = "
+                    f"{self.t_final:g} s: nothing it delays arrives within the run; allowed: "
+                    f"0 <= {key} < t_final"
+                )
         return self
 
     def build(self) -> Scenario:

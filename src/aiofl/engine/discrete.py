@@ -270,8 +270,9 @@ def delay_steps(key: str, tau: float, dt: float, sampled: bool) -> int:
     if not sampled:
         raise ValueError(
             f"scenario.{key} = {tau:g} s needs a sampled controller ([controller.discrete]"
-            " or sampling=): the continuous controller's command varies inside a step, so"
-            " its delayed value is not held exactly; allowed: 0"
+            " ts or [sensor] ts in a config, sampling= in Python): the continuous"
+            " controller's command varies inside a step, so its delayed value is not held"
+            " exactly; allowed: 0"
         )
     m = round(tau / dt)
     if m < 1 or abs(m * dt - tau) > 1e-9 * tau:

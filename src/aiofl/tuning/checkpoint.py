@@ -15,6 +15,10 @@ bit, and the stored results are fed back instead of simulating; then the run car
 A resumed run therefore ends with exactly the result of an uninterrupted one, for every
 pymoo algorithm (including CMA-ES, whose generator-based state cannot be pickled), and a
 finished run can be extended by resuming with more generations.
+
+A run that ends without a result (NSGA-II with no feasible design) has nothing worth
+resuming: :func:`discard_new_checkpoint` removes the checkpoint it wrote (``aiofl tune``
+calls it), and the folder if the run created it.
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ __all__ = [
     "CHECKPOINT",
     "CHECKPOINT_FORMAT",
     "check_replay",
+    "discard_new_checkpoint",
     "load_checkpoint",
     "save_checkpoint",
 ]
@@ -140,3 +145,21 @@ def check_replay(stored: dict[str, Any], s: NDArray[np.float64], generation: int
             "for other members than were stored (different pymoo version?); start over "
             "without --resume"
         )
+
+
+def discard_new_checkpoint(folder: Path, found: tuple[bool, bool]) -> None:
+    """Remove ``folder/checkpoint.npz`` written by a run that ended without a result, and
+    ``folder`` if the run created it and it holds nothing else but the aiofl marker.
+
+    ``found`` is ``(folder existed, checkpoint existed)`` before the run: a checkpoint the
+    run found (``--resume``) is kept, as is a folder that was there.
+    """
+    from aiofl.outputs import MARKER
+
+    folder_existed, existed = found
+    if existed:
+        return
+    (folder / CHECKPOINT).unlink(missing_ok=True)
+    if not folder_existed and folder.is_dir() and {p.name for p in folder.iterdir()} <= {MARKER}:
+        (folder / MARKER).unlink(missing_ok=True)
+        folder.rmdir()
