@@ -46,6 +46,7 @@ COMMANDS = {
     "robustness": ["robustness", "frontier-s1-ladrc", "--draws", "2"],
     "reproduce": ["reproduce", "--draws", "0"],
     "analyze-sampling": ["analyze", "paper-s1-leso", "--sampling"],
+    "report": ["report", "paper-s1-leso"],
 }
 
 

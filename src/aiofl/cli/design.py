@@ -11,7 +11,7 @@ from typing import Annotated
 
 import typer
 
-from aiofl.cli.errors import SENSOR_OPTION, bad_input_exits
+from aiofl.cli.errors import FORCE_OPTION, SENSOR_OPTION, bad_input_exits
 
 __all__ = ["design_command"]
 
@@ -40,7 +40,7 @@ def design_command(
     u_max: Annotated[
         float | None, typer.Option("--u-max", help="The actuator's limit (|u| <= u_max).")
     ] = None,
-    force: Annotated[bool, typer.Option("--force", help="Replace an existing OUT.")] = False,
+    force: Annotated[bool, FORCE_OPTION] = False,
 ) -> None:
     """Propose a first LADRC from the plant's operating point, sensor and sample time,
     check it in closed loop (a step about the operating point) and write it to OUT.

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from aiofl.cli.errors import _check_out, bad_input_exits
+from aiofl.cli.errors import FORCE_OPTION, _check_out, bad_input_exits
 
 __all__ = ["report_command"]
 
@@ -19,9 +19,7 @@ def report_command(
         int | None,
         typer.Option("--draws", help="Override uncertainty.draws (with an [uncertainty] table)."),
     ] = None,
-    force: Annotated[
-        bool, typer.Option("--force", help="Replace an existing non-empty OUT.")
-    ] = False,
+    force: Annotated[bool, FORCE_OPTION] = False,
 ) -> None:
     """Report one design: report.html, report.json and figure.png in OUT.
 
@@ -31,7 +29,7 @@ def report_command(
     draws and box corners."""
     import json
 
-    from aiofl.config import load_config
+    from aiofl.cli.configs import load_run_config
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
     from aiofl.uncertainty import MAX_DRAWS
 
@@ -39,7 +37,7 @@ def report_command(
         _check_out(out, force=force)
         if draws is not None and not 1 <= draws <= MAX_DRAWS:
             raise ValueError(f"--draws = {draws}; allowed: 1 <= draws <= {MAX_DRAWS}")
-        cfg = load_config(config)
+        cfg = load_run_config(config)
     from aiofl.reporting.design_report import design_html, design_report
 
     with bad_input_exits(run=True), atomic_output_dir(out) as stage:

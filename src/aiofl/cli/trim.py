@@ -13,7 +13,7 @@ from typing import Annotated
 
 import typer
 
-from aiofl.cli.errors import bad_input_exits
+from aiofl.cli.errors import FORCE_OPTION, bad_input_exits
 
 __all__ = ["trim_command"]
 
@@ -36,9 +36,7 @@ def trim_command(
     json_out: Annotated[
         Path | None, typer.Option("--json", help="Also write the operating point as JSON.")
     ] = None,
-    force: Annotated[
-        bool, typer.Option("--force", help="Replace an existing --json file.")
-    ] = False,
+    force: Annotated[bool, FORCE_OPTION] = False,
 ) -> None:
     """Solve for the equilibrium that holds the output: state, holding input, beta there,
     open-loop poles and stability.
