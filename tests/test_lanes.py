@@ -370,12 +370,14 @@ def test_sampled_divergence_is_per_lane() -> None:
     rc = load_config("retuned-s1-ladrc")
     scen = replace(rc.scenario, t_final=1.0)
     c = rc.controller
-    ctrls = [c.with_values(**{"eso.omega0": w}) for w in np.linspace(200.0, 3000.0, 20)]
-    kw = {"dt": rc.dt, "sampling": Sampling(1e-3, eso="euler")}
+    # (at Ts = 1 ms this design loses the plant whatever ω0: issue 36; at 0.2 ms the five
+    # slowest observers hold it and the Euler ESO of the others blows up)
+    ctrls = [c.with_values(**{"eso.omega0": w}) for w in np.linspace(200.0, 20000.0, 20)]
+    kw = {"dt": rc.dt, "sampling": Sampling(2e-4, eso="euler")}
     res = simulate_batch(rc.plant, ctrls, scen, engine="lanes", **kw)
     ref = simulate_batch(rc.plant, ctrls, scen, engine="scalar", **kw)
-    assert res.failed.any() and not res.failed.all()
-    np.testing.assert_array_equal(res.failed, ref.failed)
+    assert res.diverged.any() and not res.failed.all()
+    np.testing.assert_array_equal(res.status, ref.status)
     np.testing.assert_allclose(res.stopped_at, ref.stopped_at, rtol=0, atol=1e-12)
     for i in np.flatnonzero(~res.failed)[:2]:
         alone = simulate_batch(rc.plant, ctrls[i], scen, engine="lanes", **kw)

@@ -44,7 +44,7 @@ __all__ = [
 ]
 
 CHECKPOINT = "checkpoint.npz"
-CHECKPOINT_FORMAT = 1
+CHECKPOINT_FORMAT = 2  # 2: the scores of layout.SCORE_NAMES, "failed" (lost or diverged)
 
 
 def save_checkpoint(path: Path, fingerprint: str, gens: list[dict[str, Any]]) -> None:
@@ -52,7 +52,7 @@ def save_checkpoint(path: Path, fingerprint: str, gens: list[dict[str, Any]]) ->
     aiofl output directory, :func:`aiofl.outputs.ensure_output_dir`).
 
     Each generation is a dict with arrays ``s`` (unit-cube members), ``metrics``,
-    ``diverged``, ``stopped_at`` and the float ``seconds``; other keys are not stored.
+    ``failed``, ``stopped_at`` and the float ``seconds``; other keys are not stored.
     """
     from aiofl.outputs import atomic_write_bytes, ensure_output_dir
 
@@ -64,7 +64,7 @@ def save_checkpoint(path: Path, fingerprint: str, gens: list[dict[str, Any]]) ->
         )
     }
     for i, g in enumerate(gens):
-        for key in ("s", "metrics", "diverged", "stopped_at"):
+        for key in ("s", "metrics", "failed", "stopped_at"):
             arrays[f"g{i}_{key}"] = g[key]
         arrays[f"g{i}_seconds"] = np.array(g["seconds"])
     buf = io.BytesIO()
@@ -97,7 +97,7 @@ def load_checkpoint(path: Path, fingerprint: str) -> list[dict[str, Any]]:
                 )
             gens = []
             for i in range(int(meta["generations"])):
-                g = {k: data[f"g{i}_{k}"] for k in ("s", "metrics", "diverged", "stopped_at")}
+                g = {k: data[f"g{i}_{k}"] for k in ("s", "metrics", "failed", "stopped_at")}
                 g["seconds"] = float(data[f"g{i}_seconds"])
                 _check_shapes(g, i + 1)
                 gens.append(g)

@@ -150,7 +150,7 @@ def convergence_figure(result: TuneResult) -> Any:
     diverged = [r["failed"] for r in h]
     if any(diverged):
         ax2 = ax.twinx()
-        ax2.bar(gen, diverged, alpha=0.15, color="red", label="diverged")
+        ax2.bar(gen, diverged, alpha=0.15, color="red", label="lost or diverged")
         ax2.set_ylabel("diverged members")
         ax2.set_ylim(0, max(diverged) * 1.1)
         ax2.yaxis.set_major_locator(MaxNLocator(integer=True))
