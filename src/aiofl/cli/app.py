@@ -563,8 +563,10 @@ def main() -> None:
     """Entry point of the ``aiofl`` console script (BLAS limited to one thread:
     :mod:`aiofl.blas_threads`)."""
     from aiofl.blas_threads import one_blas_thread
+    from aiofl.cache import plain_cache_warnings
 
     one_blas_thread()
+    plain_cache_warnings()
     app()
 
 

@@ -13,11 +13,12 @@ file, the engine's compiled kernel of the plant is cached on disk too
 time.
 
 A module is written under a temporary name and renamed into place, so concurrent processes
-filling the same entry never import half a file; a module whose text does not match the
-digest it carries is rebuilt.  When a plant file is edited, the entries made from its older
-texts are removed, and entries unused for :data:`aiofl.cache.STALE_AFTER_DAYS` days go as
-well.  With the cache disabled (``AIOFL_NO_CACHE=1``) the plant is built in memory, as
-before.
+filling the same entry never import half a file; a module that is damaged (not UTF-8, not
+matching the digest it carries, not loading) is removed with one warning naming it and
+rebuilt (:func:`aiofl.plants.plant_modules.load_module`).  When a plant file is edited,
+the entries made from its older texts are removed, and entries unused for
+:data:`aiofl.cache.STALE_AFTER_DAYS` days go as well.  With the cache disabled
+(``AIOFL_NO_CACHE=1``) the plant is built in memory, as before.
 
 The module files themselves (their text, loading, atomic writing) are
 :mod:`aiofl.plants.plant_modules`, shared with symbolic plants built in Python.
@@ -116,7 +117,10 @@ def _prune(folder: Path, origin: str, keep: Path) -> None:
             if not entry.name.startswith("plant_") or entry.path == str(keep):
                 continue
             head = ""
-            with contextlib.suppress(OSError), open(entry.path, encoding="utf-8") as fh:
+            with (
+                contextlib.suppress(OSError),
+                open(entry.path, encoding="utf-8", errors="replace") as fh,
+            ):
                 head = fh.read(4096)
             if needle in head:
                 with contextlib.suppress(OSError):

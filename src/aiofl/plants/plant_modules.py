@@ -8,8 +8,9 @@ functions of a real module, and the engine's kernel compiled for them is cached 
 
 - :func:`module_source`: the text of a module, the generated functions and ``PLANT`` (the
   :class:`~aiofl.plants.base.Plant`'s other fields), with a digest of its text on its last
-  line (a damaged or partial file is detected and rebuilt by the caller) and, on its first
-  line, the name it is imported as: ``aiofl_plant_`` and a digest of the functions alone.
+  line (a damaged or partial file is detected, removed with a warning and rebuilt by the
+  caller) and, on its first line, the name it is imported as: ``aiofl_plant_`` and a
+  digest of the functions alone.
   A kernel loaded from numba's disk cache imports its plant functions' module by that name,
   so a plant whose parameter values changed (another file, the same functions, the same
   kernel: :mod:`aiofl.engine.code_fingerprint`) keeps it;
@@ -31,11 +32,12 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import math
+import os
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from aiofl.cache import prune_older_than, subdir, touch, write_atomic
+from aiofl.cache import discard, prune_older_than, subdir, touch, untrusted, write_atomic
 from aiofl.plants.base import Plant
 
 __all__ = [
@@ -123,31 +125,62 @@ def _digest_line(body: str) -> str:
 def load_module(module_path: Path) -> Plant | None:
     """The plant of a module file, or None if it is missing or not intact.  The module is
     executed afresh (its ``PLANT`` is this file's) and registered under the name on its
-    first line, replacing a module of the same functions loaded before."""
+    first line, replacing a module of the same functions loaded before.
+
+    A file that is not intact (not UTF-8, not matching its digest, not of this layout, not
+    loading as a plant) or not trusted (:func:`aiofl.cache.untrusted`) is removed with one
+    :class:`aiofl.cache.CacheWarning` naming it (:func:`aiofl.cache.discard`); the caller
+    builds the entry again."""
     try:
-        source = module_path.read_text(encoding="utf-8")
-    except OSError:
+        with open(module_path, "rb") as fh:
+            reason = untrusted(module_path, os.fstat(fh.fileno()))
+            raw = fh.read()
+    except FileNotFoundError:
         return None
+    except OSError as exc:
+        discard(module_path, f"it cannot be read: {exc.strerror or exc}")
+        return None
+    if reason is not None:
+        discard(module_path, f"not trusted: {reason}")
+        return None
+    try:
+        plant = _plant_of(module_path, raw)
+    except _Damaged as exc:
+        discard(module_path, str(exc))
+        return None
+    except Exception as exc:  # it does not load as a plant: rebuilt by the caller
+        discard(module_path, f"it does not load: {type(exc).__name__}: {exc}")
+        return None
+    return plant
+
+
+class _Damaged(Exception):
+    """A module file that is not intact; the message says how."""
+
+
+def _plant_of(module_path: Path, raw: bytes) -> Plant:
+    """The plant of the module file ``module_path`` whose bytes are ``raw`` (checked, then
+    executed); raises :class:`_Damaged`, or whatever executing the module raises."""
+    if not raw:
+        raise _Damaged("the file is empty")
+    try:
+        source = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise _Damaged(f"its text is not UTF-8 (byte {exc.start})") from None
     body, _, last = source.rpartition("# aiofl-digest: ")
     if not body or _digest_line(body) != f"# aiofl-digest: {last}":
-        return None  # damaged or partial: rebuilt by the caller
+        raise _Damaged("its digest does not match its text (a partial or edited file)")
     first = body.split("\n", 1)[0]
     name = first[len(_MODULE_LINE) :]
     if not first.startswith(_MODULE_LINE) or not name.isidentifier():
-        return None  # an entry of another format: rebuilt by the caller
+        raise _Damaged("its first line is not an aiofl module line")
     spec = importlib.util.spec_from_file_location(name, module_path)
     if spec is None or spec.loader is None:
-        return None
+        raise _Damaged("it cannot be imported")
     module = importlib.util.module_from_spec(spec)
-    try:
-        spec.loader.exec_module(module)
-    except Exception:  # an entry of another format: rebuilt by the caller
-        return None
-    # registered, so numba can import the functions' module by name when it loads a
-    # cached kernel of them
-    sys.modules[name] = module
+    spec.loader.exec_module(module)
     fields = dict(module.PLANT)
-    return Plant(
+    plant = Plant(
         f=module._fn_f,
         g=module._fn_g,
         h=module._fn_h,
@@ -157,6 +190,10 @@ def load_module(module_path: Path) -> Plant | None:
         state_of_xi=getattr(module, "_fn_state_of_xi", None),
         **fields,
     )
+    # registered, so numba can import the functions' module by name when it loads a
+    # cached kernel of them
+    sys.modules[name] = module
+    return plant
 
 
 def store_module(module_path: Path, source: str) -> Plant | None:
