@@ -155,7 +155,7 @@ def subdir(name: str) -> Path | None:
 def warn_damaged(path: Path | str, reason: str) -> None:
     """The one warning of a damaged cache entry ``path``, removed to be built again."""
     warnings.warn(
-        f"aiofl's cache entry {path} was damaged ({reason}); it was removed and is built again",
+        f"the cache entry {path} was damaged ({reason}); it was removed and is built again",
         CacheWarning,
         stacklevel=2,
     )
