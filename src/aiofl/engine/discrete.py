@@ -146,8 +146,8 @@ class Sampling:
     h0: float | None = None
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.ts) and self.ts > 0):
-            raise ValueError(f"controller.discrete.ts = {self.ts}; allowed: > 0 [s]")
+        if isinstance(self.ts, bool) or not (math.isfinite(self.ts) and self.ts > 0):
+            raise ValueError(f"controller.discrete.ts = {self.ts!r}; allowed: a number > 0 [s]")
         if isinstance(self.delay, bool) or self.delay not in (0, 1):
             raise ValueError(
                 f"controller.discrete.delay = {self.delay!r}; allowed: the integer 0 or 1"

@@ -70,7 +70,6 @@ from aiofl.engine.discrete import (
     STRIDE,
     TDM_FHAN,
     Sampling,
-    sampling_rows,
 )
 from aiofl.engine.loop import (
     S_BAD,
@@ -101,6 +100,7 @@ from aiofl.engine.member import (
     _aiofl_command,
 )
 from aiofl.engine.observer_gains import model_jacobians
+from aiofl.engine.sample_time import discrete_row
 
 __all__ = ["DiscreteController"]
 
@@ -539,7 +539,7 @@ class DiscreteController:
         batch = controller_batch(controller)
         # a model-assisted observer's gain is placed for the model's error map at Φ(x0)
         jac = model_jacobians(plant, batch, [x0]) if controller.eso_model != "none" else None
-        self.row = sampling_rows(batch, [sampling], sampling.ts, jac)[0]
+        self.row = discrete_row(controller, sampling, jac)  # a failing Ts named, with its range
         self._fn = _standalone(plant if controller.eso_model != "none" else None)
         self._pn = plant.param_vector() if plant is not None else np.zeros(1)
         self._q = np.zeros(N_Q)
