@@ -46,9 +46,10 @@ import numpy as np
 
 from aiofl.components.differentiators import improved_td_constants, linear_prefilter_coefficient
 from aiofl.components.feedback import fal_inner_slope, linear_sef_gain
-from aiofl.controller import Controller, controller_batch
+from aiofl.controller import Controller
 from aiofl.engine import discrete as DS
-from aiofl.engine.discrete import Sampling, sampling_rows
+from aiofl.engine.discrete import Sampling
+from aiofl.engine.sample_time import check_ts, discrete_row
 from aiofl.export.c_model import ModelCode, nominal_model
 from aiofl.export.c_text import c_prefix, check_comment_line, check_inert, comment_text
 from aiofl.export.errors import ExportError
@@ -75,7 +76,7 @@ MAX_INSTANCE = 24
 # names a parameter instance may not take: NAME_<it> would clash with the controller's
 _API_NAMES = frozenset(
     "controller params model default_params state real signal init start reset step "  # noqa: SIM905
-    "nominal_model sign abspow inleso fal inlsef_term fhan".split()
+    "nominal_model sign abspow inleso fal inlsef_term fhan fault finite usable".split()
 )
 _TD = {"exact": 0, "han": 1, "improved": 2, "linear": 3}
 _SEF = {"linear": 0, "nonlinear": 1, "improved": 2}
@@ -128,10 +129,44 @@ def _check(controller: Controller, sampling: Sampling | None, precision: str) ->
             "no sample time: give --ts or a [controller.discrete] table with ts in the config"
         )
     try:
+        check_ts(sampling.ts, "controller.discrete.ts")
         sampling.check(controller)
-    except ValueError as exc:
+    except (TypeError, ValueError) as exc:
         raise ExportError(str(exc)) from None
     return sampling
+
+
+# the parameter each field of aiofl_params comes from (for a non-finite field's message)
+_FIELD_SOURCE = {
+    "b0": "law.b0",
+    "eso": "eso.omega0 / eso.alpha* at this Ts",
+    "k_": "eso.k_alpha / eso.k_beta",
+    "g_": "eso.g_alpha / eso.g_beta",
+    "td": "td.R / Ts",
+    "itd": "td.a, td.b, td.c, td.rho",
+    "pf": "td.omega",
+    "sef_gain": "sef.omega_c",
+    "sef_slope": "sef.delta* / sef.alpha*",
+    "sef": "the sef.* parameters",
+    "plant_p": "the plant's nominal parameters",
+}
+
+
+def _check_finite(fields: list[tuple[str, Any]], precision: str) -> None:
+    """Refuse a parameter struct whose coefficients are not finite in ``precision`` (the
+    actuator limits excepted: +-HUGE_VAL is an open range)."""
+    big = float(np.finfo(np.float32).max) if precision == "float" else math.inf
+    for name, value in fields:
+        if name in ("u_min", "u_max"):
+            continue
+        vals = np.asarray(value, dtype=np.float64)
+        if not np.all(np.abs(vals) < big):  # NaN fails too
+            source = next(v for k, v in _FIELD_SOURCE.items() if name.startswith(k))
+            raise ExportError(
+                f"the controller's coefficients {name} = {np.array2string(vals, threshold=8)} "
+                f"are not finite numbers in {precision} (from {source}); allowed: parameters "
+                "whose coefficients are finite (a smaller value)"
+            )
 
 
 def _used_parameters(c: Controller) -> list[str]:
@@ -231,9 +266,14 @@ class _Design:
             self.model, jac = nominal_model(
                 c, kw["plant"], kw["plant_source"], kw["x0"], precision, lit
             )
-        self.row = sampling_rows(controller_batch(c), [s], s.ts, jac)[0]
+        try:
+            # a Ts the design cannot be discretised at is named, with the range it can
+            self.row = discrete_row(c, s, jac, "controller.discrete.ts")
+        except ValueError as exc:
+            raise ExportError(str(exc)) from None
         self.ntd = {"exact": 0, "han": 2, "improved": 2, "linear": c.rho}[c.td]
         self.fields = _params_values(c, s, self.row, self.model)
+        _check_finite(self.fields, precision)
         name = comment_text(kw["title"]) or "unnamed design"
         label = comment_text(c.structure, limit=40) or "custom"
         made_by = comment_text(f"aiofl {version('aiofl')}", limit=60)
@@ -314,6 +354,9 @@ class _Design:
             ),
             "aiofl_reset(&s, &p, y) restarts bumplessly mid-run.  Switch parameter instances",
             "(aiofl export --params-only) only at a sample boundary.",
+            "A y or r that is not finite or beyond +-AIOFL_SIGNAL_MAX (1e30), or an update that",
+            "overflows, is a fault: u is held at its last value and aiofl_fault(&s) is 1 until",
+            "the next start (aiofl_init / aiofl_start / aiofl_reset).",
         ]
         macros = [f"#define AIOFL_{k} {v}" for k, v in self.options.items()]
         return "\n".join(

@@ -43,6 +43,28 @@
 #define AIOFL_NEED_SIGN (AIOFL_TD == AIOFL_TD_HAN || AIOFL_SEF != AIOFL_SEF_LINEAR || AIOFL_ESO_IMPROVED)
 #define AIOFL_NEED_POW (AIOFL_SEF == AIOFL_SEF_IMPROVED || AIOFL_ESO_IMPROVED)
 
+/* 1 if x is finite (NaN and +-inf fail the comparison).  Compile without -ffinite-math-only
+   (part of -ffast-math): it lets the compiler assume every value finite and drop the checks
+   of the fault policy. */
+static int aiofl_finite(aiofl_real x)
+{
+#if AIOFL_REAL_IS_FLOAT
+    return fabsf(x) < HUGE_VALF;
+#else
+    return fabs(x) < HUGE_VAL;
+#endif
+}
+
+/* 1 if a measurement or reference value is usable: finite and |v| <= AIOFL_SIGNAL_MAX */
+static int aiofl_usable(aiofl_signal v)
+{
+#if defined(AIOFL_SIGNAL_IS_FLOAT) && AIOFL_REAL_IS_FLOAT
+    return fabsf(v) <= (float)AIOFL_SIGNAL_MAX;
+#else
+    return fabs(v) <= AIOFL_SIGNAL_MAX;
+#endif
+}
+
 #if AIOFL_NEED_SIGN
 static aiofl_real aiofl_sign(aiofl_real x)
 {
@@ -131,6 +153,13 @@ void aiofl_start(aiofl_state *s, const aiofl_params *p, aiofl_signal y0, int mod
 #if AIOFL_DELAY
     s->u_prev = AIOFL_K(0.0);
 #endif
+    s->u_held = AIOFL_K(0.0);
+    s->fault = mode != AIOFL_START_ZERO && !aiofl_usable(y0);
+}
+
+int aiofl_fault(const aiofl_state *s)
+{
+    return s->fault;
 }
 
 void aiofl_init(aiofl_state *s, const aiofl_params *p, aiofl_signal y0)
@@ -145,8 +174,9 @@ void aiofl_reset(aiofl_state *s, const aiofl_params *p, aiofl_signal y0)
 
 aiofl_real aiofl_step(aiofl_state *s, const aiofl_params *p, const aiofl_signal *r, aiofl_signal y)
 {
-    int i, j;
+    int i, j, ok;
     aiofl_real e, phi, dx1, v, u, um, acc, err[AIOFL_NFB];
+    aiofl_state before;
 #if AIOFL_TD != AIOFL_TD_EXACT
     aiofl_real x1; /* r_1 - r at t_k */
 #endif
@@ -166,6 +196,20 @@ aiofl_real aiofl_step(aiofl_state *s, const aiofl_params *p, const aiofl_signal 
 #if AIOFL_ESO_MODEL
     aiofl_real a_hat, b_hat, xi[AIOFL_RHO];
 #endif
+
+    /* the fault policy (aiofl_controller.h): unusable inputs change nothing */
+    if (s->fault) return s->u_held;
+    ok = aiofl_usable(y);
+#if AIOFL_TD == AIOFL_TD_EXACT
+    for (i = 0; i <= AIOFL_RHO; ++i) ok = ok && aiofl_usable(r[i]);
+#else
+    ok = ok && aiofl_usable(r[0]);
+#endif
+    if (!ok) {
+        s->fault = 1;
+        return s->u_held;
+    }
+    before = *s;
 
     /* ESO correction, e = y - p_1 = (y - y_prev) - (p_1 - y_prev) */
     e = (aiofl_real)(y - s->y_prev) - s->p[0];
@@ -269,5 +313,17 @@ aiofl_real aiofl_step(aiofl_state *s, const aiofl_params *p, const aiofl_signal 
 #if AIOFL_TD != AIOFL_TD_EXACT
     s->r_prev = r[0];
 #endif
+    /* an update that overflowed: undone, a fault */
+    ok = aiofl_finite(u);
+    for (i = 0; i <= AIOFL_RHO; ++i) ok = ok && aiofl_finite(s->p[i]) && aiofl_finite(s->xhat[i]);
+#if AIOFL_TD != AIOFL_TD_EXACT
+    for (i = 0; i < AIOFL_NTD; ++i) ok = ok && aiofl_finite(s->td[i]);
+#endif
+    if (!ok) {
+        *s = before;
+        s->fault = 1;
+        return s->u_held;
+    }
+    s->u_held = u;
     return u;
 }

@@ -24,6 +24,16 @@ typedef double aiofl_signal;
 #define AIOFL_SEF_NONLINEAR 1
 #define AIOFL_SEF_IMPROVED 2
 
+/* The fault policy (the same in aiofl.DiscreteController and the FMU): a measurement y, or a
+   reference value the step reads, that is not finite or beyond +-AIOFL_SIGNAL_MAX, or an
+   update that would make the command or the state non-finite, is a fault.  The sample
+   changes nothing: aiofl_step returns the last command it returned (0 after a start) and
+   aiofl_fault(s) is 1; every later sample is ignored, the command held, until the next
+   aiofl_start / aiofl_init / aiofl_reset (a start at a y0 that is not usable is a fault
+   too, except AIOFL_START_ZERO, which ignores y0).  Compile without -ffinite-math-only
+   (part of -ffast-math), which lets the compiler drop these checks. */
+#define AIOFL_SIGNAL_MAX 1e30
+
 /* start modes of aiofl_start */
 #define AIOFL_START_BUMPLESS 0 /* ESO at (y0, 0, ..., 0), differentiator at rest at y0 */
 #define AIOFL_START_ZERO 1     /* everything at 0, y0 unused (eso.init = zero) */
@@ -80,6 +90,8 @@ typedef struct {
 #if AIOFL_DELAY
     aiofl_real u_prev; /* the command applied over the current interval */
 #endif
+    aiofl_real u_held; /* the last command returned (held after a fault) */
+    int fault;         /* 1 after a fault, until the next start */
 } aiofl_state;
 
 extern const aiofl_params aiofl_default_params;
@@ -88,3 +100,4 @@ void aiofl_start(aiofl_state *s, const aiofl_params *p, aiofl_signal y0, int mod
 void aiofl_init(aiofl_state *s, const aiofl_params *p, aiofl_signal y0);
 void aiofl_reset(aiofl_state *s, const aiofl_params *p, aiofl_signal y0);
 aiofl_real aiofl_step(aiofl_state *s, const aiofl_params *p, const aiofl_signal *r, aiofl_signal y);
+int aiofl_fault(const aiofl_state *s);
