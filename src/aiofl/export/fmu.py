@@ -35,6 +35,7 @@ import io
 import math
 import os
 import platform
+import re
 import shutil
 import subprocess
 import tempfile
@@ -216,6 +217,17 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
 # ---------------------------------------------------------------------- the C adapter
 
 
+def _written_fields(params: Sequence[FmuParameter]) -> list[str]:
+    """The fields of the parameter struct (``sef_gain[0]``, ``b0``, ...) the setters of
+    ``params`` write, each once, in order."""
+    found: dict[str, None] = {}
+    for p in params:
+        for line in p.setter:
+            for m in re.finditer(r"p->(\w+(?:\[\d+\])*)\s*=(?!=)", line):
+                found[m[1]] = None
+    return list(found)
+
+
 def _adapter(
     controller: Controller,
     params: Sequence[FmuParameter],
@@ -277,6 +289,18 @@ def _adapter(
         "    for (i = 0; i <= AIOFL_RHO; ++i)",
         "        rr[i] = (aiofl_signal)(i < FMU_N_IN - 1 ? r[i] : 0.0);",
         "    return (double)aiofl_step(s, p, rr, (aiofl_signal)y);",
+        "}",
+        "",
+        "/* 1 after a fault (the controller holds u until the next start) */",
+        "static int fmu_ctl_fault(const fmu_ctl_state *s) { return aiofl_fault(s); }",
+        "",
+        "/* 1 if every coefficient a tunable parameter writes is finite in aiofl_real */",
+        "static int fmu_ctl_params_finite(const fmu_ctl_params *p)",
+        "{",
+        "    int ok = 1;",
+        *(f"    ok = ok && fabs((double)p->{f}) < HUGE_VAL;" for f in _written_fields(tun)),
+        "    (void)p;",
+        "    return ok;",
         "}",
         "",
     ]

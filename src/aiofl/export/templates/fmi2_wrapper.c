@@ -30,6 +30,15 @@
  * y and r at t_k returns u_k; setting them again recomputes it from the state before the
  * sample), and fmi2DoStep(t_k, h) commits it.  A master that reads u only after doStep
  * (FMPy's simulate_fmu) reads, at t_(k+1), the u_k held over [t_k, t_(k+1)).
+ *
+ * Faults (the controller's policy, aiofl_controller.h; the same in aiofl.DiscreteController):
+ * a y or r that is not finite or beyond +-1e30, or an update that overflows, leaves the
+ * controller as it was and holds u at its last value; from then on every fmi2DoStep and
+ * every fmi2GetReal of u returns fmi2Warning (logged once, category logStatusWarning), u
+ * held, until fmi2Reset.  Refused with fmi2Error: fmi2SetupExperiment with a start time
+ * that is not finite or beyond 1e9 Ts (the sample instants t0 + k Ts would lose their
+ * resolution), or a stop time before it; a tunable parameter whose value makes a
+ * coefficient of the controller non-finite (e.g. sef.omega_c = 1e308).
  */
 
 #include <math.h>
@@ -57,6 +66,7 @@ typedef struct {
     int pending;      /* the FMU is at sample instant next_k */
     int inputs_set;   /* the inputs were set at this communication point */
     int computed;     /* u holds the sample at this instant, from s_base */
+    int fault_logged; /* the controller's fault was logged */
     fmi2Integer start;
     fmi2Real in[FMU_N_IN];
     fmi2Real u;
@@ -95,7 +105,7 @@ static void fmu_defaults(fmu_inst *c)
     c->phase = PH_INSTANTIATED;
     c->t0 = c->time = 0.0;
     c->next_k = 0;
-    c->pending = c->inputs_set = c->computed = 0;
+    c->pending = c->inputs_set = c->computed = c->fault_logged = 0;
     memset(&c->s_base, 0, sizeof c->s_base);
     memset(&c->s, 0, sizeof c->s);
 }
@@ -109,6 +119,20 @@ static void fmu_sample(fmu_inst *c)
     c->s = c->s_base;
     c->u = fmu_ctl_step(&c->s, &c->p, c->in + 1, c->in[0]);
     c->computed = 1;
+}
+
+/* fmi2Warning (logged once) while the controller holds u after a fault, else fmi2OK */
+static fmi2Status fmu_fault_status(fmu_inst *c, const char *fn)
+{
+    if (!fmu_ctl_fault(&c->s)) return fmi2OK;
+    if (!c->fault_logged) {
+        c->fault_logged = 1;
+        fmu_log(c, fmi2Warning, "logStatusWarning",
+                "%s: the measurement y or the reference is not finite or beyond +-1e30, or the "
+                "update overflowed: u is held at %.17g until fmi2Reset",
+                fn, c->u);
+    }
+    return fmi2Warning;
 }
 
 /* ------------------------------------------------------------------ common functions */
@@ -171,11 +195,14 @@ fmi2Status fmi2SetupExperiment(fmi2Component comp, fmi2Boolean toleranceDefined,
     fmu_inst *c = (fmu_inst *)comp;
     (void)toleranceDefined;
     (void)tolerance;
-    (void)stopTimeDefined;
-    (void)stopTime;
     if (c == NULL) return fmi2Error;
     if (c->phase != PH_INSTANTIATED)
         return fmu_fail(c, "fmi2SetupExperiment", "only after fmi2Instantiate or fmi2Reset");
+    if (!isfinite(startTime) || fabs(startTime) > 1e9 * FMU_TS)
+        return fmu_fail(c, "fmi2SetupExperiment",
+                        "startTime: allowed a finite time, |startTime| <= 1e9 Ts");
+    if (stopTimeDefined && !(isfinite(stopTime) && stopTime >= startTime))
+        return fmu_fail(c, "fmi2SetupExperiment", "stopTime: allowed a finite time >= startTime");
     c->t0 = c->time = startTime;
     return fmi2OK;
 }
@@ -228,6 +255,7 @@ fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
 {
     fmu_inst *c = (fmu_inst *)comp;
     size_t i;
+    fmi2Status status = fmi2OK;
     if (c == NULL || (nvr > 0 && (vr == NULL || value == NULL))) return fmi2Error;
     for (i = 0; i < nvr; ++i) {
         fmi2ValueReference r = vr[i];
@@ -237,6 +265,7 @@ fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
             if (c->phase == PH_INIT || (c->phase == PH_STEP && c->pending && c->inputs_set))
                 fmu_sample(c);
             value[i] = c->u;
+            if (c->computed || c->phase == PH_STEP) status = fmu_fault_status(c, "fmi2GetReal");
         } else if (r < FMU_VR_TUN) {
             value[i] = fmu_calc_values[r - FMU_VR_CALC];
         } else if (r < FMU_N_REAL) {
@@ -245,7 +274,7 @@ fmi2Status fmi2GetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
             return fmu_fail(c, "fmi2GetReal", "unknown value reference");
         }
     }
-    return fmi2OK;
+    return status;
 }
 
 fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t nvr,
@@ -261,8 +290,14 @@ fmi2Status fmi2SetReal(fmi2Component comp, const fmi2ValueReference vr[], size_t
         fmi2Real v = value[i];
         if (r >= FMU_VR_TUN && r < FMU_N_REAL) {
             int k = (int)(r - FMU_VR_TUN);
+            fmu_ctl_params trial = c->p;
             if (!isfinite(v) || v < fmu_tun_min[k] || (fmu_tun_nonzero[k] && v == 0.0))
                 return fmu_fail(c, "fmi2SetReal", "a parameter value out of its range");
+            fmu_ctl_set(&trial, k, v);
+            if (!fmu_ctl_params_finite(&trial))
+                return fmu_fail(c, "fmi2SetReal",
+                                "a parameter value too large: the controller's coefficients "
+                                "it sets are not finite");
         } else if (r >= FMU_N_IN) {
             return fmu_fail(c, "fmi2SetReal", "not an input or a tunable parameter");
         }
@@ -469,7 +504,7 @@ fmi2Status fmi2DoStep(fmi2Component comp, fmi2Real t, fmi2Real h,
         c->pending = 1;
         c->computed = 0;
     }
-    return fmi2OK;
+    return fmu_fault_status(c, "fmi2DoStep");
 }
 
 fmi2Status fmi2CancelStep(fmi2Component comp)
