@@ -232,9 +232,10 @@ class Design:
 
         cfg = self.config
         if ts is not None:
-            if not (isinstance(ts, (int, float)) and 0 < ts <= 1.0):
-                raise ValueError(f"ts = {ts!r}; allowed: 0 < ts <= 1 [s]")
-            sampling = replace(cfg.sampling or Sampling(float(ts)), ts=float(ts))
+            from aiofl.engine.sample_time import check_ts
+
+            ts = check_ts(ts, "ts")  # a number in [1e-9, 1] s (True refused)
+            sampling = replace(cfg.sampling or Sampling(ts), ts=ts)
         else:
             sampling = cfg.sampling
         if precision not in ("double", "float"):

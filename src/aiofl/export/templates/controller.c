@@ -176,7 +176,6 @@ aiofl_real aiofl_step(aiofl_state *s, const aiofl_params *p, const aiofl_signal 
 {
     int i, j, ok;
     aiofl_real e, phi, dx1, v, u, um, acc, err[AIOFL_NFB];
-    aiofl_state before;
 #if AIOFL_TD != AIOFL_TD_EXACT
     aiofl_real x1; /* r_1 - r at t_k */
 #endif
@@ -209,7 +208,6 @@ aiofl_real aiofl_step(aiofl_state *s, const aiofl_params *p, const aiofl_signal 
         s->fault = 1;
         return s->u_held;
     }
-    before = *s;
 
     /* ESO correction, e = y - p_1 = (y - y_prev) - (p_1 - y_prev) */
     e = (aiofl_real)(y - s->y_prev) - s->p[0];
@@ -313,14 +311,14 @@ aiofl_real aiofl_step(aiofl_state *s, const aiofl_params *p, const aiofl_signal 
 #if AIOFL_TD != AIOFL_TD_EXACT
     s->r_prev = r[0];
 #endif
-    /* an update that overflowed: undone, a fault */
+    /* an update that overflowed: a fault (the state is not used again until a start, which
+       rewrites it; no copy to undo it, to keep the stack small) */
     ok = aiofl_finite(u);
     for (i = 0; i <= AIOFL_RHO; ++i) ok = ok && aiofl_finite(s->p[i]) && aiofl_finite(s->xhat[i]);
 #if AIOFL_TD != AIOFL_TD_EXACT
     for (i = 0; i < AIOFL_NTD; ++i) ok = ok && aiofl_finite(s->td[i]);
 #endif
     if (!ok) {
-        *s = before;
         s->fault = 1;
         return s->u_held;
     }

@@ -26,9 +26,10 @@ typedef double aiofl_signal;
 
 /* The fault policy (the same in aiofl.DiscreteController and the FMU): a measurement y, or a
    reference value the step reads, that is not finite or beyond +-AIOFL_SIGNAL_MAX, or an
-   update that would make the command or the state non-finite, is a fault.  The sample
-   changes nothing: aiofl_step returns the last command it returned (0 after a start) and
-   aiofl_fault(s) is 1; every later sample is ignored, the command held, until the next
+   update that would make the command or the state non-finite, is a fault: aiofl_step
+   returns the last command it returned (0 after a start) and aiofl_fault(s) is 1 (a
+   faulted input changes nothing; after an update that overflowed the state is not used
+   again); every later sample is ignored, the command held, until the next
    aiofl_start / aiofl_init / aiofl_reset (a start at a y0 that is not usable is a fault
    too, except AIOFL_START_ZERO, which ignores y0).  Compile without -ffinite-math-only
    (part of -ffast-math), which lets the compiler drop these checks. */
