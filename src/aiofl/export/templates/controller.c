@@ -43,7 +43,7 @@
 #define AIOFL_NEED_SIGN (AIOFL_TD == AIOFL_TD_HAN || AIOFL_SEF != AIOFL_SEF_LINEAR || AIOFL_ESO_IMPROVED)
 #define AIOFL_NEED_POW (AIOFL_SEF == AIOFL_SEF_IMPROVED || AIOFL_ESO_IMPROVED)
 
-/* 1 if x is finite (NaN and +-inf fail the comparison).  Compile without -ffinite-math-only
+/* 1 if x is finite (not-a-number and +-inf fail the comparison).  Compile without -ffinite-math-only
    (part of -ffast-math): it lets the compiler assume every value finite and drop the checks
    of the fault policy. */
 static int aiofl_finite(aiofl_real x)
