@@ -253,6 +253,16 @@ class Scenario:
         interval, plus the last partial interval and the sample at ``t_final``."""
         return math.ceil(self.t_final / self.noise_hold) + 2
 
+    def initial_value(self) -> float:
+        """r(0): where the scenario starts the plant's output (the operating point a trim,
+        a bumpless start or ``u_ref = "trim"`` refers to)."""
+        ref = self.reference
+        if ref.kind == "sine":
+            return float(ref.offset + ref.amplitude * math.sin(ref.phase))
+        if ref.kind == "step":
+            return float(ref.offset + (ref.amplitude if ref.t_step <= 0.0 else 0.0))
+        return float(ref.samples[0]) if ref.samples else 0.0
+
     def row(self) -> NDArray[np.float64]:
         """The engine's scenario row (:mod:`aiofl.layout` ``S_*`` columns)."""
         ref = self.reference

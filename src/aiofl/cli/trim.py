@@ -74,11 +74,7 @@ def trim_command(
         if is_config:
             cfg = load_config(target)
             plant = cfg.plant
-            ref = cfg.scenario.reference
-            r0 = {"sine": ref.offset + ref.amplitude * math.sin(ref.phase), "step": ref.offset}
-            y_hold = (
-                y if y is not None else r0.get(ref.kind, ref.samples[0] if ref.samples else 0.0)
-            )
+            y_hold = y if y is not None else cfg.scenario.initial_value()
             guess = guess if guess is not None else (list(cfg.scenario.x0) or None)
         else:
             plant = resolve_plant(target)

@@ -83,7 +83,6 @@ paper; each maps onto the engine columns of :data:`aiofl.layout.FLOAT_COLUMNS`
 from __future__ import annotations
 
 import copy
-import math
 import tomllib
 from dataclasses import dataclass, field, replace
 from importlib import resources
@@ -105,6 +104,7 @@ from aiofl.limits import (
     check_run_size,
 )
 from aiofl.plants.base import Plant, PlantError
+from aiofl.plants.operating_point import holding_input
 from aiofl.scenario import Scenario
 from aiofl.sensor import Sensor, check_quantum_range
 from aiofl.uncertainty import UncertaintyModel
@@ -493,7 +493,7 @@ def parse_config(
         plant.check(scenario.x0 or [0.0] * plant.n_states)
         controller.check_plant(plant, scenario.x0 or None)
         if model.scenario.u_ref == "trim":  # ISU, IAU about the holding input
-            scenario = replace(scenario, u_ref=_holding_input(plant, scenario))
+            scenario = replace(scenario, u_ref=holding_input(plant, scenario))
         columns = len(L.trajectory_columns(plant.n_states))
         check_run_size(sc.t_final, sim.dt, trajectory_columns=columns, decimation=sim.decimation)
     except (ValueError, PlantError) as exc:
@@ -527,22 +527,6 @@ def parse_config(
         cfg.check_sampling()
     label = sensor_table.preset if sensor_table is not None else "custom"
     return replace(cfg, sensor=Sensor.of_run(cfg.scenario, cfg.sampling, preset=label))
-
-
-def _holding_input(plant: Any, scenario: Any) -> float:
-    """``scenario.u_ref = "trim"``: the input that holds the plant at the reference's
-    starting value, :math:`r(0)` (:func:`aiofl.plants.operating_point.trim`, from the scenario's
-    x0)."""
-    from aiofl.plants.operating_point import trim
-
-    ref = scenario.reference
-    r0 = {"sine": ref.offset + ref.amplitude * math.sin(ref.phase), "step": ref.offset}.get(
-        ref.kind, ref.samples[0] if ref.samples else 0.0
-    )
-    try:
-        return trim(plant, float(r0), x_guess=scenario.x0 or None).u
-    except ValueError as exc:
-        raise ValueError(f'scenario.u_ref = "trim": {exc}') from None
 
 
 def _check_sensor_ts(ts: float | None, dt: float, source: str) -> None:

@@ -27,9 +27,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.optimize import root
 
-__all__ = ["OperatingPoint", "TrimError", "trim"]
+__all__ = ["OperatingPoint", "TrimError", "holding_input", "trim"]
 
 #: the largest residual |F| (scaled) accepted as a solution
 TRIM_TOLERANCE = 1e-9
@@ -167,6 +166,8 @@ def trim(
         When no equilibrium is found (a plant that cannot hold that output, or a guess
         too far from one); the message names the residual and suggests a guess.
     """
+    from scipy.optimize import root
+
     if isinstance(y, bool) or not isinstance(y, (int, float)) or not math.isfinite(y):
         raise TrimError(f"trim: y = {y!r}; allowed: a finite number")
     n = plant.n_states
@@ -211,6 +212,16 @@ def trim(
     return OperatingPoint(
         y=float(y), x=x_e, u=u_e, beta=beta, poles=poles, state_names=tuple(plant.state_names)
     )
+
+
+def holding_input(plant: Any, scenario: Any) -> float:
+    """``[scenario] u_ref = "trim"``: the input :math:`u_e` holding ``plant`` at the
+    scenario's :math:`r(0)`, the search started at its x0; a ``ValueError`` naming
+    ``scenario.u_ref`` when there is none."""
+    try:
+        return trim(plant, scenario.initial_value(), x_guess=scenario.x0 or None).u
+    except ValueError as exc:
+        raise ValueError(f'scenario.u_ref = "trim": {exc}') from None
 
 
 def _output_guess(

@@ -69,15 +69,6 @@ class DesignReport:
         }
 
 
-def _r0(cfg: Any) -> float:
-    ref = cfg.scenario.reference
-    if ref.kind == "sine":
-        return float(ref.offset + ref.amplitude * math.sin(ref.phase))
-    if ref.kind == "step":
-        return float(ref.offset)
-    return float(ref.samples[0]) if ref.samples else 0.0
-
-
 def _fmt(x: Any, digits: int = 4) -> str:
     if x is None or (isinstance(x, float) and not math.isfinite(x)):
         return "—"
@@ -188,7 +179,7 @@ def design_report(cfg: Any, label: str, *, draws: int | None = None) -> DesignRe
     )
     notes: list[str] = []
     try:
-        point = trim(cfg.plant, _r0(cfg), x_guess=cfg.scenario.x0 or None)
+        point = trim(cfg.plant, cfg.scenario.initial_value(), x_guess=cfg.scenario.x0 or None)
         op, op_text = point.to_dict(), point.text(cfg.plant.output_unit, cfg.plant.input_unit)
     except ValueError as exc:
         op, op_text = None, f"no operating point: {exc}"

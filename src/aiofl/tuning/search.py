@@ -574,13 +574,9 @@ def tune(
     else:
         ib = int(np.argmin(obj_all))
     best_values = {n: float(values[ib, j]) for j, n in enumerate(space.names)}
+    best = dict(zip(L.SCORE_NAMES, met_all[ib].tolist(), strict=True))
     best_metrics = (
-        None
-        if div_all[ib]
-        else {
-            k: float(v) if np.isfinite(v) else None
-            for k, v in zip(L.SCORE_NAMES, met_all[ib], strict=True)
-        }
+        None if div_all[ib] else {k: v if np.isfinite(v) else None for k, v in best.items()}
     )
     config = config_with_values(prep.config.raw, prep.config.controller, best_values)
     return TuneResult(
