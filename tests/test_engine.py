@@ -385,9 +385,7 @@ def test_batch_members_equal_single_runs_bitwise_with_a_diverging_member(slfjm):
     assert 0.42 < div.stopped_at < 0.43
     assert div.t[-1] == pytest.approx(div.stopped_at, abs=1e-12)
     assert all(
-        not s.failed and s.t[-1] == pytest.approx(horizon)
-        for i, s in enumerate(singles)
-        if i != 2
+        not s.failed and s.t[-1] == pytest.approx(horizon) for i, s in enumerate(singles) if i != 2
     )
     assert np.isnan(batch.metric("itae")[2]) and np.isnan(batch.opi()[2])
     assert np.all(np.isfinite(np.delete(batch.opi(), 2)))

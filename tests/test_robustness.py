@@ -247,9 +247,7 @@ def test_chunked_runs_equal_one_call(mixed: tuple, monkeypatch: pytest.MonkeyPat
     runs = simulate_draws(cfg, res.draws)
     assert runs.engine_calls == 9
     np.testing.assert_array_equal(runs.failed[1:], res.failed)
-    np.testing.assert_array_equal(
-        np.where(runs.failed[1:], np.inf, runs.metrics[1:, 0]), res.itae
-    )
+    np.testing.assert_array_equal(np.where(runs.failed[1:], np.inf, runs.metrics[1:, 0]), res.itae)
 
 
 def test_a_plant_change_after_t0_is_refused() -> None:
