@@ -120,7 +120,7 @@ def _check_shapes(g: dict[str, Any], generation: int) -> None:
         n >= 0
         and m.ndim in (2, 3)
         and m.shape[0] == n
-        and m.shape[-1] == L.N_SCORE
+        and m.shape[-1] in (L.N_METRIC, L.N_SCORE)  # a custom evaluator gives the integrals
         and g["failed"].shape == m.shape[:-1]
         and g["stopped_at"].shape == m.shape[:-1]
         and g["failed"].dtype == np.bool_

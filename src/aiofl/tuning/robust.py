@@ -206,7 +206,10 @@ def quantity_values(
         return np.asarray(margins[q.metric], dtype=np.float64)
     if q.metric == "stable_fraction":
         return 1.0 - d.mean(axis=1)
-    col = m[:, :, L.SCORE_NAMES.index(q.metric)]
+    j = L.SCORE_NAMES.index(q.metric)
+    if j >= m.shape[-1]:
+        raise ValueError(f"{q.text()}: the evaluator gives only {', '.join(L.METRIC_NAMES)}")
+    col = m[:, :, j]
     col = np.where(d, np.inf, col)
     return aggregate(col, q.aggregate or default, alpha)
 

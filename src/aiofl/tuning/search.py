@@ -574,7 +574,7 @@ def tune(
     else:
         ib = int(np.argmin(obj_all))
     best_values = {n: float(values[ib, j]) for j, n in enumerate(space.names)}
-    best = dict(zip(L.SCORE_NAMES, met_all[ib].tolist(), strict=True))
+    best = dict(zip(L.SCORE_NAMES, met_all[ib].tolist(), strict=False))  # 5 from a custom evaluator
     best_metrics = (
         None if div_all[ib] else {k: v if np.isfinite(v) else None for k, v in best.items()}
     )
