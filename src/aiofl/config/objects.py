@@ -165,6 +165,33 @@ def _sensor_table(sensor: Sensor | str) -> dict[str, Any]:
     return table
 
 
+_NOISE_KEYS = ("noise_variance", "noise_hold", "noise_seed")
+
+
+def _leave_noise_to_sensor(
+    scen: dict[str, Any], sensor: dict[str, Any], scenario: Scenario
+) -> None:
+    """Drop from the ``[scenario]`` table ``scen`` the noise keys the sensor decides.
+
+    With a sensor, the measurement's noise is the sensor's: a scenario noise key left at
+    :class:`~aiofl.scenario.Scenario`'s default, or equal to the sensor's value, is not
+    written (a ``[sensor]`` table with the scenario's noise keys is refused as "set
+    twice", as a TOML file is); a scenario value that differs from the sensor's is a real
+    contradiction, refused naming both.
+    """
+    default = Scenario()
+    for key in _NOISE_KEYS:
+        mine = getattr(scenario, key)
+        if key in sensor and mine != sensor[key] and mine != getattr(default, key):
+            raise ConfigError(
+                f"{key} is set twice: the sensor's {key} = {sensor[key]!r} and "
+                f"scenario.{key} = {mine!r}; set it in the Sensor only (the sensor is the "
+                "measurement)"
+            )
+        if key in sensor or mine == getattr(default, key):
+            scen.pop(key, None)
+
+
 def _sampling_table(sampling: Any) -> dict[str, Any]:
     from aiofl.engine.discrete import Sampling
 
@@ -224,6 +251,7 @@ def config_dict(
         data["controller"]["discrete"] = _sampling_table(sampling)
     if sensor is not None:
         data["sensor"] = _sensor_table(sensor)
+        _leave_noise_to_sensor(data["scenario"], data["sensor"], scenario)
     if uncertainty is not None:
         dump = getattr(uncertainty, "model_dump", None)
         data["uncertainty"] = dump(exclude_none=True) if dump else dict(uncertainty)

@@ -525,8 +525,11 @@ def parse_config(
     if sampling is not None:  # [controller.discrete]: a sampled controller
         cfg = replace(cfg, sampling=sampling)
         cfg.check_sampling()
-    label = sensor_table.preset if sensor_table is not None else "custom"
-    return replace(cfg, sensor=Sensor.of_run(cfg.scenario, cfg.sampling, preset=label))
+    # a [sensor] table without a preset is a custom sensor, not the "ideal" preset
+    given = sensor_table is not None and "preset" in data["sensor"]
+    label = sensor_table.preset if given else "custom"
+    sensor = Sensor.of_run(cfg.scenario, cfg.sampling, preset=label, unit=plant.output_unit)
+    return replace(cfg, sensor=sensor)
 
 
 def _holding_input(plant: Any, scenario: Any) -> float:
