@@ -13,11 +13,16 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from typer.testing import CliRunner
 
 from aiofl import Controller, Design, Reference, Scenario
+from aiofl.cli.app import app
 from aiofl.config import load_config, parse_config
 from aiofl.plants import get_plant
 from aiofl.sensor import Sensor
+from aiofl.tuning.search import prepare
+from aiofl.tuning.space import to_toml
+from test_tuning import FAST
 
 HERE = Path(__file__).parent
 MAGLEV = HERE / "maglev_plant.toml"
@@ -27,6 +32,7 @@ CTRL = Controller.from_structure(
     rho=2,
     values={"eso.omega0": 40.0, "sef.omega_c": 5.0, "td.omega": 10.0, "law.b0": 4.0},
 )
+runner = CliRunner()
 SCEN = Scenario(reference=Reference(amplitude=0.5, omega=1.0), t_final=1.0)
 
 
@@ -78,3 +84,32 @@ def test_a_sensor_without_a_preset_is_custom_and_its_step_is_in_the_output_unit(
     ideal = _with_sensor("tank-ladrc", {"noise_seed": 4})
     assert ideal.sensor.describe().startswith("ideal (continuous")
     assert Sensor(ts=1e-3).describe().startswith("custom (")
+
+
+# ------------------------------------------- 2. the tuning horizon follows the scenario's
+def _tune_config(tmp_path: Path, **tune: Any) -> Path:
+    data = copy.deepcopy(FAST)
+    data["scenario"]["t_final"] = 1.0
+    data["tune"] = {k: v for k, v in {**data["tune"], **tune}.items() if v is not None}
+    path = tmp_path / "notf.toml"
+    path.write_text(to_toml(data))
+    return path
+
+
+def test_the_tuning_horizon_is_the_scenarios_by_default_and_check_says_so(
+    tmp_path: Path,
+) -> None:
+    """It was 6 s whatever the scenario's horizon, silently ("simulations of 6 s")."""
+    res = runner.invoke(app, ["tune", str(_tune_config(tmp_path, t_final=None)), "--check"])
+    assert res.exit_code == 0, res.output
+    assert "simulations of 1 s (the scenario's horizon)" in res.output
+    assert prepare(str(_tune_config(tmp_path, t_final=None))).settings.t_final == 1.0
+    res = runner.invoke(app, ["tune", str(_tune_config(tmp_path, t_final=0.6)), "--check"])
+    assert res.exit_code == 0 and "simulations of 0.6 s (tune.t_final)" in res.output
+
+
+def test_a_tuning_horizon_longer_than_the_scenario_is_refused(tmp_path: Path) -> None:
+    res = runner.invoke(app, ["tune", str(_tune_config(tmp_path, t_final=6.0)), "--check"])
+    assert res.exit_code == 2, res.output
+    assert "tune.t_final = 6 s is longer than the scenario's horizon" in res.stderr
+    assert "scenario.t_final = 1 s" in res.stderr

@@ -181,6 +181,7 @@ def describe_tuning(run_config: RunConfig) -> str | None:
     if not data:
         return None
     st = parse_tune_settings(data)
+    horizon = st.t_final if st.t_final is not None else run_config.scenario.t_final
     obj = st.objective
     if isinstance(obj, str):
         obj_text = obj.upper()
@@ -197,7 +198,7 @@ def describe_tuning(run_config: RunConfig) -> str | None:
         obj_text += (
             f", robust ({st.robust.aggregate} over nominal + {st.robust.draws} draws{corners})"
         )
-    return f"{st.budget()}, {obj_text} over {st.t_final:g} s (aiofl tune)"
+    return f"{st.budget()}, {obj_text} over {horizon:g} s (aiofl tune)"
 
 
 # ---------------------------------------------------------------------- preparing
@@ -279,6 +280,7 @@ def prepare(
     overrides = {k: v for k, v in overrides.items() if v is not None}
     if overrides:
         st = parse_tune_settings({**st.model_dump(exclude_none=True), **overrides})
+    st = st.with_horizon(cfg.scenario.t_final, source)  # t_final: the scenario's by default
     _check_parameters(cfg, st)
     try:  # the tuning horizon's size, before any member is allocated
         check_run_size(
