@@ -9,9 +9,11 @@ from __future__ import annotations
 
 import copy
 import math
+import warnings
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 import pytest
 from typer.testing import CliRunner
 
@@ -21,7 +23,7 @@ from aiofl.config import load_config, parse_config
 from aiofl.plants import get_plant
 from aiofl.sensor import Sensor
 from aiofl.tuning.search import prepare
-from aiofl.tuning.space import to_toml
+from aiofl.tuning.space import ParameterBounds, SearchSpace, to_toml
 from test_tuning import FAST
 
 HERE = Path(__file__).parent
@@ -113,3 +115,20 @@ def test_a_tuning_horizon_longer_than_the_scenario_is_refused(tmp_path: Path) ->
     assert res.exit_code == 2, res.output
     assert "tune.t_final = 6 s is longer than the scenario's horizon" in res.stderr
     assert "scenario.t_final = 1 s" in res.stderr
+
+
+# ------------------------------------------- 6. linear bounds decode without an overflow
+def test_linear_bounds_decode_without_an_overflow_warning() -> None:
+    """Decoding took exp() of every column, linear ones too: "overflow encountered in exp"
+    for tuple bounds such as law.b0 in (1e3, 1e5)."""
+    space = SearchSpace(
+        {
+            "law.b0": ParameterBounds(lo=1e3, hi=1e5),
+            "eso.omega0": ParameterBounds(lo=10.0, hi=1000.0, log=True),
+        }
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        v = space.decode(np.array([[0.5, 0.5], [0.0, 1.0], [0.25, 0.0]]))
+    assert np.allclose(v, [[50500.0, 100.0], [1e3, 1000.0], [25750.0, 10.0]])
+    assert np.allclose(space.encode(v), [[0.5, 0.5], [0.0, 1.0], [0.25, 0.0]])

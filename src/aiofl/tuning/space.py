@@ -364,7 +364,8 @@ class SearchSpace:
         """Parameter values (B, d) of unit-cube points s (B, d)."""
         s = np.clip(np.asarray(s, dtype=np.float64), 0.0, 1.0)
         z = self._a + s * (self._b - self._a)
-        v = np.where(self.log, np.exp(z), z)
+        v = z.copy()  # exp only of the log-scaled columns (a linear value overflows it)
+        v[..., self.log] = np.exp(z[..., self.log])
         # land exactly on the bounds at s = 0, 1 (exp(log(x)) may differ from x in the last bit)
         v = np.where(s == 0.0, self.lo, v)
         return np.where(s == 1.0, self.hi, v)
