@@ -17,10 +17,11 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from aiofl import Controller, Design, Reference, Scenario
+from aiofl import Controller, Design, Plant, Reference, Scenario
 from aiofl.cli.app import app
 from aiofl.config import load_config, parse_config
 from aiofl.plants import get_plant
+from aiofl.plants.base import PlantError
 from aiofl.sensor import Sensor
 from aiofl.tuning.search import prepare
 from aiofl.tuning.space import ParameterBounds, SearchSpace, to_toml
@@ -132,3 +133,25 @@ def test_linear_bounds_decode_without_an_overflow_warning() -> None:
         v = space.decode(np.array([[0.5, 0.5], [0.0, 1.0], [0.25, 0.0]]))
     assert np.allclose(v, [[50500.0, 100.0], [1e3, 1000.0], [25750.0, 10.0]])
     assert np.allclose(space.encode(v), [[0.5, 0.5], [0.0, 1.0], [0.25, 0.0]])
+
+
+# ------------------------------------------- 12. a Python plant's bad parameter is named
+@pytest.mark.parametrize("value", ["four", None, True, float("nan"), [4.0]])
+def test_a_python_plants_non_numeric_parameter_is_named(value: Any) -> None:
+    """It raised "could not convert string to float: 'four'" without naming k."""
+    with pytest.raises(PlantError, match=r"plant 'bad_k': params\['k'\] = .*allowed: a finite"):
+        Plant(name="bad_k", n_states=1, f=_f1, g=_g1, h=_h1, params={"k": value})
+    p = Plant(name="ok_k", n_states=1, f=_f1, g=_g1, h=_h1, params={"k": np.float32(4)})
+    assert p.params["k"] == 4.0 and type(p.params["k"]) is float
+
+
+def _f1(x: Any, p: Any) -> Any:
+    return (-p[0] * x[0],)
+
+
+def _g1(x: Any, p: Any) -> Any:
+    return (1.0,)
+
+
+def _h1(x: Any, p: Any) -> Any:
+    return x[0]
