@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import copy
 import math
+import typing
 import warnings
 from pathlib import Path
 from typing import Any
@@ -19,6 +20,7 @@ from typer.testing import CliRunner
 
 from aiofl import Controller, Design, Plant, Reference, Scenario
 from aiofl.cli.app import app
+from aiofl.cli.export import FORMATS, export_command
 from aiofl.config import load_config, parse_config
 from aiofl.plants import get_plant
 from aiofl.plants.base import PlantError
@@ -155,3 +157,14 @@ def _g1(x: Any, p: Any) -> Any:
 
 def _h1(x: Any, p: Any) -> Any:
     return x[0]
+
+
+# --------------------------------------------------- 10. export --help lists the formats
+def test_export_help_lists_the_formats() -> None:
+    """It showed ``--format <str>``."""
+    res = runner.invoke(app, ["export", "--help"], env={"COLUMNS": "200"})
+    assert res.exit_code == 0
+    line = next(ln for ln in res.output.splitlines() if "--format" in ln)
+    assert "<c|fmu>" in line, line
+    hint = typing.get_type_hints(export_command, include_extras=True)["fmt"]
+    assert set(typing.get_args(typing.get_args(hint)[0])) == set(FORMATS)

@@ -93,8 +93,9 @@ def export_command(
     prefix: Annotated[
         str, typer.Option("--prefix", help="Start of every C name (NAME_step, NAME_UP_RHO).")
     ] = "aiofl",
-    fmt: Annotated[
-        str, typer.Option("--format", help="c: C99 sources; fmu: an FMI 2.0 co-simulation FMU.")
+    fmt: Annotated[  # the choices are FORMATS' keys (a test checks they agree)
+        Literal["c", "fmu"],
+        typer.Option("--format", help="c: C99 sources; fmu: an FMI 2.0 co-simulation FMU."),
     ] = "c",
     params_only: Annotated[
         bool,
