@@ -11,6 +11,8 @@ import copy
 import math
 import typing
 import warnings
+import xml.etree.ElementTree as ET
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -168,3 +170,29 @@ def test_export_help_lists_the_formats() -> None:
     assert "<c|fmu>" in line, line
     hint = typing.get_type_hints(export_command, include_extras=True)["fmt"]
     assert set(typing.get_args(typing.get_args(hint)[0])) == set(FORMATS)
+
+
+# ----------------------------------------- 7. Design.export as an FMU; 11. its units
+def test_a_design_exports_an_fmu(tmp_path: Path) -> None:
+    """Design.export had C only; the CLI's --format fmu now has its keyword."""
+    paths = _design().export(tmp_path / "fmu", ts=1e-3, prefix="pend", format="fmu")
+    assert list(paths) == ["pend.fmu"]
+    with zipfile.ZipFile(paths["pend.fmu"]) as z:
+        assert any(n.startswith("binaries/") for n in z.namelist())
+        xml = ET.fromstring(z.read("modelDescription.xml"))
+    # 11. the variables carry the plant's units, each declared in UnitDefinitions
+    units = {
+        sv.get("name"): sv.find("Real").get("unit")  # type: ignore[union-attr]
+        for sv in xml.iter("ScalarVariable")
+        if sv.find("Real") is not None
+    }
+    assert units["y"] == units["r"] == PENDULUM.output_unit == "rad"
+    assert units["u"] == PENDULUM.input_unit and units["Ts"] == "s"
+    declared = {u.get("name") for u in xml.iter("Unit")}
+    assert {u for u in units.values() if u is not None} == declared
+    children = [c.tag for c in xml]
+    assert children.index("CoSimulation") < children.index("UnitDefinitions")
+    assert children.index("UnitDefinitions") < children.index("DefaultExperiment")
+    with pytest.raises(ValueError, match=r"format = 'exe'; allowed: c, fmu"):
+        _design().export(tmp_path / "no", ts=1e-3, format="exe")
+    assert not (tmp_path / "no").exists()

@@ -219,16 +219,22 @@ class Design:
         ts: float | None = None,
         precision: str = "double",
         prefix: str = "aiofl",
+        format: str = "c",  # noqa: A002 - the CLI's --format
     ) -> dict[str, Path]:
-        """Write the controller as C99 (``aiofl export``): ``PREFIX_controller.h``,
-        ``PREFIX_controller.c`` and ``PREFIX_params.c`` (and ``PREFIX_model.h`` for a
-        model-assisted controller) in ``out``, sampled at ``ts`` (default: the design's
-        sampling); returns the paths by file name.  Raises ``ValueError`` for what the C
-        code cannot express or a bad prefix (:class:`aiofl.export.ExportError`); nothing is
-        written then.  Unlike ``aiofl export`` it runs no simulation first."""
+        """Write the controller (``aiofl export``), sampled at ``ts`` (default: the
+        design's sampling), in ``out``; returns the paths by file name.
+
+        ``format = "c"``: C99 sources, ``PREFIX_controller.h``, ``PREFIX_controller.c`` and
+        ``PREFIX_params.c`` (and ``PREFIX_model.h`` for a model-assisted controller);
+        ``format = "fmu"``: ``PREFIX.fmu``, an FMI 2.0 co-simulation FMU of the same C
+        (built with the C compiler, ``$CC`` or ``cc``).  Raises ``ValueError`` for what the
+        C code cannot express, a bad prefix or format, or no compiler for an FMU
+        (:class:`aiofl.export.ExportError`); nothing is written then.  Unlike ``aiofl
+        export`` it runs no simulation first."""
         from aiofl.engine.discrete import Sampling
         from aiofl.export import ExportError, export_c
-        from aiofl.outputs import atomic_write_text
+        from aiofl.export.fmu import export_fmu_for_config
+        from aiofl.outputs import atomic_write_bytes, atomic_write_text
 
         cfg = self.config
         if ts is not None:
@@ -239,25 +245,39 @@ class Design:
             sampling = cfg.sampling
         if precision not in ("double", "float"):
             raise ValueError(f"precision = {precision!r}; allowed: double, float")
+        if format not in ("c", "fmu"):
+            raise ValueError(f"format = {format!r}; allowed: c, fmu")
+        files: dict[str, str | bytes]
         try:
-            files = export_c(
-                cfg.controller,
-                sampling,
-                precision=precision,
-                prefix=prefix,
-                title=cfg.name,
-                notes=[cfg.description] if cfg.description else [],
-                plant=cfg.plant,
-                plant_source=cfg.plant.name,
-                x0=cfg.scenario.x0,
-            )
+            if format == "fmu":
+                if sampling is None:
+                    raise ExportError("no sample time: give ts or the design a sampling")
+                name, data = export_fmu_for_config(
+                    cfg, sampling, precision=precision, config=cfg.name, prefix=prefix
+                )
+                files = {name: data}
+            else:
+                files = export_c(
+                    cfg.controller,
+                    sampling,
+                    precision=precision,
+                    prefix=prefix,
+                    title=cfg.name,
+                    notes=[cfg.description] if cfg.description else [],
+                    plant=cfg.plant,
+                    plant_source=cfg.plant.name,
+                    x0=cfg.scenario.x0,
+                )
         except ExportError as exc:
             raise ValueError(f"cannot export {cfg.name!r}: {exc}") from None
         folder = Path(out)
         folder.mkdir(parents=True, exist_ok=True)
         paths = {}
-        for name, text in files.items():
-            atomic_write_text(folder / name, text)
+        for name, content in files.items():
+            if isinstance(content, bytes):
+                atomic_write_bytes(folder / name, content)
+            else:
+                atomic_write_text(folder / name, content)
             paths[name] = folder / name
         return paths
 
