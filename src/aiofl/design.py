@@ -219,7 +219,7 @@ class Design:
         ts: float | None = None,
         precision: str = "double",
         prefix: str = "aiofl",
-        format: str = "c",  # noqa: A002 - the CLI's --format
+        format: str = "c",  # the CLI's --format
     ) -> dict[str, Path]:
         """Write the controller (``aiofl export``), sampled at ``ts`` (default: the
         design's sampling), in ``out``; returns the paths by file name.
