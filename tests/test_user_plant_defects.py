@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import copy
 import math
+import tomllib
 import typing
 import warnings
 import xml.etree.ElementTree as ET
@@ -23,7 +24,7 @@ from typer.testing import CliRunner
 from aiofl import Controller, Design, Plant, Reference, Scenario
 from aiofl.cli.app import app
 from aiofl.cli.export import FORMATS, export_command
-from aiofl.config import load_config, parse_config
+from aiofl.config import load_config, parse_config, resolve_plant
 from aiofl.plants import get_plant
 from aiofl.plants.base import PlantError
 from aiofl.sensor import Sensor
@@ -196,3 +197,59 @@ def test_a_design_exports_an_fmu(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"format = 'exe'; allowed: c, fmu"):
         _design().export(tmp_path / "no", ts=1e-3, format="exe")
     assert not (tmp_path / "no").exists()
+
+
+# ------------------------------------- 8. a design saved as TOML; a Python plant's config
+def test_a_saved_design_runs_on_the_command_line(tmp_path: Path) -> None:
+    """A Design could not be saved as TOML."""
+    d = _design(sensor="encoder-16bit")
+    path = d.save(tmp_path / "design.toml")
+    assert tomllib.loads(path.read_text()) == d.config.raw
+    res = runner.invoke(app, ["simulate", str(path), "--check"])
+    assert res.exit_code == 0, res.output
+    again = load_config(path)
+    assert np.array_equal(again.controller.float_row(), CTRL.float_row(), equal_nan=True)
+    assert again.sampling == d.config.sampling and again.scenario == d.config.scenario
+
+
+def test_a_plant_files_design_names_the_file_and_saves_it_relative(tmp_path: Path) -> None:
+    plant = resolve_plant(str(MAGLEV))
+    ctrl = Controller.from_structure(
+        "LADRC",
+        rho=3,
+        values={"eso.omega0": 400.0, "sef.omega_c": 60.0, "td.omega": 40.0, "law.b0": -2800.0},
+    )
+    scen = Scenario(
+        reference=Reference(kind="step", amplitude=1e-3, offset=0.01),
+        t_final=1.0,
+        x0=(0.01, 0.0, 0.7004),
+    )
+    d = Design(plant, ctrl, scen, dt=1e-4)
+    assert d.config.raw["plant"] == str(MAGLEV.resolve())
+    (tmp_path / "sub").mkdir()
+    path = d.save(tmp_path / "sub" / "maglev.toml")
+    written = tomllib.loads(path.read_text())["plant"]
+    assert not Path(written).is_absolute() and (path.parent / written).resolve() == MAGLEV.resolve()
+    assert load_config(path).plant is plant
+
+
+def test_a_python_plants_config_says_what_to_do(tmp_path: Path) -> None:
+    """best.toml tuned on a Python plant failed in the CLI with "unknown plant 'maglev_py'"."""
+    data = copy.deepcopy(load_config("tank-ladrc").raw)
+    data["plant"] = "maglev_py"
+    res_path = tmp_path / "best.toml"
+    res_path.write_text(to_toml(data))
+    res = runner.invoke(app, ["simulate", str(res_path), "--check"])
+    assert res.exit_code == 2
+    text = " ".join(res.stderr.split())
+    assert "unknown plant 'maglev_py'" in text and "defined in Python" in text
+    assert 'plant = "FILE.toml"' in text and "aiofl.register_plant('maglev_py'" in text
+    py = Design(
+        Plant(name="saved_py", n_states=1, f=_f1, g=_g1, h=_h1, params={"k": 1.0}),
+        Controller.from_structure("LADRC", rho=1, values={"law.b0": 1.0}),
+        SCEN,
+        dt=1e-3,
+    )
+    with pytest.raises(ValueError, match=r"'saved_py' is defined in Python.*plant file"):
+        py.to_toml()
+    assert "defined in Python" in py.to_toml(python_plant=True).splitlines()[1]

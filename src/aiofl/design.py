@@ -118,6 +118,57 @@ class Design:
         validated again."""
         return replace(self, **changes)
 
+    # ------------------------------------------------------------------ saving
+    def to_toml(self, path: str | Path | None = None, *, python_plant: bool = False) -> str:
+        """This design as a run config's TOML text (written with tomlkit); with ``path``
+        also written there (atomically; a plant file is then named relative to the
+        file's folder), so ``aiofl simulate PATH`` (and every command) runs it.
+
+        The plant must be one a config can name: a shipped or registered plant, or one built
+        from a plant file (:func:`aiofl.config.resolve_plant`: named by its path).  A plant
+        defined in Python is known only in the process that defined it: refused (a
+        ``ValueError`` saying what to do) unless ``python_plant`` is true, when the file
+        loads only in a Python process that registers the plant first
+        (``aiofl.register_plant(NAME, lambda: plant)``).
+        """
+        import copy
+        import os
+
+        import tomlkit
+
+        from aiofl.config.objects import is_python_plant
+        from aiofl.outputs import atomic_write_text
+        from aiofl.plants.registry import python_plant_hint
+
+        data = copy.deepcopy(dict(self.config.raw))
+        plant = str(data["plant"])
+        python = is_python_plant(plant)
+        if python and not python_plant:
+            raise ValueError(
+                f"plant {plant!r} is defined in Python: a saved config naming it runs only in a "
+                "Python process that registers it first. Write the plant as a plant file and "
+                "build the Design from aiofl.config.resolve_plant('FILE.toml') (the file then "
+                "runs anywhere), or pass python_plant=True to save it anyway"
+            )
+        if path is not None and plant.endswith(".toml"):
+            folder = Path(path).resolve().parent
+            data["plant"] = Path(os.path.relpath(plant, folder)).as_posix()
+        doc = tomlkit.document()
+        doc.add(tomlkit.comment(f"aiofl design {self.name!r}, saved by aiofl.Design.to_toml"))
+        if python:
+            doc.add(tomlkit.comment(python_plant_hint(plant)))
+        for key, value in data.items():
+            doc[key] = value
+        text = tomlkit.dumps(doc)
+        if path is not None:
+            atomic_write_text(Path(path), text)
+        return text
+
+    def save(self, path: str | Path, *, python_plant: bool = False) -> Path:
+        """Write this design as a run config to ``path`` (:meth:`to_toml`); returns it."""
+        self.to_toml(path, python_plant=python_plant)
+        return Path(path)
+
     # ------------------------------------------------------------------ commands
     def simulate(self, *, store: bool = True) -> Any:
         """One run (``aiofl simulate``): a :class:`aiofl.engine.simulation.SimulationResult`

@@ -7,11 +7,13 @@ objects pass exactly the checks a file does and the CLI makes) and returns the
 tuning (which rebuilds the config from ``raw`` for every spec), ``best.toml`` and the
 closed-loop analyses work on it as on a loaded file.
 
-A plant defined in Python has no file to name: it is registered in this process under
-its own name (:func:`register_python_plant`, :func:`aiofl.plants.register_plant`), and
-``raw["plant"]`` names it.  Such a config therefore resolves only in the process that
-registered the plant (the local tuner, which runs every population in one compiled,
-parallel call, does; Dask workers in other processes do not: use a plant file there).
+A plant built from a plant file (:func:`aiofl.config.resolve_plant`) is named by that
+file's path, so its config runs anywhere.  A plant defined in Python has no file to name:
+it is registered in this process under its own name (:func:`register_python_plant`,
+:func:`aiofl.plants.register_plant`), and ``raw["plant"]`` names it.  Such a config
+therefore resolves only in the process that registered the plant (the local tuner, which
+runs every population in one compiled, parallel call, does; Dask workers in other
+processes do not: use a plant file there).
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ from aiofl.sensor import SENSOR_PRESETS, Sensor
 __all__ = [
     "config_dict",
     "controller_table",
+    "is_python_plant",
+    "plant_entry",
     "register_python_plant",
     "run_config_from_objects",
     "scenario_table",
@@ -62,6 +66,24 @@ def register_python_plant(plant: Plant) -> str:
         _REGISTERED[name] = plant
         register_plant(name, lambda: plant)
     return name
+
+
+def is_python_plant(name: str) -> bool:
+    """Whether ``name`` is a plant defined in Python and registered by
+    :func:`register_python_plant` (known in this process only)."""
+    return name in _REGISTERED
+
+
+def plant_entry(plant: Plant) -> str:
+    """The config's ``plant``: the file a plant file's plant was built from (so the config
+    runs in any process, the command line's too), else its registered name
+    (:func:`register_python_plant`)."""
+    from aiofl.config.run_config import plant_file_of
+
+    if not isinstance(plant, Plant):
+        raise ValueError(f"plant = {plant!r}; allowed: an aiofl.Plant")
+    path = plant_file_of(plant)
+    return path if path is not None else register_python_plant(plant)
 
 
 def _structure(c: Controller) -> str:
@@ -233,7 +255,7 @@ def config_dict(
     data: dict[str, Any] = {
         "name": name,
         "description": description,
-        "plant": register_python_plant(plant),
+        "plant": plant_entry(plant),
         "scenario": scenario_table(scenario),
         "controller": controller_table(controller),
         "simulation": {
