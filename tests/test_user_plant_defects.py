@@ -8,6 +8,7 @@ pendulum (its kernels are in every test cache).
 from __future__ import annotations
 
 import copy
+import json
 import math
 import tomllib
 import typing
@@ -22,6 +23,7 @@ import pytest
 from typer.testing import CliRunner
 
 from aiofl import Controller, Design, Plant, Reference, Scenario
+from aiofl.analysis.corners import _nominal_beta
 from aiofl.cli.app import app
 from aiofl.cli.export import FORMATS, export_command
 from aiofl.config import load_config, parse_config, resolve_plant
@@ -253,3 +255,56 @@ def test_a_python_plants_config_says_what_to_do(tmp_path: Path) -> None:
     with pytest.raises(ValueError, match=r"'saved_py' is defined in Python.*plant file"):
         py.to_toml()
     assert "defined in Python" in py.to_toml(python_plant=True).splitlines()[1]
+
+
+# ----------------------------------- 9. analyze's β at the operating point = robustness's
+MAGLEV_RUN = """
+plant = "{plant}"
+[scenario]
+t_final = 1.0
+x0 = [0.01, 0.0, 0.7003570517957252]
+[scenario.reference]
+kind = "step"
+amplitude = 0.001
+offset = 0.01
+[controller]
+structure = "LADRC"
+n_feedback = 3
+[controller.eso]
+omega0 = 400.0
+[controller.td]
+omega = 40.0
+[controller.sef]
+omega_c = 60.0
+[controller.law]
+b0 = -2800.0
+u_max = 24.0
+[simulation]
+dt = 1e-4
+"""
+
+
+def _maglev_run(tmp_path: Path, **changes: str) -> Path:
+    path = tmp_path / "maglev_run.toml"
+    text = MAGLEV_RUN.format(plant=MAGLEV.as_posix())
+    for old, new in changes.items():
+        text = text.replace(old, new)
+    path.write_text(text)
+    return path
+
+
+def test_analyze_gives_beta_at_the_operating_point_as_robustness_does(tmp_path: Path) -> None:
+    """analyze printed beta_nominal: null (β depends on x) where robustness took −2801.43."""
+    res = runner.invoke(app, ["analyze", str(MAGLEV), "--json"])
+    assert res.exit_code == 0, res.output
+    info = json.loads(res.output)
+    assert info["beta_nominal"] == pytest.approx(-2801.43, abs=0.01)
+    assert info["beta_point"] == [0.01, 0.0, 0.7003570517957252]
+    assert "equilibrium" in info["beta_point_label"]
+    run = _maglev_run(tmp_path)
+    res = runner.invoke(app, ["analyze", str(run), "--json"])
+    assert res.exit_code == 0, res.output
+    robustness_beta = _nominal_beta(load_config(run))  # what `aiofl robustness` reports
+    assert json.loads(res.output)["beta_nominal"] == pytest.approx(robustness_beta, rel=1e-12)
+    text = runner.invoke(app, ["analyze", str(run)]).output
+    assert "β at x0, the config's initial state = [0.01, 0, 0.700357]: -2801.43" in text

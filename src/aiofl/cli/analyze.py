@@ -212,9 +212,14 @@ def analyze_command(
             format_analysis_latex,
             format_analysis_text,
         )
-        from aiofl.plants.plant_file import load_symbolic_plant
+        from aiofl.plants.plant_file import config_initial_state, load_symbolic_plant
 
-        analysis = load_symbolic_plant(target).analyze()
+        symbolic = load_symbolic_plant(target)
+        analysis = symbolic.analyze()
+        x0 = config_initial_state(target)  # a run config: β where `aiofl robustness` takes it
+        if x0 is not None and len(x0) in (0, symbolic.n):
+            label = "x0, the config's initial state" + ("" if x0 else " (zero)")
+            analysis = analysis.at_point(x0 or (0.0,) * symbolic.n, label)
         if as_json:
             typer.echo(json.dumps(analysis_to_dict(analysis), indent=2))
         elif latex:
