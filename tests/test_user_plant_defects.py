@@ -24,6 +24,7 @@ from typer.testing import CliRunner
 
 from aiofl import Controller, Design, Plant, Reference, Scenario
 from aiofl.analysis.corners import _nominal_beta
+from aiofl.analysis.numeric_warnings import numeric_warnings, warnings_note
 from aiofl.cli.app import app
 from aiofl.cli.export import FORMATS, export_command
 from aiofl.config import load_config, parse_config, resolve_plant
@@ -308,3 +309,47 @@ def test_analyze_gives_beta_at_the_operating_point_as_robustness_does(tmp_path: 
     assert json.loads(res.output)["beta_nominal"] == pytest.approx(robustness_beta, rel=1e-12)
     text = runner.invoke(app, ["analyze", str(run)]).output
     assert "β at x0, the config's initial state = [0.01, 0, 0.700357]: -2801.43" in text
+
+
+# ------------------------- 5. analyze --closed-loop on the maglev: warnings, a step's orbit
+def test_closed_loop_analysis_of_the_maglev_leaks_no_warning_and_handles_the_step(
+    tmp_path: Path,
+) -> None:
+    """It leaked numpy/scipy RuntimeWarnings pointing into the plant cache and reported
+    "tracking orbit not analysed (ValueError: array must not contain infs or NaNs)": the
+    finite difference's first step crossed x1 = 0, so a good complex step was dropped."""
+    run = _maglev_run(tmp_path)
+    with warnings.catch_warnings(record=True) as seen:
+        warnings.simplefilter("always")
+        res = runner.invoke(app, ["analyze", "--closed-loop", str(run), "--json"])
+    assert res.exit_code == 0, res.output
+    assert not [w for w in seen if issubclass(w.category, RuntimeWarning)], seen[:3]
+    info = json.loads(res.stdout)
+    orbit = info["orbit"]
+    assert orbit["step_final"] == pytest.approx(0.011)
+    assert "notes" not in orbit  # every plant function by the exact complex step
+    assert "infs or NaNs" not in orbit["verdict"]
+    assert "tracking orbit is the equilibrium at its final value r = 0.011 m" in orbit["verdict"]
+    assert orbit["verdict"].startswith("equilibrium stable")
+
+
+def test_numerical_warnings_are_summarised_in_one_note() -> None:
+    with numeric_warnings() as caught:
+        for _ in range(3):
+            warnings.warn_explicit(
+                "divide by zero encountered in scalar divide",
+                RuntimeWarning,
+                "/cache/plants/plant_0123.py",
+                10,
+            )
+        warnings.warn_explicit(
+            "invalid value encountered in matmul",
+            RuntimeWarning,
+            "/venv/site-packages/scipy/differentiate/_d.py",
+            5,
+        )
+    note = warnings_note(caught)
+    assert note is not None and note.startswith("4 numerical warning(s) while analysing")
+    assert "divide by zero encountered in scalar divide (×3, in the plant's functions)" in note
+    assert "invalid value encountered in matmul (×1, in scipy)" in note
+    assert warnings_note([]) is None

@@ -135,8 +135,10 @@ def analyze_command(
         if out is not None:
             raise ValueError("--out applies only with --sampling")
 
+    from aiofl.analysis.numeric_warnings import numeric_warnings, warnings_note
+
     console = Console(highlight=False, markup=False, soft_wrap=True)
-    with bad_input_exits():
+    with bad_input_exits(), numeric_warnings() as caught:  # numpy/scipy's: one note below
         if not (amplitude > 0 and math.isfinite(amplitude)):
             raise ValueError(f"--amplitude = {amplitude}; allowed: finite and > 0")
         if r_op is not None and not math.isfinite(r_op):
@@ -183,6 +185,9 @@ def analyze_command(
 
                 info["orbit"] = orbit_analysis(cfg, info, unit=cfg.plant.output_unit, budget=budget)
                 info["reconciled_verdict"] = info["orbit"]["verdict"]
+            note = warnings_note(caught)
+            if note is not None:
+                info["numerical_warnings"] = note
             if figure is not None:
                 from aiofl.analysis.frequency import loop_figure_bytes
                 from aiofl.outputs import atomic_write_bytes
@@ -204,6 +209,8 @@ def analyze_command(
                     from aiofl.analysis.orbit import format_orbit_text
 
                     console.print(format_orbit_text(info["orbit"]))
+                if note is not None:
+                    typer.echo(f"aiofl: note: {note}", err=True)
             return
         if r_op is not None:
             raise ValueError("--r-op applies only with --closed-loop")
