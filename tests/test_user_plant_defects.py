@@ -24,7 +24,9 @@ from typer.testing import CliRunner
 
 from aiofl import Controller, Design, Plant, Reference, Scenario
 from aiofl.analysis.corners import _nominal_beta
+from aiofl.analysis.linearize import linearize_closed_loop
 from aiofl.analysis.numeric_warnings import numeric_warnings, warnings_note
+from aiofl.analysis.sampled_loop import sampled_margins
 from aiofl.cli.app import app
 from aiofl.cli.export import FORMATS, export_command
 from aiofl.config import load_config, parse_config, resolve_plant
@@ -353,3 +355,27 @@ def test_numerical_warnings_are_summarised_in_one_note() -> None:
     assert "divide by zero encountered in scalar divide (×3, in the plant's functions)" in note
     assert "invalid value encountered in matmul (×1, in scipy)" in note
     assert warnings_note([]) is None
+
+
+def test_a_sampled_configs_margins_are_labelled_and_the_sampled_loops_given() -> None:
+    """On a sampled config it gave the continuous loop's margins without saying so."""
+    res = runner.invoke(app, ["analyze", "--closed-loop", "assisted-s1-ladrc", "--no-orbit"])
+    assert res.exit_code == 0, res.output
+    first = res.output.splitlines()[0]
+    assert "the continuous loop (the design runs sampled at Ts = 0.001 s)" in first
+    assert "Sampled loop at Ts = 0.001 s" in res.output
+    res = runner.invoke(
+        app, ["analyze", "--closed-loop", "assisted-s1-ladrc", "--no-orbit", "--json"]
+    )
+    info = json.loads(res.stdout)
+    assert info["margins_of"] == "the continuous loop (no sampling)"
+    sampled = info["sampled_loop"]
+    assert sampled["ts"] == 1e-3 and sampled["stable"] and sampled["spectral_radius"] < 1
+    assert sampled["phase_margin_deg"] > 0 and sampled["delay_margin_s"] > 0
+    # a fast enough sampling gives back the continuous margins
+    cfg = load_config("retuned-s1-ladrc")
+    fast = sampled_margins(cfg.with_sample_time(1e-4))
+    m = linearize_closed_loop(cfg).margins
+    assert fast["gain_margin_db"] == pytest.approx(m.gain_margin_db, abs=0.2)
+    assert fast["phase_margin_deg"] == pytest.approx(m.phase_margin_deg, abs=0.2)
+    assert fast["delay_margin_s"] == pytest.approx(m.delay_margin_s, rel=0.03)

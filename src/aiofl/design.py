@@ -249,7 +249,9 @@ class Design:
         """The linearised closed loop (``aiofl analyze --closed-loop``): verdict,
         eigenvalues, damping and margins as a dict
         (:func:`aiofl.analysis.linearize.closed_loop_verdict`; with ``r_op`` the
-        linearisation at that reference value)."""
+        linearisation at that reference value).  For a sampled design those are the
+        continuous loop's (``"margins_of"``) and ``"sampled_loop"`` holds the sampled
+        loop's verdict and margins (:func:`aiofl.analysis.sampled_loop.sampled_margins`)."""
         import math
 
         from aiofl.analysis.linearize import closed_loop_verdict, linearize_closed_loop
@@ -261,7 +263,13 @@ class Design:
         lin = linearize_closed_loop(self.config, amplitude=amplitude, r_op=r_op)
         if r_op is not None:
             return dict(lin.to_dict())
-        return closed_loop_verdict(self.config, amplitude=amplitude, linearization=lin)
+        out = closed_loop_verdict(self.config, amplitude=amplitude, linearization=lin)
+        if self.config.sampling is not None:  # the margins above are the continuous loop's
+            from aiofl.analysis.sampled_loop import sampled_margins
+
+            out["margins_of"] = "the continuous loop (no sampling)"
+            out["sampled_loop"] = sampled_margins(self.config)
+        return out
 
     def export(
         self,

@@ -185,6 +185,11 @@ def analyze_command(
 
                 info["orbit"] = orbit_analysis(cfg, info, unit=cfg.plant.output_unit, budget=budget)
                 info["reconciled_verdict"] = info["orbit"]["verdict"]
+            if cfg.sampling is not None and r_op is None:  # the loop as it runs, labelled
+                from aiofl.analysis.sampled_loop import sampled_margins
+
+                info["margins_of"] = "the continuous loop (no sampling)"
+                info["sampled_loop"] = sampled_margins(cfg)
             note = warnings_note(caught)
             if note is not None:
                 info["numerical_warnings"] = note
