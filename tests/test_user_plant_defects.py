@@ -28,7 +28,7 @@ from aiofl.analysis.linearize import linearize_closed_loop
 from aiofl.analysis.numeric_warnings import numeric_warnings, warnings_note
 from aiofl.analysis.sampled_loop import sampled_margins
 from aiofl.cli.app import app
-from aiofl.cli.export import FORMATS, export_command
+from aiofl.cli.export import FORMATS, _loop_checks, export_command
 from aiofl.config import load_config, parse_config, resolve_plant
 from aiofl.plants import get_plant
 from aiofl.plants.base import PlantError
@@ -379,3 +379,18 @@ def test_a_sampled_configs_margins_are_labelled_and_the_sampled_loops_given() ->
     assert fast["gain_margin_db"] == pytest.approx(m.gain_margin_db, abs=0.2)
     assert fast["phase_margin_deg"] == pytest.approx(m.phase_margin_deg, abs=0.2)
     assert fast["delay_margin_s"] == pytest.approx(m.delay_margin_s, rel=0.03)
+
+
+# ------------------ 4. export compares a design made sampled with its own sampled self
+def test_export_compares_a_sampled_design_with_its_own_sampled_self() -> None:
+    """`aiofl export assisted-s1-ladrc --ts 0.001` warned its sampled ITAE exceeded a
+    continuous ideal-sensor version the preset never was."""
+    cont = load_config("tank-ladrc")
+    made = cont.with_sample_time(0.1)  # a design made sampled (ITAE 3.5 % over continuous)
+    assert _loop_checks(made, made, made.sampling, "tank", 0.02) == []
+    coarser = made.with_sample_time(0.2)
+    (warning,) = _loop_checks(made, coarser, coarser.sampling, "tank", 0.02)
+    assert "sampled at Ts = 0.2 s has ITAE" in warning
+    assert "of the design at its own Ts = 0.1 s (both without the converters' quanta)" in warning
+    (warning,) = _loop_checks(cont, made, made.sampling, "tank", 0.02)
+    assert "of the continuous design (the config as it is)" in warning
