@@ -247,12 +247,10 @@ class Analysis:
     beta_constant
         β does not depend on x (ρ is then defined everywhere, if β ≠ 0).
     beta_nominal
-        β at the nominal parameters: the constant, or (β depending on x) its value at
-        :attr:`beta_point` (None when there is no point or β is not finite there).
+        β at the nominal parameters: the constant, or its value at :attr:`beta_point`.
     beta_point, beta_point_label
-        The state β is evaluated at when it depends on x: the plant's declared
-        ``equilibrium`` (:func:`analyze`), or a run config's initial state
-        (:meth:`at_point`, as ``aiofl robustness`` takes it); None and ``""`` otherwise.
+        Where a state-dependent β is evaluated (:meth:`at_point`): the declared
+        ``equilibrium``, or a run config's x0 (as ``aiofl robustness`` takes it).
     beta_zero_set, beta_undefined_set
         Factors c(x) of β's numerator / denominator: ρ is not defined where c(x) = 0.
     zero_dynamics
@@ -275,20 +273,13 @@ class Analysis:
     beta_point_label: str = ""
 
     def at_point(self, x: Sequence[float], label: str) -> Analysis:
-        """This analysis with a state-dependent β evaluated at ``x`` (nominal parameters),
-        the point named by ``label`` (e.g. ``"x0, the config's initial state"``); a
-        constant β is returned unchanged."""
+        """This analysis with a state-dependent β evaluated at ``x`` (named ``label``)."""
         if self.beta_constant:
             return self
         point = tuple(float(v) for v in x)
-        if len(point) != self.plant.n:
-            raise ValueError(f"β's point has {len(point)} entries; the plant has {self.plant.n}")
-        sub = {**self.plant.nominal, **dict(zip(self.plant.states, point, strict=True))}
-        try:
-            value = float(self.beta.subs(sub))
-        except (TypeError, ValueError, OverflowError, ZeroDivisionError):
-            value = math.nan
-        nominal = value if math.isfinite(value) else None
+        at = dict(zip(self.plant.states, point, strict=True))
+        val = self.beta.subs({**self.plant.nominal, **at})
+        nominal = float(val) if val.is_number and val.is_finite and val.is_real else None
         return replace(self, beta_nominal=nominal, beta_point=point, beta_point_label=label)
 
     @property
