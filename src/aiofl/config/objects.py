@@ -78,11 +78,11 @@ def plant_entry(plant: Plant) -> str:
     """The config's ``plant``: the file a plant file's plant was built from (so the config
     runs in any process, the command line's too), else its registered name
     (:func:`register_python_plant`)."""
-    from aiofl.config.run_config import plant_file_of
+    from aiofl.config.run_config import _FILE_PLANTS  # plant files built in this process
 
     if not isinstance(plant, Plant):
         raise ValueError(f"plant = {plant!r}; allowed: an aiofl.Plant")
-    path = plant_file_of(plant)
+    path = next((p for (p, _), built in _FILE_PLANTS.items() if built is plant), None)
     return path if path is not None else register_python_plant(plant)
 
 

@@ -394,15 +394,6 @@ def resolve_plant(name_or_file: str, base_dir: str | Path | None = None) -> Plan
     return _FILE_PLANTS[key]
 
 
-def plant_file_of(plant: Plant) -> str | None:
-    """The absolute path of the plant file ``plant`` was built from in this process
-    (:func:`resolve_plant`), or None (a registered or Python-defined plant)."""
-    for (path, _), built in _FILE_PLANTS.items():
-        if built is plant:
-            return path
-    return None
-
-
 def _prepare_loops_ahead(path: Path) -> None:
     """A plant file the cache has never seen: start compiling the loops of its number of
     states in a second process while sympy builds it, if the cache has none

@@ -270,9 +270,8 @@ def prepare(
     from aiofl.limits import check_run_size
     from aiofl.tuning.evaluate import EvalSpec
 
-    given = isinstance(run_config, (str, Path))
-    cfg = load_config(run_config) if given else run_config
-    source = str(run_config) if given else cfg.name
+    cfg = load_config(run_config) if isinstance(run_config, (str, Path)) else run_config
+    source = str(run_config) if cfg is not run_config else cfg.name
     st = parse_tune_settings(settings if settings is not None else cfg.raw.get("tune"))
     overrides = {k: v for k, v in overrides.items() if v is not None}
     st = parse_tune_settings({**st.model_dump(exclude_none=True), **overrides})
