@@ -525,11 +525,9 @@ def parse_config(
     if sampling is not None:  # [controller.discrete]: a sampled controller
         cfg = replace(cfg, sampling=sampling)
         cfg.check_sampling()
-    # a [sensor] table without a preset is a custom sensor, not the "ideal" preset
-    given = sensor_table is not None and "preset" in data["sensor"]
+    given = sensor_table is not None and "preset" in data["sensor"]  # else custom, not ideal
     label = sensor_table.preset if given else "custom"
-    sensor = Sensor.of_run(cfg.scenario, cfg.sampling, preset=label, unit=plant.output_unit)
-    return replace(cfg, sensor=sensor)
+    return replace(cfg, sensor=Sensor.of_run(cfg.scenario, cfg.sampling, label, plant.output_unit))
 
 
 def _holding_input(plant: Any, scenario: Any) -> float:
