@@ -34,7 +34,7 @@ def _run(args: list[str]):
         (["--ts", "-1e-3"], "--ts"),
         (["--ts", "1.5e-4"], "--ts = 0.00015: "),
         (["--ts", "1.5e-4"], "is not an integer multiple of the step dt = 0.0001 s"),
-        (["--ts", "1e-3", "--format", "vhdl"], "--format = 'vhdl'; allowed: c"),
+        (["--ts", "1e-3", "--format", "vhdl"], "'vhdl' is not one of 'c', 'fmu'"),
         (["--ts", "1e-3", "--precision", "half"], "--precision"),
         ([], "no sample time"),
         (["--ts", "1e-3", "--params-only", "--params-name", "2x"], "--params-name"),

@@ -118,6 +118,57 @@ class Design:
         validated again."""
         return replace(self, **changes)
 
+    # ------------------------------------------------------------------ saving
+    def to_toml(self, path: str | Path | None = None, *, python_plant: bool = False) -> str:
+        """This design as a run config's TOML text (written with tomlkit); with ``path``
+        also written there (atomically; a plant file is then named relative to the
+        file's folder), so ``aiofl simulate PATH`` (and every command) runs it.
+
+        The plant must be one a config can name: a shipped or registered plant, or one built
+        from a plant file (:func:`aiofl.config.resolve_plant`: named by its path).  A plant
+        defined in Python is known only in the process that defined it: refused (a
+        ``ValueError`` saying what to do) unless ``python_plant`` is true, when the file
+        loads only in a Python process that registers the plant first
+        (``aiofl.register_plant(NAME, lambda: plant)``).
+        """
+        import copy
+        import os
+
+        import tomlkit
+
+        from aiofl.config.objects import is_python_plant
+        from aiofl.outputs import atomic_write_text
+        from aiofl.plants.registry import python_plant_hint
+
+        data = copy.deepcopy(dict(self.config.raw))
+        plant = str(data["plant"])
+        python = is_python_plant(plant)
+        if python and not python_plant:
+            raise ValueError(
+                f"plant {plant!r} is defined in Python: a saved config naming it runs only in a "
+                "Python process that registers it first. Write the plant as a plant file and "
+                "build the Design from aiofl.config.resolve_plant('FILE.toml') (the file then "
+                "runs anywhere), or pass python_plant=True to save it anyway"
+            )
+        if path is not None and plant.endswith(".toml"):
+            folder = Path(path).resolve().parent
+            data["plant"] = Path(os.path.relpath(plant, folder)).as_posix()
+        doc = tomlkit.document()
+        doc.add(tomlkit.comment(f"aiofl design {self.name!r}, saved by aiofl.Design.to_toml"))
+        if python:
+            doc.add(tomlkit.comment(python_plant_hint(plant)))
+        for key, value in data.items():
+            doc[key] = value
+        text = tomlkit.dumps(doc)
+        if path is not None:
+            atomic_write_text(Path(path), text)
+        return text
+
+    def save(self, path: str | Path, *, python_plant: bool = False) -> Path:
+        """Write this design as a run config to ``path`` (:meth:`to_toml`); returns it."""
+        self.to_toml(path, python_plant=python_plant)
+        return Path(path)
+
     # ------------------------------------------------------------------ commands
     def simulate(self, *, store: bool = True) -> Any:
         """One run (``aiofl simulate``): a :class:`aiofl.engine.simulation.SimulationResult`
@@ -198,7 +249,9 @@ class Design:
         """The linearised closed loop (``aiofl analyze --closed-loop``): verdict,
         eigenvalues, damping and margins as a dict
         (:func:`aiofl.analysis.linearize.closed_loop_verdict`; with ``r_op`` the
-        linearisation at that reference value)."""
+        linearisation at that reference value).  For a sampled design those are the
+        continuous loop's (``"margins_of"``) and ``"sampled_loop"`` holds the sampled
+        loop's verdict and margins (:func:`aiofl.analysis.sampled_loop.sampled_margins`)."""
         import math
 
         from aiofl.analysis.linearize import closed_loop_verdict, linearize_closed_loop
@@ -210,7 +263,13 @@ class Design:
         lin = linearize_closed_loop(self.config, amplitude=amplitude, r_op=r_op)
         if r_op is not None:
             return dict(lin.to_dict())
-        return closed_loop_verdict(self.config, amplitude=amplitude, linearization=lin)
+        out = closed_loop_verdict(self.config, amplitude=amplitude, linearization=lin)
+        if self.config.sampling is not None:  # the margins above are the continuous loop's
+            from aiofl.analysis.sampled_loop import sampled_margins
+
+            out["margins_of"] = "the continuous loop (no sampling)"
+            out["sampled_loop"] = sampled_margins(self.config)
+        return out
 
     def export(
         self,
@@ -219,16 +278,22 @@ class Design:
         ts: float | None = None,
         precision: str = "double",
         prefix: str = "aiofl",
+        format: str = "c",  # the CLI's --format
     ) -> dict[str, Path]:
-        """Write the controller as C99 (``aiofl export``): ``PREFIX_controller.h``,
-        ``PREFIX_controller.c`` and ``PREFIX_params.c`` (and ``PREFIX_model.h`` for a
-        model-assisted controller) in ``out``, sampled at ``ts`` (default: the design's
-        sampling); returns the paths by file name.  Raises ``ValueError`` for what the C
-        code cannot express or a bad prefix (:class:`aiofl.export.ExportError`); nothing is
-        written then.  Unlike ``aiofl export`` it runs no simulation first."""
+        """Write the controller (``aiofl export``), sampled at ``ts`` (default: the
+        design's sampling), in ``out``; returns the paths by file name.
+
+        ``format = "c"``: C99 sources, ``PREFIX_controller.h``, ``PREFIX_controller.c`` and
+        ``PREFIX_params.c`` (and ``PREFIX_model.h`` for a model-assisted controller);
+        ``format = "fmu"``: ``PREFIX.fmu``, an FMI 2.0 co-simulation FMU of the same C
+        (built with the C compiler, ``$CC`` or ``cc``).  Raises ``ValueError`` for what the
+        C code cannot express, a bad prefix or format, or no compiler for an FMU
+        (:class:`aiofl.export.ExportError`); nothing is written then.  Unlike ``aiofl
+        export`` it runs no simulation first."""
         from aiofl.engine.discrete import Sampling
         from aiofl.export import ExportError, export_c
-        from aiofl.outputs import atomic_write_text
+        from aiofl.export.fmu import export_fmu_for_config
+        from aiofl.outputs import atomic_write_bytes, atomic_write_text
 
         cfg = self.config
         if ts is not None:
@@ -240,25 +305,39 @@ class Design:
             sampling = cfg.sampling
         if precision not in ("double", "float"):
             raise ValueError(f"precision = {precision!r}; allowed: double, float")
+        if format not in ("c", "fmu"):
+            raise ValueError(f"format = {format!r}; allowed: c, fmu")
+        files: dict[str, str | bytes]
         try:
-            files = export_c(
-                cfg.controller,
-                sampling,
-                precision=precision,
-                prefix=prefix,
-                title=cfg.name,
-                notes=[cfg.description] if cfg.description else [],
-                plant=cfg.plant,
-                plant_source=cfg.plant.name,
-                x0=cfg.scenario.x0,
-            )
+            if format == "fmu":
+                if sampling is None:
+                    raise ExportError("no sample time: give ts or the design a sampling")
+                name, data = export_fmu_for_config(
+                    cfg, sampling, precision=precision, config=cfg.name, prefix=prefix
+                )
+                files = {name: data}
+            else:
+                files = export_c(
+                    cfg.controller,
+                    sampling,
+                    precision=precision,
+                    prefix=prefix,
+                    title=cfg.name,
+                    notes=[cfg.description] if cfg.description else [],
+                    plant=cfg.plant,
+                    plant_source=cfg.plant.name,
+                    x0=cfg.scenario.x0,
+                )
         except ExportError as exc:
             raise ValueError(f"cannot export {cfg.name!r}: {exc}") from None
         folder = Path(out)
         folder.mkdir(parents=True, exist_ok=True)
         paths = {}
-        for name, text in files.items():
-            atomic_write_text(folder / name, text)
+        for name, content in files.items():
+            if isinstance(content, bytes):
+                atomic_write_bytes(folder / name, content)
+            else:
+                atomic_write_text(folder / name, content)
             paths[name] = folder / name
         return paths
 

@@ -148,6 +148,9 @@ class Sensor:
         How long a noise sample is held [s], > 0; None: ``ts``, else 1 ms.
     noise_seed
         Seed of the noise sequence, ``0 <= seed < 2**63``.
+    unit
+        The unit of the measured output (the plant's ``output_unit``; ``""``: not
+        declared): :meth:`describe` writes the quantum in it, as 2π/N only for ``rad``.
     """
 
     preset: str = "ideal"
@@ -156,10 +159,13 @@ class Sensor:
     noise_variance: float = 0.0
     noise_hold: float | None = None
     noise_seed: int = 0
+    unit: str = ""
 
     def __post_init__(self) -> None:
         if not isinstance(self.preset, str):
             raise ValueError(f"sensor.preset = {self.preset!r}; allowed: a name")
+        if not isinstance(self.unit, str):
+            raise ValueError(f"sensor.unit = {self.unit!r}; allowed: a unit's text")
         if self.ts is not None:
             ts = _number("ts", self.ts)
             if not 0 < ts <= TS_MAX:
@@ -215,17 +221,30 @@ class Sensor:
         """True for the continuous, unquantised, noise-free measurement."""
         return self.ts is None and self.quantum == 0 and self.noise_variance == 0
 
+    @property
+    def label(self) -> str:
+        """What this sensor is called: ``"ideal"`` for the ideal measurement, the preset's
+        name for a (possibly overridden) encoder preset, else ``"custom"`` (a sensor set by
+        its keys alone is no "ideal" one)."""
+        if self.is_ideal:
+            return "ideal"
+        if self.preset in SENSOR_PRESETS and self.preset != "ideal":
+            return self.preset
+        return "custom"
+
     def describe(self) -> str:
         """One line: ``encoder-12bit (sampled at 1 ms, quantum 2π/4096 = 0.001534 rad, no
-        noise)``."""
+        noise)``; the quantum of an output that is no angle is written in its unit
+        (``custom (sampled at 1 ms, quantum 1e-05 m, no noise)``)."""
         parts = []
         parts.append("continuous" if self.ts is None else f"sampled at {1e3 * self.ts:g} ms")
         if self.quantum > 0:
+            unit = f" {self.unit}" if self.unit and self.unit != "-" else ""
             counts = 2.0 * math.pi / self.quantum
-            if abs(counts - round(counts)) < 1e-6 * counts:
-                parts.append(f"quantum 2π/{round(counts)} = {self.quantum:.4g}")
+            if self.unit == "rad" and abs(counts - round(counts)) < 1e-6 * counts:
+                parts.append(f"quantum 2π/{round(counts)} = {self.quantum:.4g} rad")
             else:
-                parts.append(f"quantum {self.quantum:.4g}")
+                parts.append(f"quantum {self.quantum:.4g}{unit}")
         else:
             parts.append("not quantised")
         if self.noise_variance > 0:
@@ -235,7 +254,7 @@ class Sensor:
             )
         else:
             parts.append("no noise")
-        return f"{self.preset} ({', '.join(parts)})"
+        return f"{self.label} ({', '.join(parts)})"
 
     def apply(self, scenario: Any, sampling: Any = None) -> tuple[Any, Any]:
         """``(scenario, sampling)`` with this sensor's noise and sample time / quantum.
@@ -269,11 +288,15 @@ class Sensor:
         return scenario, sampling
 
     @classmethod
-    def of_run(cls, scenario: Any, sampling: Any = None, preset: str = "custom") -> Sensor:
+    def of_run(
+        cls, scenario: Any, sampling: Any = None, preset: str = "custom", unit: str = ""
+    ) -> Sensor:
         """The sensor a scenario and sampling setting amount to (their noise, ts and
-        y_quantum); ``preset`` labels it (``"ideal"`` when it is the ideal measurement)."""
+        y_quantum); ``preset`` labels it (``"ideal"`` when it is the ideal measurement),
+        ``unit`` is the measured output's."""
         sensor = cls(
             preset=preset,
+            unit=unit,
             ts=None if sampling is None else sampling.ts,
             quantum=0.0 if sampling is None else sampling.y_quantum,
             noise_variance=scenario.noise_variance,

@@ -45,6 +45,10 @@ __all__ = ["COMPLEX_STEP", "FD_CACHE_SIZE", "PlantDerivatives", "complex_safe"]
 COMPLEX_STEP = 1e-30
 """Imaginary step h of the complex-step derivative (no cancellation, so any tiny h works)."""
 
+FD_STEPS = (1e-2, 1e-4, 1e-6)
+"""First steps of the finite difference, as fractions of max(1, |x_j|), tried in turn until
+the Jacobian is finite (a step may reach a point where the plant is not defined)."""
+
 FD_CACHE_SIZE = 256
 """Finite-difference Jacobians a :class:`PlantDerivatives` keeps (the most recently used).
 A tangent batch asks for the Jacobian at one real state once per column, so a few entries
@@ -266,8 +270,17 @@ class PlantDerivatives:
             out = np.stack(cols, axis=-1)
             return out.reshape((out.shape[0], *xs.shape[1:]))
 
-        step = 0.01 * np.maximum(1.0, np.abs(x))
-        return jacobian(vectorised, x, initial_step=step)
+        # a first step of 1 % of max(1, |x|) may reach a point where the function is not
+        # finite (the maglev's 1/x1² at x1 = 0.01 m): then smaller steps; the non-finite
+        # trials are detected here, not printed as numpy's RuntimeWarnings
+        base = np.maximum(1.0, np.abs(x))
+        for scale in FD_STEPS:
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore", RuntimeWarning)
+                res = jacobian(vectorised, x, initial_step=scale * base)
+            if np.all(np.isfinite(res.df)):
+                break
+        return res
 
     def complex_jacobian(
         self, name: str, x: NDArray[np.float64], p: NDArray[np.float64]

@@ -559,7 +559,11 @@ def format_linearization_text(
 
     Eigenvalues are listed once per group with their multiplicity (``−50 ×3``,
     :func:`group_eigenvalues`)."""
-    out = [f"Closed-loop linearisation{f' of {name}' if name else ''}"]
+    sampled = (extra or {}).get("sampled_loop")
+    head = f"Closed-loop linearisation{f' of {name}' if name else ''}"
+    if sampled is not None:  # the lines below are the continuous loop's: say so
+        head += f" — the continuous loop (the design runs sampled at Ts = {sampled['ts']:g} s)"
+    out = [head]
     out.append(
         f"  operating point: r = {lin.r_op:g}, τ_d = {lin.d_op:g}; states: "
         + ", ".join(lin.state_names)
@@ -586,4 +590,29 @@ def format_linearization_text(
     if extra and "verdicts_by_amplitude" in extra:
         sweep = ", ".join(f"ε={k}: {v}" for k, v in extra["verdicts_by_amplitude"].items())
         out.append(f"  verdict by error amplitude: {sweep}")
+    if sampled is not None:
+        out += format_sampled_text(sampled)
     return "\n".join(out)
+
+
+def format_sampled_text(sampled: dict[str, Any]) -> list[str]:
+    """Text lines of :func:`aiofl.analysis.sampled_loop.sampled_margins`."""
+    ts = sampled["ts"]
+    out = [f"Sampled loop at Ts = {ts:g} s (ZOH plant + the engine's discrete update, linearised)"]
+    if "reason" in sampled:
+        return [*out, f"  not analysed: {sampled['reason']}"]
+    word = "STABLE" if sampled["stable"] else "UNSTABLE"
+    out.append(f"  verdict: {word} (spectral radius {sampled['spectral_radius']:.6g})")
+
+    def at(w: float | None) -> str:
+        return f" at {w:.4g} rad/s" if w is not None else ""
+
+    gm, pm, dm = (sampled[k] for k in ("gain_margin_db", "phase_margin_deg", "delay_margin_s"))
+    gm_text = f"{gm:.4g} dB{at(sampled['phase_crossover'])}" if gm is not None else "∞"
+    pm_text = f"{pm:.4g}°{at(sampled['gain_crossover'])}" if pm is not None else "∞"
+    dm_text = "not defined" if dm is None else f"{dm:.4g} s"
+    out.append(
+        f"  loop broken at the plant input, z = e^(jωTs), ω ≤ π/Ts = {np.pi / ts:.4g} rad/s:"
+    )
+    out.append(f"    gain margin {gm_text}; phase margin {pm_text}; delay margin {dm_text}")
+    return out

@@ -326,6 +326,11 @@ def reconciled_text(info: dict[str, Any], unit: str = "") -> tuple[str, str]:
             short.append("equilibrium diverges")
     elif eq in ("stable", "unstable", "marginal"):
         short.append(f"equilibrium {eq}")
+    if info.get("step_final") is not None:  # a step's tracking orbit is that equilibrium
+        parts.append(
+            f"a step reference's tracking orbit is the equilibrium at its final value r = "
+            f"{_g(info['step_final'], 6)}{u}, the one above: {eq}"
+        )
     fl, ft = info.get("floquet"), info.get("ftle")
     if fl is not None:
         mu = fl["largest"]
@@ -359,6 +364,12 @@ def reconciled_text(info: dict[str, Any], unit: str = "") -> tuple[str, str]:
     elif info.get("orbit_diverges"):
         parts.append(f"the tracking run diverges ({info['orbit_diverges']})")
         short.insert(0, "tracking diverges")
+    elif info.get("orbit_error") and info.get("step_final") is not None:
+        parts.append(
+            "the run from the initial state was not followed to a finite-time Lyapunov "
+            f"exponent (its states or Jacobian became non-finite: {info['orbit_error']}; the "
+            "transient leaves the region where the loop is defined: see aiofl simulate)"
+        )
     elif info.get("orbit_error"):
         parts.append(f"tracking orbit not analysed ({info['orbit_error']})")
     gave_up = info.get("gave_up")
@@ -460,6 +471,7 @@ def _orbit_parts(
     """The limit cycle and the tracking orbit of :func:`orbit_analysis` (with the settings
     ``q``: :data:`QUICK` or none), into ``out``; a part stopped by the time budget is named
     in ``gave_up``."""
+    from aiofl.analysis.closed_loop import reference_operating_value
     from aiofl.analysis.linearize import linearize_closed_loop
 
     simulate_cycle = q.get("simulate_cycle", True)
@@ -497,6 +509,8 @@ def _orbit_parts(
         elif cfg.scenario.reference.kind == "sine":
             out["floquet"] = tracking_floquet(loop, **periods)
         else:
+            if cfg.scenario.reference.kind == "step":  # after the step r is held: its orbit
+                out["step_final"] = reference_operating_value(cfg.scenario.reference)
             out["ftle"] = tracking_ftle(loop)
     except OrbitDiverges as exc:
         out["orbit_diverges"] = str(exc)

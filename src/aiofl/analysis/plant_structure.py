@@ -55,6 +55,10 @@ def format_analysis_text(a: Analysis) -> str:
     out.append(f"relative degree  ρ = {a.rho}   (n = {p.n})")
     out.append(f"  defined: {a.region}")
     out.append(f"  β(x) = L_g L_f^{a.rho - 1} h = {sp.sstr(a.beta)}")
+    if a.beta_point is not None:
+        at = "[" + ", ".join(f"{v:g}" for v in a.beta_point) + "]"
+        value = f"{a.beta_nominal:.6g}" if a.beta_nominal is not None else "not finite"
+        out.append(f"  β at {a.beta_point_label} = {at}: {value}")
     out.append(f"  α(x) = L_f^{a.rho} h = {sp.sstr(a.alpha)}")
     out.append(f"  y^({a.rho}) = α(x) + β(x)·u;  IOFL: u = (−α(x) + v)/β(x) gives y^({a.rho}) = v")
     out.append("")
@@ -139,6 +143,8 @@ def analysis_to_dict(a: Analysis) -> dict[str, Any]:
         "beta": sp.sstr(a.beta),
         "beta_constant": a.beta_constant,
         "beta_nominal": a.beta_nominal,
+        "beta_point": None if a.beta_point is None else list(a.beta_point),
+        "beta_point_label": a.beta_point_label or None,
         "region": a.region,
         "xi": [sp.sstr(e) for e in a.xi],
         "zero_dynamics": None

@@ -55,7 +55,7 @@ from numpy.typing import NDArray
 from aiofl.analysis.closed_loop import DEFAULT_AMPLITUDE, ClosedLoop
 from aiofl.engine.discrete import Sampling
 
-__all__ = ["SampledLoop", "zoh"]
+__all__ = ["SampledLoop", "sampled_margins", "zoh"]
 
 
 def zoh(a: NDArray[np.float64], b: NDArray[np.float64], ts: float) -> tuple[Any, Any]:
@@ -260,6 +260,32 @@ class SampledLoop:
             m[w0 + j, w0 + j - 1] = 1.0
         return m
 
+    def broken_loop(
+        self, ts: float
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        r"""``(A, B, C)`` of the sampled loop broken at the plant input: state
+        :math:`(\delta x, \delta c)`, input the held :math:`\delta u_p`, output the
+        command the DAC applies; closing :math:`u_p = ` output gives :meth:`matrix` (``ts``).
+        """
+        if not self.available:
+            raise ValueError(self.reason)
+        jcc, jcy, juc, juy, keep, i_up = self._controller_pieces(ts)
+        phi, gam = zoh(self.ap, self.bp, ts)
+        n, nk = phi.shape[0], keep.size
+        cp = self.cp[0]
+        a = np.zeros((n + nk, n + nk))
+        a[:n, :n] = phi
+        a[n:, :n] = np.outer(jcy, cp)
+        a[n:, n:] = jcc
+        b = np.zeros((n + nk, 1))
+        b[:n, 0] = gam[:, 0]
+        c = np.zeros((1, n + nk))
+        if self.base.delay:
+            c[0, n + i_up] = 1.0
+        else:
+            c[0, :n], c[0, n:] = juy * cp, juc
+        return a, b, c
+
     def delay_margin(
         self, ts: float, *, d_max: float | None = None, rtol: float = 1e-4
     ) -> float | None:
@@ -329,3 +355,66 @@ class SampledLoop:
         if not np.all(np.isfinite(m)):
             return None
         return float(np.max(np.abs(np.linalg.eigvals(m))))
+
+
+def sampled_margins(config: Any, ts: float | None = None) -> dict[str, Any]:
+    r"""The sampled loop's stability and margins at ``ts`` (default: the config's own
+    sample time), to stand beside the continuous loop's (:mod:`aiofl.analysis.frequency`).
+
+    Returns ``{"ts", "spectral_radius", "stable", "gain_margin_db", "phase_crossover",
+    "phase_margin_deg", "gain_crossover", "delay_margin_s"}``: the gain and phase margins
+    of :math:`L(z) = -C(zI-A)^{-1}B` (:meth:`SampledLoop.broken_loop`) on the unit circle
+    :math:`z = e^{j\omega T_s}`, :math:`\omega` up to the Nyquist frequency
+    :math:`\pi/T_s` (crossings bracketed on a log grid, refined by
+    :func:`scipy.optimize.brentq`; headline margins chosen as the continuous ones: the gain
+    margin closest to 0 dB, the smallest phase margin; like them, distances at the
+    crossings); the delay margin the smallest transport delay that makes the loop
+    unstable (:meth:`SampledLoop.delay_margin`).  ``{"ts", "reason"}`` when there is no
+    linearisation.
+    """
+    import math
+
+    from scipy.optimize import brentq
+
+    ts = float(ts if ts is not None else (config.sampling.ts if config.sampling else config.dt))
+    loop = SampledLoop(config)
+    radius = loop.spectral_radius(ts)
+    if radius is None:
+        return {"ts": ts, "reason": loop.reason or "the sampled loop's matrix is not finite"}
+    a, b, c = loop.broken_loop(ts)
+    eye = np.eye(a.shape[0])
+
+    def at(w: float) -> complex:
+        return complex(-(c @ np.linalg.solve(np.exp(1j * w * ts) * eye - a, b))[0, 0])
+
+    nyquist = math.pi / ts
+    w = np.logspace(math.log10(nyquist) - 6, math.log10(nyquist), 3000)[:-1]
+    lw = np.array([at(x) for x in w])
+
+    def roots(fun: Any, fw: NDArray[np.float64]) -> list[float]:
+        ok = np.isfinite(fw[:-1]) & np.isfinite(fw[1:]) & (np.sign(fw[:-1]) != np.sign(fw[1:]))
+        return [brentq(fun, w[i], w[i + 1], xtol=1e-14 * w[i]) for i in np.nonzero(ok)[0]]
+
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w_gc = roots(lambda x: math.log(abs(at(x))), np.log(np.abs(lw)))
+        w_pc = [x for x in roots(lambda x: at(x).imag, lw.imag) if at(x).real < 0]
+    gm_db = wpc = pm = wgc = None
+    if w_pc:
+        gms = [-20.0 * math.log10(abs(at(x))) for x in w_pc]
+        i = int(np.argmin(np.abs(gms)))
+        gm_db, wpc = gms[i], w_pc[i]
+    if w_gc:
+        pms = [float(np.remainder(np.angle(at(x), deg=True), 360.0) - 180.0) for x in w_gc]
+        i = int(np.argmin(np.abs(pms)))
+        pm, wgc = pms[i], w_gc[i]
+    dm = loop.delay_margin(ts)
+    return {
+        "ts": ts,
+        "spectral_radius": radius,
+        "stable": radius < 1.0,
+        "gain_margin_db": gm_db,
+        "phase_crossover": wpc,
+        "phase_margin_deg": pm,
+        "gain_crossover": wgc,
+        "delay_margin_s": dm,
+    }

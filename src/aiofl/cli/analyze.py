@@ -135,8 +135,10 @@ def analyze_command(
         if out is not None:
             raise ValueError("--out applies only with --sampling")
 
+    from aiofl.analysis.numeric_warnings import numeric_warnings, warnings_note
+
     console = Console(highlight=False, markup=False, soft_wrap=True)
-    with bad_input_exits():
+    with bad_input_exits(), numeric_warnings() as caught:  # numpy/scipy's: one note below
         if not (amplitude > 0 and math.isfinite(amplitude)):
             raise ValueError(f"--amplitude = {amplitude}; allowed: finite and > 0")
         if r_op is not None and not math.isfinite(r_op):
@@ -183,6 +185,14 @@ def analyze_command(
 
                 info["orbit"] = orbit_analysis(cfg, info, unit=cfg.plant.output_unit, budget=budget)
                 info["reconciled_verdict"] = info["orbit"]["verdict"]
+            if cfg.sampling is not None and r_op is None:  # the loop as it runs, labelled
+                from aiofl.analysis.sampled_loop import sampled_margins
+
+                info["margins_of"] = "the continuous loop (no sampling)"
+                info["sampled_loop"] = sampled_margins(cfg)
+            note = warnings_note(caught)
+            if note is not None:
+                info["numerical_warnings"] = note
             if figure is not None:
                 from aiofl.analysis.frequency import loop_figure_bytes
                 from aiofl.outputs import atomic_write_bytes
@@ -204,6 +214,8 @@ def analyze_command(
                     from aiofl.analysis.orbit import format_orbit_text
 
                     console.print(format_orbit_text(info["orbit"]))
+                if note is not None:
+                    typer.echo(f"aiofl: note: {note}", err=True)
             return
         if r_op is not None:
             raise ValueError("--r-op applies only with --closed-loop")
@@ -212,9 +224,14 @@ def analyze_command(
             format_analysis_latex,
             format_analysis_text,
         )
-        from aiofl.plants.plant_file import load_symbolic_plant
+        from aiofl.plants.plant_file import config_initial_state, load_symbolic_plant
 
-        analysis = load_symbolic_plant(target).analyze()
+        symbolic = load_symbolic_plant(target)
+        analysis = symbolic.analyze()
+        x0 = config_initial_state(target)  # a run config: β where `aiofl robustness` takes it
+        if x0 is not None and len(x0) in (0, symbolic.n):
+            label = "x0, the config's initial state" + ("" if x0 else " (zero)")
+            analysis = analysis.at_point(x0 or (0.0,) * symbolic.n, label)
         if as_json:
             typer.echo(json.dumps(analysis_to_dict(analysis), indent=2))
         elif latex:

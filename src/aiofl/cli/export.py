@@ -16,9 +16,11 @@ closed loop diverges in its own simulation (the config as it is).
 Warnings (stderr, exit 0): the design sampled at Ts (without the converters' quanta, which
 are not part of the code) diverges, its sampled loop linearised
 at the operating point is unstable (:class:`aiofl.analysis.sampled_loop.SampledLoop`), or
-its ITAE exceeds the continuous design's by more than ``--tolerance`` (the criterion of
-``aiofl analyze --sampling``); with ``--precision float``, float does not hold
-(:func:`aiofl.export.c_check.float_holds`, which needs a C compiler).
+its ITAE exceeds by more than ``--tolerance`` (the criterion of ``aiofl analyze
+--sampling``) the design's as it was made: the continuous design's, or for a design made
+sampled its own at its Ts (each warning names what it compares); with ``--precision
+float``, float does not hold (:func:`aiofl.export.c_check.float_holds`, which needs a C
+compiler).
 """
 
 from __future__ import annotations
@@ -93,8 +95,9 @@ def export_command(
     prefix: Annotated[
         str, typer.Option("--prefix", help="Start of every C name (NAME_step, NAME_UP_RHO).")
     ] = "aiofl",
-    fmt: Annotated[
-        str, typer.Option("--format", help="c: C99 sources; fmu: an FMI 2.0 co-simulation FMU.")
+    fmt: Annotated[  # the choices are FORMATS' keys (a test checks they agree)
+        Literal["c", "fmu"],
+        typer.Option("--format", help="c: C99 sources; fmu: an FMI 2.0 co-simulation FMU."),
     ] = "c",
     params_only: Annotated[
         bool,
@@ -105,7 +108,11 @@ def export_command(
         typer.Option("--params-name", help="Its name (default: the config's name)."),
     ] = None,
     tolerance: Annotated[
-        float, typer.Option(help="ITAE allowance of the sampled over the continuous design.")
+        float,
+        typer.Option(
+            help="ITAE allowance of the export (sampled at Ts) over the design as made "
+            "(continuous, or sampled at its own Ts)."
+        ),
     ] = 0.1,
     force: Annotated[bool, FORCE_OPTION] = False,
 ) -> None:
@@ -216,18 +223,27 @@ def _loop_checks(own_cfg: Any, cfg: Any, sampling: Any, config: str, tolerance: 
     from aiofl.engine.simulation import simulate_batch
     from aiofl.plants.base import PlantError
 
-    # the discretisation alone: the converters' quanta are not part of the code
+    # the discretisation alone: the converters' quanta are not part of the code; compared
+    # with the design as it was made: continuous, or sampled at its own Ts (a design made
+    # sampled is compared with its own sampled self, not with a continuous version)
     ideal = replace(sampling, y_quantum=0.0, u_quantum=0.0)
+    made = own_cfg.sampling
+    base = None if made is None else replace(made, y_quantum=0.0, u_quantum=0.0)
+    what = (
+        "the continuous design (the config as it is)"
+        if made is None
+        else f"the design at its own Ts = {made.ts:g} s (both without the converters' quanta)"
+    )
     try:
         own = own_cfg.simulate(store=False)
         res = simulate_batch(
             cfg.plant,
-            [cfg.controller] * 2,
+            [own_cfg.controller, cfg.controller],
             cfg.scenario,
             dt=cfg.dt,
             method=cfg.method,
             divergence_threshold=cfg.divergence_threshold,
-            sampling=[None, ideal],
+            sampling=[base, ideal],
         )
     except (PlantError, ValueError) as exc:
         return [f"{config}: could not simulate the design before export ({exc})"]
@@ -249,7 +265,7 @@ def _loop_checks(own_cfg: Any, cfg: Any, sampling: Any, config: str, tolerance: 
         )
     elif not res.failed[0] and itae[1] > (1.0 + tolerance) * itae[0]:
         out.append(
-            f"{config} sampled {at} has ITAE {itae[1]:.4g} against {itae[0]:.4g} continuous, "
+            f"{config} sampled {at} has ITAE {itae[1]:.4g} against {itae[0]:.4g} of {what}, "
             f"more than the {100 * tolerance:g} % allowance (aiofl analyze --sampling)"
         )
     try:

@@ -173,9 +173,11 @@ def check_text(prep: Any) -> str:
         goal += f", robust ({st.robust.aggregate} over nominal + {st.robust.draws} draws)"
     if st.noise_realisations > 1:
         goal += f", mean over {st.noise_realisations} noise realisations"
+    given = isinstance(prep.config.raw.get("tune"), dict) and "t_final" in prep.config.raw["tune"]
+    horizon = "tune.t_final" if given else "the scenario's horizon"
     return (
         f"{st.budget()}: up to {candidates} candidates ({sims} simulations of "
-        f"{st.t_final:g} s at dt = {prep.spec.dt:g}, {prep.spec.method}); {goal}; "
+        f"{st.t_final:g} s ({horizon}) at dt = {prep.spec.dt:g}, {prep.spec.method}); {goal}; "
         f"parameters {', '.join(prep.space.names)}"
     )
 

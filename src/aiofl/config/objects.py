@@ -7,11 +7,13 @@ objects pass exactly the checks a file does and the CLI makes) and returns the
 tuning (which rebuilds the config from ``raw`` for every spec), ``best.toml`` and the
 closed-loop analyses work on it as on a loaded file.
 
-A plant defined in Python has no file to name: it is registered in this process under
-its own name (:func:`register_python_plant`, :func:`aiofl.plants.register_plant`), and
-``raw["plant"]`` names it.  Such a config therefore resolves only in the process that
-registered the plant (the local tuner, which runs every population in one compiled,
-parallel call, does; Dask workers in other processes do not: use a plant file there).
+A plant built from a plant file (:func:`aiofl.config.resolve_plant`) is named by that
+file's path, so its config runs anywhere.  A plant defined in Python has no file to name:
+it is registered in this process under its own name (:func:`register_python_plant`,
+:func:`aiofl.plants.register_plant`), and ``raw["plant"]`` names it.  Such a config
+therefore resolves only in the process that registered the plant (the local tuner, which
+runs every population in one compiled, parallel call, does; Dask workers in other
+processes do not: use a plant file there).
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ from aiofl.sensor import SENSOR_PRESETS, Sensor
 __all__ = [
     "config_dict",
     "controller_table",
+    "is_python_plant",
+    "plant_entry",
     "register_python_plant",
     "run_config_from_objects",
     "scenario_table",
@@ -62,6 +66,24 @@ def register_python_plant(plant: Plant) -> str:
         _REGISTERED[name] = plant
         register_plant(name, lambda: plant)
     return name
+
+
+def is_python_plant(name: str) -> bool:
+    """Whether ``name`` is a plant defined in Python and registered by
+    :func:`register_python_plant` (known in this process only)."""
+    return name in _REGISTERED
+
+
+def plant_entry(plant: Plant) -> str:
+    """The config's ``plant``: the file a plant file's plant was built from (so the config
+    runs in any process, the command line's too), else its registered name
+    (:func:`register_python_plant`)."""
+    from aiofl.config.run_config import _FILE_PLANTS  # plant files built in this process
+
+    if not isinstance(plant, Plant):
+        raise ValueError(f"plant = {plant!r}; allowed: an aiofl.Plant")
+    path = next((p for (p, _), built in _FILE_PLANTS.items() if built is plant), None)
+    return path if path is not None else register_python_plant(plant)
 
 
 def _structure(c: Controller) -> str:
@@ -165,6 +187,33 @@ def _sensor_table(sensor: Sensor | str) -> dict[str, Any]:
     return table
 
 
+_NOISE_KEYS = ("noise_variance", "noise_hold", "noise_seed")
+
+
+def _leave_noise_to_sensor(
+    scen: dict[str, Any], sensor: dict[str, Any], scenario: Scenario
+) -> None:
+    """Drop from the ``[scenario]`` table ``scen`` the noise keys the sensor decides.
+
+    With a sensor, the measurement's noise is the sensor's: a scenario noise key left at
+    :class:`~aiofl.scenario.Scenario`'s default, or equal to the sensor's value, is not
+    written (a ``[sensor]`` table with the scenario's noise keys is refused as "set
+    twice", as a TOML file is); a scenario value that differs from the sensor's is a real
+    contradiction, refused naming both.
+    """
+    default = Scenario()
+    for key in _NOISE_KEYS:
+        mine = getattr(scenario, key)
+        if key in sensor and mine != sensor[key] and mine != getattr(default, key):
+            raise ConfigError(
+                f"{key} is set twice: the sensor's {key} = {sensor[key]!r} and "
+                f"scenario.{key} = {mine!r}; set it in the Sensor only (the sensor is the "
+                "measurement)"
+            )
+        if key in sensor or mine == getattr(default, key):
+            scen.pop(key, None)
+
+
 def _sampling_table(sampling: Any) -> dict[str, Any]:
     from aiofl.engine.discrete import Sampling
 
@@ -206,7 +255,7 @@ def config_dict(
     data: dict[str, Any] = {
         "name": name,
         "description": description,
-        "plant": register_python_plant(plant),
+        "plant": plant_entry(plant),
         "scenario": scenario_table(scenario),
         "controller": controller_table(controller),
         "simulation": {
@@ -224,6 +273,7 @@ def config_dict(
         data["controller"]["discrete"] = _sampling_table(sampling)
     if sensor is not None:
         data["sensor"] = _sensor_table(sensor)
+        _leave_noise_to_sensor(data["scenario"], data["sensor"], scenario)
     if uncertainty is not None:
         dump = getattr(uncertainty, "model_dump", None)
         data["uncertainty"] = dump(exclude_none=True) if dump else dict(uncertainty)

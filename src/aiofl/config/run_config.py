@@ -525,8 +525,9 @@ def parse_config(
     if sampling is not None:  # [controller.discrete]: a sampled controller
         cfg = replace(cfg, sampling=sampling)
         cfg.check_sampling()
-    label = sensor_table.preset if sensor_table is not None else "custom"
-    return replace(cfg, sensor=Sensor.of_run(cfg.scenario, cfg.sampling, preset=label))
+    given = sensor_table is not None and "preset" in data["sensor"]  # else custom, not ideal
+    label = sensor_table.preset if given else "custom"
+    return replace(cfg, sensor=Sensor.of_run(cfg.scenario, cfg.sampling, label, plant.output_unit))
 
 
 def _check_sensor_ts(ts: float | None, dt: float, source: str) -> None:

@@ -540,11 +540,11 @@ class ConfigModel(_Model):
     @field_validator("plant")
     @classmethod
     def _plant_name(cls, v: str) -> str:
-        from aiofl.plants.registry import available_plants
+        from aiofl.plants.registry import available_plants, python_plant_hint
 
         if v not in available_plants() and not v.endswith(".toml"):
             raise ValueError(
                 f"unknown plant {v!r}; allowed: a symbolic-plant .toml file or one of "
-                f"{', '.join(available_plants())}"
+                f"{', '.join(available_plants())}; {python_plant_hint(v)}"
             )
         return v

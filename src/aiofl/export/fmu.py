@@ -56,7 +56,7 @@ from aiofl.engine.discrete import Sampling, sampling_rows
 from aiofl.export import c_code
 from aiofl.export.c_text import c_prefix
 from aiofl.export.errors import ExportError
-from aiofl.plants.base import Plant
+from aiofl.plants.base import Plant, derivative_unit
 
 if TYPE_CHECKING:
     from aiofl.config.run_config import RunConfig
@@ -350,6 +350,18 @@ def _inputs(controller: Controller) -> list[tuple[str, str]]:
     return out
 
 
+def _units(controller: Controller, plant: Plant | None) -> dict[str, str]:
+    """The unit of each Real variable that has one, by variable name: y and r in the
+    plant's output unit, r_i in its derivatives', u and the actuator limits in its input
+    unit, Ts in s (an undeclared unit, ``""`` or ``"-"``, is left out)."""
+    out = {"Ts": "s"}
+    if plant is not None:
+        y, u = plant.output_unit, plant.input_unit
+        out |= {"y": y, "r": y, "u": u, "law.u_max": u, "law.u_min": u}
+        out |= {f"r_{i}": derivative_unit(y, i) for i in range(1, 1 + controller.rho)}
+    return {k: v for k, v in out.items() if v and v != "-"}
+
+
 def _model_description(
     *,
     model_identifier: str,
@@ -362,10 +374,14 @@ def _model_description(
     ts: float,
     stop_time: float | None,
     start: int,
+    units: dict[str, str] | None = None,
 ) -> bytes:
     """``modelDescription.xml`` (FMI 2.0 co-simulation), every attribute set through
     :mod:`xml.etree.ElementTree`, which escapes it; ``start``: the default of the start-mode
-    parameter (:data:`START_MODES`)."""
+    parameter (:data:`START_MODES`); ``units``: a Real variable's unit by name (:func:`_units`),
+    each declared in ``UnitDefinitions``."""
+    present = {"u", *(name for name, _ in inputs), *(p.name for p in params)}
+    units = {k: v for k, v in (units or {}).items() if k in present}
     from importlib.metadata import version
 
     fmt = lambda x: repr(float(x))  # noqa: E731
@@ -398,6 +414,10 @@ def _model_description(
     files = ET.SubElement(cs, "SourceFiles")
     for name in sources:
         ET.SubElement(files, "File", {"name": name})
+    if units:  # FMI 2.0: after CoSimulation, before DefaultExperiment
+        defs = ET.SubElement(root, "UnitDefinitions")
+        for unit in sorted(set(units.values())):
+            ET.SubElement(defs, "Unit", {"name": unit})
     exp = {"startTime": "0.0", "stepSize": fmt(ts)}
     if stop_time is not None:
         exp["stopTime"] = fmt(stop_time)
@@ -407,7 +427,7 @@ def _model_description(
     def var(name: str, vr: int, attrs: dict[str, str], desc: str, kind: str, t: dict[str, str]):
         sv = ET.SubElement(mv, "ScalarVariable", {"name": name, "valueReference": str(vr), **attrs})
         sv.set("description", desc)
-        ET.SubElement(sv, kind, t)
+        ET.SubElement(sv, kind, {**t, **({"unit": units[name]} if name in units else {})})
 
     index = 0  # 1-based index of a ScalarVariable in ModelVariables
     for vr, (name, desc) in enumerate(inputs):
@@ -561,6 +581,7 @@ def export_fmu(
         ts=sampling.ts,
         stop_time=stop_time,
         start=START_MODES[controller.eso_init],
+        units=_units(controller, plant),
     )
     with tempfile.TemporaryDirectory(prefix="aiofl-fmu-") as tmp:
         src = Path(tmp) / "sources"

@@ -45,6 +45,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from aiofl.checks import check_number
+
 __all__ = ["Plant", "PlantError", "derivative_unit", "unit_from_label", "unit_label"]
 
 PlantFunction = Callable[[NDArray[np.float64], NDArray[np.float64]], Any]
@@ -171,7 +173,17 @@ class Plant:
         for fname in ("f", "g", "h"):
             if not callable(getattr(self, fname)):
                 raise PlantError(f"plant {self.name!r}: {fname} must be a function (x, p)")
-        object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
+        if not isinstance(self.params, Mapping):
+            raise PlantError(f"plant {self.name!r}: params = {self.params!r}; allowed: a dict")
+        values = {}
+        for key, value in self.params.items():
+            if not isinstance(key, str) or not key:
+                raise PlantError(f"plant {self.name!r}: parameter name {key!r}; allowed: a name")
+            try:  # the parameter named, not numpy's "could not convert string to float"
+                values[key] = check_number(f"plant {self.name!r}: params[{key!r}]", value)
+            except ValueError as exc:
+                raise PlantError(str(exc)) from None
+        object.__setattr__(self, "params", MappingProxyType(values))
         if not self.state_names:
             names = tuple(f"x{i}" for i in range(1, self.n_states + 1))
             object.__setattr__(self, "state_names", names)

@@ -43,7 +43,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from functools import cached_property
 from typing import Any, Protocol
 
@@ -247,7 +247,10 @@ class Analysis:
     beta_constant
         β does not depend on x (ρ is then defined everywhere, if β ≠ 0).
     beta_nominal
-        β at the nominal parameters when it is constant.
+        β at the nominal parameters: the constant, or its value at :attr:`beta_point`.
+    beta_point, beta_point_label
+        Where a state-dependent β is evaluated (:meth:`at_point`): the declared
+        ``equilibrium``, or a run config's x0 (as ``aiofl robustness`` takes it).
     beta_zero_set, beta_undefined_set
         Factors c(x) of β's numerator / denominator: ρ is not defined where c(x) = 0.
     zero_dynamics
@@ -266,6 +269,18 @@ class Analysis:
     beta_undefined_set: tuple[Any, ...]
     zero_dynamics: ZeroDynamics | None
     zero_dynamics_note: str
+    beta_point: tuple[float, ...] | None = None
+    beta_point_label: str = ""
+
+    def at_point(self, x: Sequence[float], label: str) -> Analysis:
+        """This analysis with a state-dependent β evaluated at ``x`` (named ``label``)."""
+        if self.beta_constant:
+            return self
+        point = tuple(float(v) for v in x)
+        at = dict(zip(self.plant.states, point, strict=True))
+        val = self.beta.subs({**self.plant.nominal, **at})
+        nominal = float(val) if val.is_number and val.is_finite and val.is_real else None
+        return replace(self, beta_nominal=nominal, beta_point=point, beta_point_label=label)
 
     @property
     def xi(self) -> tuple[Any, ...]:
@@ -410,7 +425,7 @@ def analyze(plant: SymbolicModel) -> Analysis:
             note = f"{zd.verdict} (eigenvalues of the linearised zero dynamics at x_e)"
         except ZeroDynamicsError as exc:
             note = str(exc)
-    return Analysis(
+    out = Analysis(
         plant=plant,
         lf_h=tuple(lf),
         lg_lf_h=tuple(lg),
@@ -422,6 +437,9 @@ def analyze(plant: SymbolicModel) -> Analysis:
         zero_dynamics=zd,
         zero_dynamics_note=note,
     )
+    if plant.equilibrium is not None:  # a state-dependent β at the declared operating point
+        out = out.at_point(plant.equilibrium, "x_e, the plant's equilibrium")
+    return out
 
 
 def _state_factors(expr: Any, sset: set[Any]) -> tuple[Any, ...]:

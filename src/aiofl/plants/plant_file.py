@@ -18,7 +18,23 @@ from aiofl.plants.library import symbolic_model, symbolic_plant_names
 from aiofl.plants.registry import available_plants
 from aiofl.plants.symbolic import SymbolicPlant, read_plant_toml
 
-__all__ = ["load_symbolic_plant"]
+__all__ = ["config_initial_state", "load_symbolic_plant"]
+
+
+def config_initial_state(target: str | Path) -> tuple[float, ...] | None:
+    """A run config's ``[scenario] x0`` (``()`` when it sets none: the zero state), or None
+    when ``target`` is no run config file (a plant's name or a plant file)."""
+    path = Path(str(target))
+    if path.suffix != ".toml" or not path.is_file():
+        return None
+    data = read_plant_toml(path)
+    if "f" in data or not isinstance(data.get("plant"), str):
+        return None
+    scenario = data.get("scenario")
+    x0 = scenario.get("x0") if isinstance(scenario, dict) else None
+    if not isinstance(x0, list) or not all(isinstance(v, (int, float)) for v in x0):
+        return ()
+    return tuple(float(v) for v in x0)
 
 
 def load_symbolic_plant(target: str | Path, _seen: frozenset[Path] = frozenset()) -> SymbolicPlant:

@@ -15,7 +15,7 @@ from aiofl.plants.base import Plant, PlantError
 from aiofl.plants.builtin import pendulum, slfjm
 from aiofl.plants.library import FACTORIES as _LIBRARY  # more plants (tank, dcmotor_arm, ...)
 
-__all__ = ["available_plants", "get_plant", "register_plant"]
+__all__ = ["available_plants", "get_plant", "python_plant_hint", "register_plant"]
 
 _REGISTRY: dict[str, Callable[[], Plant]] = {"slfjm": slfjm, "pendulum": pendulum}
 _REGISTRY.update(_LIBRARY)
@@ -28,6 +28,20 @@ def register_plant(name: str, factory: Callable[[], Plant]) -> None:
     _CACHE.pop(name, None)
 
 
+def python_plant_hint(name: str) -> str:
+    """What to do with a config naming ``name``, a plant this process does not know: a
+    plant defined in Python (an :class:`aiofl.Plant`, e.g. a ``Design``'s, tuned into a
+    ``best.toml``) is known only in the process that defined it."""
+    return (
+        f"if {name!r} is a plant defined in Python (aiofl.Plant), it is known only in the "
+        "Python process that defined it: for the command line write it as a plant file "
+        "(states, f, g, h and [params] as expressions: README, Symbolic analysis) and set "
+        'plant = "FILE.toml"; '
+        f"in Python call aiofl.register_plant({name!r}, lambda: plant) before loading "
+        "the config"
+    )
+
+
 def available_plants() -> tuple[str, ...]:
     """Names of the registered plants."""
     return tuple(sorted(_REGISTRY))
@@ -36,7 +50,10 @@ def available_plants() -> tuple[str, ...]:
 def get_plant(name: str) -> Plant:
     """The registered plant ``name`` (one shared instance, so its kernel compiles once)."""
     if name not in _REGISTRY:
-        raise PlantError(f"unknown plant {name!r}; available: {', '.join(available_plants())}")
+        raise PlantError(
+            f"unknown plant {name!r}; available: {', '.join(available_plants())}; "
+            + python_plant_hint(name)
+        )
     if name not in _CACHE:
         _CACHE[name] = _REGISTRY[name]()
     return _CACHE[name]

@@ -222,6 +222,8 @@ def best_toml(result: TuneResult, out: str | Path, header: str = "") -> str:
     import os
     import tomllib
 
+    from aiofl.config.objects import is_python_plant
+    from aiofl.plants.registry import python_plant_hint
     from aiofl.tuning.space import to_toml, update_toml
 
     config = dict(result.config)
@@ -233,6 +235,8 @@ def best_toml(result: TuneResult, out: str | Path, header: str = "") -> str:
         except ValueError:  # pragma: no cover - another drive (Windows): keep it absolute
             pass
     header = header or result.describe()
+    if isinstance(plant, str) and is_python_plant(plant):  # the CLI cannot load it: say so
+        header += "\nNote: " + python_plant_hint(plant)
     source = _source_text(result.source) if result.source else None
     if source is not None:
         try:

@@ -197,7 +197,8 @@ def describe_tuning(run_config: RunConfig) -> str | None:
         obj_text += (
             f", robust ({st.robust.aggregate} over nominal + {st.robust.draws} draws{corners})"
         )
-    return f"{st.budget()}, {obj_text} over {st.t_final:g} s (aiofl tune)"
+    horizon = st.t_final or run_config.scenario.t_final  # None: the scenario's
+    return f"{st.budget()}, {obj_text} over {horizon:g} s (aiofl tune)"
 
 
 # ---------------------------------------------------------------------- preparing
@@ -269,16 +270,12 @@ def prepare(
     from aiofl.limits import check_run_size
     from aiofl.tuning.evaluate import EvalSpec
 
-    source = ""
-    if isinstance(run_config, (str, Path)):
-        source = str(run_config)
-        run_config = load_config(run_config)
-    cfg = run_config
-    source = source or cfg.name
+    cfg = load_config(run_config) if isinstance(run_config, (str, Path)) else run_config
+    source = str(run_config) if cfg is not run_config else cfg.name
     st = parse_tune_settings(settings if settings is not None else cfg.raw.get("tune"))
     overrides = {k: v for k, v in overrides.items() if v is not None}
-    if overrides:
-        st = parse_tune_settings({**st.model_dump(exclude_none=True), **overrides})
+    st = parse_tune_settings({**st.model_dump(exclude_none=True), **overrides})
+    st = st.with_horizon(cfg.scenario.t_final, source)  # t_final: the scenario's by default
     _check_parameters(cfg, st)
     try:  # the tuning horizon's size, before any member is allocated
         check_run_size(

@@ -5,7 +5,7 @@ r"""The ``[tune]`` table: settings, search space, objective, and writing a tuned
     [tune]
     algorithm = "ga"          # ga | de | cmaes | nsga2 (pymoo)
     objective = "opi"         # opi | itae | iae | ise | isu | iau | {itae = 1.0, isu = 0.01}
-    t_final = 6.0             # tuning horizon [s] (paper: 6 s)
+    t_final = 6.0             # tuning horizon [s] (paper: 6 s); default: the scenario's
     population = 64
     generations = 50
     seed = 1
@@ -137,7 +137,8 @@ class TuneSettings(_Model):
 
     algorithm: Literal["ga", "de", "cmaes", "nsga2"] = "ga"
     objective: str | dict[str, Annotated[float, Field(ge=0, allow_inf_nan=False)]] = "opi"
-    t_final: Annotated[float, Field(gt=0, le=T_FINAL_MAX, allow_inf_nan=False)] = 6.0
+    # None: the scenario's horizon (:meth:`with_horizon`); never longer than it
+    t_final: Annotated[float, Field(gt=0, le=T_FINAL_MAX, allow_inf_nan=False)] | None = None
     population: Annotated[int, Field(ge=2, le=MAX_POPULATION)] = 64
     generations: Annotated[int, Field(ge=1, le=MAX_EVALUATIONS // 2)] = 50
     seed: Annotated[int, Field(ge=0, lt=2**32)] = 1
@@ -248,6 +249,23 @@ class TuneSettings(_Model):
             )
         return v
 
+    def with_horizon(self, scenario_t_final: float, source: str = "") -> TuneSettings:
+        """These settings with ``t_final`` resolved against the scenario's horizon: the
+        scenario's when not given; raises :class:`aiofl.config.ConfigError` when the given
+        one is longer (the runs would score what the scenario does not describe)."""
+        from aiofl.config import ConfigError
+
+        if self.t_final is None:
+            return self.model_copy(update={"t_final": float(scenario_t_final)})
+        if self.t_final > scenario_t_final * (1 + 1e-12):
+            raise ConfigError(
+                f"invalid [tune]{' of ' + source if source else ''}: tune.t_final = "
+                f"{self.t_final:g} s is longer than the scenario's horizon (scenario.t_final "
+                f"= {scenario_t_final:g} s); allowed: 0 < tune.t_final <= {scenario_t_final:g}"
+                " s (leave it out to tune over the scenario's horizon)"
+            )
+        return self
+
     def budget(self) -> str:
         """One-line description of the search budget."""
         return (
@@ -346,7 +364,8 @@ class SearchSpace:
         """Parameter values (B, d) of unit-cube points s (B, d)."""
         s = np.clip(np.asarray(s, dtype=np.float64), 0.0, 1.0)
         z = self._a + s * (self._b - self._a)
-        v = np.where(self.log, np.exp(z), z)
+        v = z.copy()  # exp only of the log-scaled columns (a linear value overflows it)
+        v[..., self.log] = np.exp(z[..., self.log])
         # land exactly on the bounds at s = 0, 1 (exp(log(x)) may differ from x in the last bit)
         v = np.where(s == 0.0, self.lo, v)
         return np.where(s == 1.0, self.hi, v)
