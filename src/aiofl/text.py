@@ -204,7 +204,12 @@ _TERMINAL_ESCAPED = re.compile(
 )
 
 
+_NAMED_ESCAPES = {"\n": "\\n", "\r": "\\r", "\t": "\\t"}
+
+
 def _escape(match: re.Match[str]) -> str:
+    if match.group() in _NAMED_ESCAPES:
+        return _NAMED_ESCAPES[match.group()]
     cp = ord(match.group())
     return f"\\x{cp:02x}" if cp < 0x100 else f"\\u{cp:04x}"
 
