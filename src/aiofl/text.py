@@ -43,6 +43,7 @@ escapes with :func:`json.dumps` and the HTML report with :func:`html.escape`.
 
 from __future__ import annotations
 
+import keyword
 import re
 import unicodedata
 from collections.abc import Iterable, Mapping
@@ -157,10 +158,16 @@ def check_name(
     names a plant file's expressions are written in)."""
     text = normal_name(check_text(field, value, max_chars=max_chars))
     if identifier:
-        if not text.isidentifier() or text.startswith("_") or len(text) > max_chars:
+        if (
+            not value.isidentifier()  # as Python reads source: valid as written, then NFKC
+            or not text.isidentifier()
+            or keyword.iskeyword(text)
+            or text.startswith("_")
+            or len(text) > max_chars
+        ):
             raise ValueError(
                 f"{field} = {_shown(value)} is not a valid name; allowed: a Python identifier "
-                f"not starting with _, at most {max_chars} characters"
+                f"(not a keyword) not starting with _, at most {max_chars} characters"
             )
     elif not text.strip() or len(text) > max_chars:
         raise ValueError(

@@ -53,7 +53,8 @@ def declared_symbols(
         nn = plant_text(check_name, f"plant {plant!r}: {key} name", nm, identifier=True)
         if nn in FUNCTIONS or nn in CONSTANTS:
             raise SymbolicPlantError(
-                f"plant {plant!r}: {nm!r} is reserved (a function or constant name)"
+                f"plant {plant!r}: {key} name {nm!r} is reserved (a function or constant "
+                "name of the expressions)"
             )
         normal[nm] = nn
         symbols[nn] = sp.Symbol(nn, real=True)
