@@ -204,7 +204,7 @@ def test_python_plants_and_parameter_keys_use_the_normal_names() -> None:
     with pytest.raises(PlantError, match="'fi' and 'ﬁ'"):
         Plant("p", 1, f, g, h, params={"fi": 1.0, "ﬁ": 2.0})
     assert dict(Scenario(plant_overrides={"ﬁ": 2.0}).plant_overrides) == {"fi": 2.0}
-    with pytest.raises(ValueError, match="scenario.plant_scale: 'fi' and 'ﬁ'"):
+    with pytest.raises(ValueError, match=r"scenario\.plant_scale: 'fi' and 'ﬁ'"):
         Scenario(plant_scale={"fi": 1.1, "ﬁ": 1.2})
     model = UncertaintyModel.model_validate({"parameters": {"ﬁ": {"uniform": 0.1}}})
     assert list(model.parameters) == ["fi"]
