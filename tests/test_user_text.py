@@ -293,3 +293,10 @@ def test_the_python_api_refuses_the_same_text_naming_the_field() -> None:
         Controller(structure="LESO\u202e")
     with pytest.raises(ValueError, match="has 201 characters"):
         Scenario(name="a" * 201)
+    from aiofl.design import Design
+    from aiofl.plants.registry import get_plant
+
+    vals = {"law.b0": 0.05, "eso.omega0": 20.0, "sef.omega_c": 4.0}
+    ctrl = Controller.from_structure("LADRC", rho=1, values=vals)
+    with pytest.raises(ValueError, match=r"description = 'a\\x1bb': U\+001B"):
+        Design(get_plant("tank"), ctrl, Scenario(t_final=0.1), description="a\x1bb")
