@@ -300,3 +300,13 @@ def test_the_python_api_refuses_the_same_text_naming_the_field() -> None:
     ctrl = Controller.from_structure("LADRC", rho=1, values=vals)
     with pytest.raises(ValueError, match=r"description = 'a\\x1bb': U\+001B"):
         Design(get_plant("tank"), ctrl, Scenario(t_final=0.1), description="a\x1bb")
+
+
+def test_an_error_quoting_user_text_never_drives_the_terminal(tmp_path: Path) -> None:
+    """Before: an unknown TOML key holding ESC sequences was printed raw in the error."""
+    cfg = _config(tmp_path)
+    cfg.write_text('"\\u001b[2Jkey\\u0007" = 1\n' + cfg.read_text(encoding="utf-8"), "utf-8")
+    res = _invoke("simulate", str(cfg), "--check")
+    assert res.exit_code == 2 and "unknown key" in res.output, res.output
+    assert "\x1b" not in res.output and "\x07" not in res.output
+    assert "\\x1b[2Jkey\\x07" in res.output
