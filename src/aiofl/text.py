@@ -254,7 +254,12 @@ def xml_text(text: str) -> str:
     s = str(text)
     if all(_xml_allowed(ord(c)) for c in s):
         return s
-    return "".join(c if _xml_allowed(ord(c)) else f"\\u{ord(c):04x}" for c in s)
+    return "".join(c if _xml_allowed(ord(c)) else _code_escape(ord(c)) for c in s)
+
+
+def _code_escape(cp: int) -> str:
+    """``\\u0001`` or, past the first plane, ``\\U0001fffe``."""
+    return f"\\u{cp:04x}" if cp <= 0xFFFF else f"\\U{cp:08x}"
 
 
 def one_line(text: str) -> str:
