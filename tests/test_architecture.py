@@ -19,7 +19,8 @@ PACKAGE = SRC / "aiofl"
 LAYERS: tuple[tuple[str, ...], ...] = (
     # lowest first; a module may import from its own layer (without a cycle) or below
     # the paper's pieces; atomic file output; the bounds on every input size; the disk cache;
-    # single-value checks shared by the Python objects and the config schema; one BLAS thread;
+    # single-value checks shared by the Python objects and the config schema; user text (one
+    # rule where it enters, one escape per output format); one BLAS thread;
     # numba's helpers keyed by fast-math flags
     (
         "aiofl.components",
@@ -27,6 +28,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "aiofl.limits",
         "aiofl.cache",
         "aiofl.checks",
+        "aiofl.text",
         "aiofl.blas_threads",
         "aiofl.numba_patches",
     ),

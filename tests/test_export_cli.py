@@ -144,13 +144,13 @@ def test_good_prefixes_pass(ok):
 
 def test_a_hostile_config_name_gives_a_plain_instance_name(tmp_path):
     """--params-only names the instance after the config's name, reduced to letters, digits
-    and _: a name holding a comment closer, a directive and U+202E gives a plain identifier,
+    and _: a name holding a comment closer, a directive and U+FB01 gives a plain identifier,
     and the code outside comments holds nothing of the rest."""
     import re
     from importlib.resources import files
 
     text = (files("aiofl") / "presets" / "retuned-s1-ladrc.toml").read_text(encoding="utf-8")
-    hostile = 'name = "9 x */ #define aiofl_step EVIL /* \\u202e"'
+    hostile = 'name = "9 x */ #define aiofl_step EVIL /* \\ufb01"'
     cfg = tmp_path / "h.toml"
     cfg.write_text(re.sub(r'^name = ".*"$', lambda _: hostile, text, count=1, flags=re.M))
     out = tmp_path / "p"

@@ -84,6 +84,18 @@ def _controller() -> Controller:
     return ctrl.with_binomial_alphas()
 
 
+def _refused(text: str) -> bool:
+    """Whether the entry rule refuses ``text`` as a label (:func:`aiofl.text.check_text`):
+    then it never reaches the export through a Controller."""
+    from aiofl.text import check_text
+
+    try:
+        check_text("label", text)
+    except ValueError:
+        return True
+    return False
+
+
 CTRL = _controller()
 SAMPLING = Sampling(1e-3, delay=1)
 
@@ -114,6 +126,10 @@ BENIGN_CODE = {name: _code(text) for name, text in BENIGN.items()}
 @pytest.mark.parametrize("field", ["title", "note", "structure"])
 @pytest.mark.parametrize("hostile", HOSTILE.values(), ids=IDS)
 def test_hostile_text_in_any_field_leaves_the_code_unchanged(field: str, hostile: str) -> None:
+    if field == "structure" and _refused(hostile):  # a Controller's label enters checked
+        with pytest.raises(ValueError, match=r"controller\.structure = "):
+            _export(structure=hostile)
+        return
     files = _export(**{field: hostile})
     for name, text in files.items():
         assert _code(text) == BENIGN_CODE[name], name
@@ -173,7 +189,7 @@ def benign_builds(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
 def test_hostile_text_compiles_to_the_benign_object(
     tmp_path: Path, benign_builds: dict[str, str], hostile: str
 ) -> None:
-    files = _export(title=hostile, note=hostile, structure=hostile)
+    files = _export(title=hostile, note=hostile, structure="LESO" if _refused(hostile) else hostile)
     for key, flags in FLAGS.items():
         pre, nm = _build(files, tmp_path / key, flags)
         _assert_clean_object(nm, pre)
@@ -235,7 +251,7 @@ def test_cli_export_of_a_hostile_config_in_a_hostile_folder(tmp_path: Path) -> N
     hostile = _cli_export(
         folder / "c.toml",
         f"x */ {DEFINE} /*",
-        f"x */ int {TOKEN} = 1; /* y\n??/\n#include <stdio.h>\r\u202e\x00 \\",
+        f"x */ int {TOKEN} = 1; /* y ??/ #include <stdio.h> \ufb01 \\",
         tmp_path / "out-bad",
     )
     for key, flags in FLAGS.items():
@@ -244,6 +260,12 @@ def test_cli_export_of_a_hostile_config_in_a_hostile_folder(tmp_path: Path) -> N
         _assert_clean_object(nm, pre)
         assert pre == pre_ok and nm == nm_ok
     assert "x _/ _define aiofl_step AIOFL_INJECTED /_" in hostile[HEADER]  # inert, still legible
+    # newlines, CR, NUL and U+202E are refused where they enter (aiofl.text), naming the field
+    path = folder / "d.toml"
+    text = TANK.format(name='"tank"', description=json.dumps("y\n??/\n#x\r\u202e\x00"))
+    path.write_text(text, encoding="utf-8")
+    res = CliRunner().invoke(app, ["export", str(path), "--out", str(tmp_path / "out-refused")])
+    assert res.exit_code == 2 and "description = " in res.output and "U+000A" in res.output
 
 
 # ------------------------------------------------------------------ the pieces

@@ -486,7 +486,7 @@ def test_unit_texts_are_bounded() -> None:
     spec = {"states": ["h"], "params": {"k": 1.0}, "f": ["-k*h"], "g": ["1"], "h": "h"}
     with pytest.raises(SymbolicPlantError, match=r"input_unit = 'VVVV.*at most 32 characters"):
         SymbolicPlant.from_dict({**spec, "input_unit": "V" * 10_000})
-    with pytest.raises(SymbolicPlantError, match="state_units = 'mmmm"):
+    with pytest.raises(SymbolicPlantError, match=r"state_units\[1\] = 'mmmm"):
         SymbolicPlant.from_dict({**spec, "state_units": ["m" * 33]})
     ok = SymbolicPlant.from_dict({**spec, "states": {"h": "level [" + "m" * 50 + "]"}})
     assert ok.state_units == ("m" * 32,)  # a label's bracket is documentation: cut, not refused

@@ -50,6 +50,7 @@ from aiofl import layout as L
 from aiofl.checks import check_integer, check_number
 from aiofl.components.kalman import kalman_gain_parameters
 from aiofl.components.observers import binomial_alphas
+from aiofl.text import check_text
 
 __all__ = [
     "STRUCTURES",
@@ -236,6 +237,7 @@ class Controller:
     eso_gains: str = "bandwidth"
 
     def __post_init__(self) -> None:
+        check_text("controller.structure", self.structure)  # a label: reports, C comments
         for kind, table in (
             ("eso", L.ESO_KINDS),
             ("td", L.TD_KINDS),

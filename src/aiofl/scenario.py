@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from aiofl import layout as L
 from aiofl.checks import check_integer, check_number
 from aiofl.limits import T_FINAL_MAX
+from aiofl.text import check_text, normal_keys
 
 __all__ = ["DELAY_MAX", "Reference", "Scenario", "noise_sequence", "realisation_seed"]
 
@@ -174,8 +175,7 @@ class Scenario:
     steady_from: float | None = None
 
     def __post_init__(self) -> None:
-        if not isinstance(self.name, str):
-            raise ValueError(f"scenario.name = {self.name!r}; allowed: a string")
+        check_text("scenario.name", self.name)
         if not isinstance(self.reference, Reference):
             raise ValueError(
                 f"scenario.reference = {self.reference!r}; allowed: an aiofl.Reference"
@@ -195,11 +195,7 @@ class Scenario:
                     "names to numbers"
                 )
             checked = {}
-            for key, value in given.items():
-                if not isinstance(key, str):
-                    raise ValueError(
-                        f"scenario.{table} key {key!r}; allowed: a plant parameter name"
-                    )
+            for key, value in normal_keys(f"scenario.{table}", given).items():
                 checked[key] = check_number(f"scenario.{table}.{key}", value, **bounds)
             object.__setattr__(self, table, MappingProxyType(checked))
         if isinstance(self.x0, (str, bytes)) or not hasattr(self.x0, "__iter__"):

@@ -55,9 +55,10 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import BaseModel, ConfigDict, Field, model_validator
+from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from aiofl.scenario import Scenario, realisation_seed
+from aiofl.text import normal_keys
 
 __all__ = [
     "AGGREGATES",
@@ -166,6 +167,12 @@ class UncertaintyModel(_Model):
     parameters: dict[str, Distribution] = Field(default_factory=dict)
     ts: Pair | None = None
     noise_variance: Pair | None = None
+
+    @field_validator("parameters")
+    @classmethod
+    def _parameter_names(cls, v: dict[str, Distribution]) -> dict[str, Distribution]:
+        # plant parameter names, read as the plant declares them (Unicode NFKC)
+        return normal_keys("uncertainty.parameters", v)
 
     @model_validator(mode="after")
     def _ranges(self) -> UncertaintyModel:

@@ -117,6 +117,7 @@ def analyze_command(
     from rich.console import Console
 
     from aiofl.cli.errors import bad_input_exits
+    from aiofl.text import terminal_text
 
     if sampling:
         from aiofl.cli.sampling import run_sampling
@@ -208,12 +209,14 @@ def analyze_command(
                 atomic_write_bytes(figure, data)
             if as_json:
                 typer.echo(json.dumps(info, indent=2))
-            else:
-                console.print(format_linearization_text(lin, cfg.name, info))
+            else:  # the config's name is user text: escaped for the terminal (aiofl.text)
+                console.print(
+                    terminal_text(format_linearization_text(lin, cfg.name, info), lines=True)
+                )
                 if "orbit" in info:
                     from aiofl.analysis.orbit import format_orbit_text
 
-                    console.print(format_orbit_text(info["orbit"]))
+                    console.print(terminal_text(format_orbit_text(info["orbit"]), lines=True))
                 if note is not None:
                     typer.echo(f"aiofl: note: {note}", err=True)
             return
@@ -234,10 +237,10 @@ def analyze_command(
             analysis = analysis.at_point(x0 or (0.0,) * symbolic.n, label)
         if as_json:
             typer.echo(json.dumps(analysis_to_dict(analysis), indent=2))
-        elif latex:
-            typer.echo(format_analysis_latex(analysis))
+        elif latex:  # names, description and units are user text: escaped (aiofl.text)
+            typer.echo(terminal_text(format_analysis_latex(analysis), lines=True))
         else:
-            console.print(format_analysis_text(analysis))
+            console.print(terminal_text(format_analysis_text(analysis), lines=True))
 
 
 def _check_budget_option(budget: float) -> None:

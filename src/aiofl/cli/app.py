@@ -284,7 +284,10 @@ def _column_labels(cfg: Any, columns: list[str]) -> list[str]:
             labels.append(unit_label(col, derivative_unit(plant.output_unit, k)))
         else:  # x1..xn
             labels.append(plant.state_label(int(col[1:]) - 1))
-    return [lab.replace(",", ";") for lab in labels]
+    from aiofl.text import one_line
+
+    # one line, one cell each: a newline or CR is escaped, a comma is no separator
+    return [one_line(lab).replace(",", ";") for lab in labels]
 
 
 def _csv_text(result: Any, columns: list[str], labels: list[str] | None = None) -> str:
@@ -412,10 +415,12 @@ def simulate_command(
         cfg = cfg.with_sample_time(ts) if ts is not None else cfg
         cfg.check_sampling()  # Ts must stay a multiple of an overridden dt
     if check or out is None:
+        from aiofl.text import terminal_text
+
         steps = round(cfg.scenario.t_final / cfg.dt)
         typer.echo(
-            f"{config}: valid; {steps} {cfg.method} steps of {cfg.dt:g} s over "
-            f"{cfg.scenario.t_final:g} s, plant {cfg.plant.name}, "
+            f"{terminal_text(config)}: valid; {steps} {cfg.method} steps of {cfg.dt:g} s over "
+            f"{cfg.scenario.t_final:g} s, plant {terminal_text(cfg.plant.name)}, "
             f"{cfg.controller.structure} controller, sensor {cfg.sensor.describe()}; "
             "nothing run or written"
         )
@@ -423,7 +428,11 @@ def simulate_command(
             typer.echo(f"  default: {line}")
         return
     with bad_input_exits(run=True), atomic_output_dir(out) as stage:
-        with console.status(f"simulating {cfg.name} (first run compiles the kernel)"):
+        from aiofl.text import terminal_text
+
+        # the name is user text: a "[/]" in it is no rich markup (aiofl.text)
+        label = terminal_text(cfg.name, markup=True)
+        with console.status(f"simulating {label} (first run compiles the kernel)"):
             result = cfg.simulate(store=True)
         record = simulation_record(cfg, result, config)
         atomic_write_text(stage / "metrics.json", json.dumps(record, indent=2) + "\n")

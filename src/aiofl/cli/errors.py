@@ -69,7 +69,10 @@ def bad_input_exits(*, run: bool = False) -> Iterator[None]:
     try:
         yield
     except _input_errors(run) as exc:
-        msg = str(exc).strip() or type(exc).__name__
+        from aiofl.text import terminal_text
+
+        # a message may quote user text (a TOML key, a path): escaped for the terminal
+        msg = terminal_text(str(exc).strip() or type(exc).__name__, lines=True)
         typer.echo(f"aiofl: error: {msg}", err=True)
         raise typer.Exit(EXIT_BAD_INPUT) from None
 

@@ -25,6 +25,7 @@ from aiofl.limits import (
 )
 from aiofl.scenario import DELAY_MAX, Reference, Scenario
 from aiofl.sensor import SENSOR_PRESETS, Sensor
+from aiofl.text import MAX_DESCRIPTION_CHARS, MAX_PATH_CHARS, check_text, normal_keys
 from aiofl.uncertainty import UncertaintyModel
 
 __all__ = [
@@ -110,6 +111,17 @@ class ScenarioModel(_Model):
                 f"t_final = {self.t_final:g} s"
             )
         return self
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, v: str) -> str:
+        return check_text("scenario.name", v)
+
+    @field_validator("plant_scale", "plant_overrides")
+    @classmethod
+    def _parameter_names(cls, v: dict[str, float], info: Any) -> dict[str, float]:
+        # plant parameter names, read as the plant declares them (Unicode NFKC)
+        return normal_keys(f"scenario.{info.field_name}", v)
 
     @model_validator(mode="after")
     def _events_within_horizon(self) -> ScenarioModel:
@@ -537,11 +549,22 @@ class ConfigModel(_Model):
             ]
         return out + self.controller.defaults_used()
 
+    @field_validator("name")
+    @classmethod
+    def _name(cls, v: str) -> str:
+        return check_text("name", v)
+
+    @field_validator("description")
+    @classmethod
+    def _description(cls, v: str) -> str:
+        return check_text("description", v, max_chars=MAX_DESCRIPTION_CHARS)
+
     @field_validator("plant")
     @classmethod
     def _plant_name(cls, v: str) -> str:
         from aiofl.plants.registry import available_plants, python_plant_hint
 
+        check_text("plant", v, max_chars=MAX_PATH_CHARS)
         if v not in available_plants() and not v.endswith(".toml"):
             raise ValueError(
                 f"unknown plant {v!r}; allowed: a symbolic-plant .toml file or one of "

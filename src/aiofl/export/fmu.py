@@ -4,7 +4,8 @@ r"""An FMI 2.0 co-simulation FMU of a sampled AIOFL controller (``aiofl export -
 controller) into ``<modelIdentifier>.fmu``:
 
 - ``modelDescription.xml``, written with :mod:`xml.etree.ElementTree` (user text, the
-  config's name and description, is escaped by the XML library, never formatted into it);
+  config's name and description, is escaped by the XML library, never formatted into it,
+  and a character XML 1.0 cannot hold is written as a visible escape);
 - ``sources/``: the controller's C files, the hand-written co-simulation wrapper
   ``fmi2_wrapper.c`` (shipped in ``aiofl/export/templates``), the FMI 2.0 standard headers
   (2-clause BSD, from FMPy) and ``fmu_adapter.h``, generated here: it maps the controller's
@@ -57,6 +58,7 @@ from aiofl.export import c_code
 from aiofl.export.c_text import c_prefix
 from aiofl.export.errors import ExportError
 from aiofl.plants.base import Plant, derivative_unit
+from aiofl.text import xml_text
 
 if TYPE_CHECKING:
     from aiofl.config.run_config import RunConfig
@@ -377,9 +379,10 @@ def _model_description(
     units: dict[str, str] | None = None,
 ) -> bytes:
     """``modelDescription.xml`` (FMI 2.0 co-simulation), every attribute set through
-    :mod:`xml.etree.ElementTree`, which escapes it; ``start``: the default of the start-mode
-    parameter (:data:`START_MODES`); ``units``: a Real variable's unit by name (:func:`_units`),
-    each declared in ``UnitDefinitions``."""
+    :mod:`xml.etree.ElementTree`, which escapes it, and what XML 1.0 cannot hold written as
+    an escape (:func:`aiofl.text.xml_text`); ``start``: the default of the start-mode
+    parameter (:data:`START_MODES`); ``units``: a Real variable's unit by name
+    (:func:`_units`), each declared in ``UnitDefinitions``."""
     present = {"u", *(name for name, _ in inputs), *(p.name for p in params)}
     units = {k: v for k, v in (units or {}).items() if k in present}
     from importlib.metadata import version
@@ -467,6 +470,12 @@ def _model_description(
     init = ET.SubElement(ms, "InitialUnknowns")
     for i in [u_index, *calc_indices]:
         ET.SubElement(init, "Unknown", {"index": str(i)})
+    # ElementTree escapes & < > " but writes what XML 1.0 cannot hold (a control
+    # character, U+FFFE) as it is, into a file no parser loads: such characters are
+    # written as visible escapes (aiofl.text.xml_text), in every attribute
+    for element in root.iter():
+        for key, value in element.attrib.items():
+            element.set(key, xml_text(value))
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True) + b"\n"
 

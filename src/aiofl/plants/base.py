@@ -46,6 +46,15 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from aiofl.checks import check_number
+from aiofl.text import (
+    MAX_DESCRIPTION_CHARS,
+    MAX_UNIT_CHARS,
+    check_distinct,
+    check_name,
+    check_text,
+    normal_keys,
+    normal_name,
+)
 
 __all__ = ["Plant", "PlantError", "derivative_unit", "unit_from_label", "unit_label"]
 
@@ -168,6 +177,11 @@ class Plant:
     _checked: dict[str, bool] = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
+        try:  # the text rule of aiofl.text, before the name is used in any message
+            check_text("plant.name", self.name)
+            check_text("plant.description", self.description, max_chars=MAX_DESCRIPTION_CHARS)
+        except ValueError as exc:
+            raise PlantError(str(exc)) from None
         if not isinstance(self.n_states, int) or self.n_states < 1:
             raise PlantError(f"plant {self.name!r}: n_states must be an integer >= 1")
         for fname in ("f", "g", "h"):
@@ -197,15 +211,33 @@ class Plant:
         for key in ("output_unit", "input_unit", "disturbance_unit"):
             if not isinstance(getattr(self, key), str):
                 raise PlantError(f"plant {self.name!r}: {key} must be a string (e.g. 'rad')")
+        try:  # names in Unicode NFKC (as expressions read them), distinct; units bounded
+            params = normal_keys(f"plant {self.name!r}: params", self.params)
+            state_names = tuple(
+                check_name(f"plant {self.name!r}: state_names[{i}]", v)
+                for i, v in enumerate(self.state_names)
+            )
+            check_distinct(f"plant {self.name!r}: state_names", state_names)
+            for key in ("output_unit", "input_unit", "disturbance_unit"):
+                check_text(
+                    f"plant {self.name!r}: {key}", getattr(self, key), max_chars=MAX_UNIT_CHARS
+                )
+            for i, unit in enumerate(units):
+                check_text(f"plant {self.name!r}: state_units[{i}]", unit, max_chars=MAX_UNIT_CHARS)
+        except ValueError as exc:
+            raise PlantError(str(exc)) from None
+        object.__setattr__(self, "params", MappingProxyType(params))
+        object.__setattr__(self, "state_names", state_names)
         if not isinstance(self.state_bounds, Mapping):
             raise PlantError(
                 f"plant {self.name!r}: state_bounds must map state names to (low, high)"
             )
         bounds = {}
-        for key, pair in self.state_bounds.items():
+        for given, pair in self.state_bounds.items():
+            key = normal_name(given) if isinstance(given, str) else given  # as declared
             if key not in self.state_names:
                 raise PlantError(
-                    f"plant {self.name!r}: state_bounds names {key!r}; allowed: one of the "
+                    f"plant {self.name!r}: state_bounds names {given!r}; allowed: one of the "
                     f"states {', '.join(self.state_names)}"
                 )
             bounds[key] = _range_pair(f"plant {self.name!r}: state_bounds.{key}", pair)
@@ -245,10 +277,11 @@ class Plant:
         """
         values = dict(self.params)
         for source, op in ((overrides, "set"), (scale, "scale")):
-            for key, val in (source or {}).items():
+            for given, val in (source or {}).items():
+                key = normal_name(given) if isinstance(given, str) else given  # as declared
                 if key not in values:
                     raise PlantError(
-                        f"plant {self.name!r} has no parameter {key!r}; "
+                        f"plant {self.name!r} has no parameter {given!r}; "
                         f"allowed: {', '.join(self.param_names)}"
                     )
                 values[key] = float(val) if op == "set" else values[key] * float(val)

@@ -38,8 +38,6 @@ from aiofl.limits import MAX_PLANT_FILE_BYTES
 from aiofl.plants.base import Plant, unit_from_label
 from aiofl.plants.codegen import GENERATED_FUNCTIONS, compile_sources, plant_sources
 from aiofl.plants.expressions import (
-    CONSTANTS,
-    FUNCTIONS,
     MAX_EXPANDED_TERMS,
     MAX_PARAMS,
     MAX_STATES,
@@ -48,15 +46,18 @@ from aiofl.plants.expressions import (
     expanded_terms,
     parse_expression,
 )
+from aiofl.plants.names import declared_symbols, normal_symbols, plant_text
+from aiofl.plants.names import renamed as renamed_in
 from aiofl.plants.normal_form import Analysis, RelativeDegreeError, analyze, drop_delta
 from aiofl.plants.plant_modules import cached_plant, generator_digest, plant_from_sources
+from aiofl.text import (
+    MAX_DESCRIPTION_CHARS,
+    MAX_UNIT_CHARS,
+    check_text,
+    normal_name,
+)
 
 __all__ = ["SymbolicPlant", "read_plant_toml"]
-
-_MAX_NAME = 64
-"""Longest state or parameter name."""
-_MAX_UNIT = 32
-"""Longest unit text (``output_unit``, ``input_unit``, ``disturbance_unit``, ``state_units``)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -111,13 +112,30 @@ class SymbolicPlant:
     _cache: dict[str, Any] = field(default_factory=dict, repr=False)
 
     def __post_init__(self) -> None:
+        plant_text(check_text, "name", self.name)
         name = self.name
+        plant_text(
+            check_text,
+            f"plant {name!r}: description",
+            self.description,
+            max_chars=MAX_DESCRIPTION_CHARS,
+        )
         states = tuple(self.states)
         if not states:
             raise SymbolicPlantError(f"plant {name!r}: states must list at least one state")
         if len(set(states)) != len(states):
             raise SymbolicPlantError(f"plant {name!r}: states must be distinct")
         _check_counts(name, len(states), len(self.params))
+        # symbols named in Unicode NFKC, as a parsed expression reads names: a sympy
+        # symbol from Python named otherwise ("ﬁ") is renamed ("fi") wherever it is used
+        renamed = normal_symbols(name, states, [s for s, _ in self.params])
+        if renamed:
+            states = tuple(renamed.get(s, s) for s in states)
+            object.__setattr__(
+                self, "params", tuple((renamed.get(s, s), v) for s, v in self.params)
+            )
+            for key in ("f", "g", "h", "bd", "eta"):
+                object.__setattr__(self, key, renamed_in(getattr(self, key), renamed))
         params = tuple((s, _finite(v, f"plant {name!r}: params.{s}")) for s, v in self.params)
         psyms = {s for s, _ in params}
         if len(psyms) != len(params):
@@ -193,8 +211,10 @@ class SymbolicPlant:
         labels = tuple(self.state_labels) or tuple(str(s) for s in states)
         if len(labels) != n:
             raise SymbolicPlantError(f"plant {name!r}: state_labels needs {n} entries")
+        for i, lab in enumerate(labels, 1):
+            plant_text(check_text, f"plant {name!r}: the label of state {i}", lab)
         object.__setattr__(self, "state_labels", labels)
-        from_labels = tuple(unit_from_label(lab)[:_MAX_UNIT] for lab in labels)
+        from_labels = tuple(unit_from_label(lab)[:MAX_UNIT_CHARS] for lab in labels)
         units = tuple(self.state_units) or from_labels
         if len(units) != n or not all(isinstance(u, str) for u in units):
             raise SymbolicPlantError(
@@ -203,12 +223,10 @@ class SymbolicPlant:
         object.__setattr__(self, "state_units", units)
         for key in ("output_unit", "input_unit", "disturbance_unit", "state_units"):
             val = getattr(self, key)
-            for v in val if key == "state_units" else (val,):
-                if not isinstance(v, str) or len(v) > _MAX_UNIT:
-                    raise SymbolicPlantError(
-                        f"plant {name!r}: {key} = {v!r:.40}; allowed: a string of at most "
-                        f"{_MAX_UNIT} characters (e.g. 'm')"
-                    )
+            many = key == "state_units"
+            for i, v in enumerate(val if many else (val,), 1):
+                field = f"plant {name!r}: {key}" + (f"[{i}]" if many else "")
+                plant_text(check_text, field, v, max_chars=MAX_UNIT_CHARS)
 
     # ------------------------------------------------------------- constructors
     @classmethod
@@ -245,26 +263,11 @@ class SymbolicPlant:
         names = list(states)
         if not isinstance(params, Mapping):
             raise SymbolicPlantError(f"plant {name!r}: params must be a table name = value")
+        plant_text(check_text, "name", name)
         _check_counts(name, len(names), len(params))
-        symbols: dict[str, sp.Symbol] = {}
-        for nm in [*names, *params]:
-            if (
-                not isinstance(nm, str)
-                or not nm.isidentifier()
-                or nm.startswith("_")
-                or len(nm) > _MAX_NAME
-            ):
-                raise SymbolicPlantError(
-                    f"plant {name!r}: {nm!r:.80} is not a valid name (a Python identifier not "
-                    f"starting with _, at most {_MAX_NAME} characters)"
-                )
-            if nm in FUNCTIONS or nm in CONSTANTS:
-                raise SymbolicPlantError(
-                    f"plant {name!r}: {nm!r} is reserved (a function or constant name)"
-                )
-            if nm in symbols:
-                raise SymbolicPlantError(f"plant {name!r}: name {nm!r} is used twice")
-            symbols[nm] = sp.Symbol(nm, real=True)
+        # every name in Unicode NFKC, the form Python's parser gives the names in the
+        # expressions ("-ﬁ*theta" reads fi): declared "fi" and "ﬁ" are one name, refused
+        symbols, normal = declared_symbols(name, names, list(params))
         for pn, pv in params.items():
             if isinstance(pv, bool) or not isinstance(pv, (int, float)):
                 raise SymbolicPlantError(
@@ -296,8 +299,8 @@ class SymbolicPlant:
             )
         return cls(
             name=name,
-            states=tuple(symbols[s] for s in names),
-            params=tuple((symbols[p], v) for p, v in params.items()),
+            states=tuple(symbols[normal[s]] for s in names),
+            params=tuple((symbols[normal[p]], v) for p, v in params.items()),
             f=vec("f", f),
             g=vec("g", g),
             h=parse_expression(h, symbols, "h") if not isinstance(h, (list, tuple)) else h,
@@ -309,8 +312,8 @@ class SymbolicPlant:
             output_unit=output_unit,
             input_unit=input_unit,
             disturbance_unit=disturbance_unit,
-            state_units=_state_units(name, names, state_units),
-            state_bounds=_bounds(name, names, bounds),
+            state_units=_state_units(name, [normal[s] for s in names], state_units),
+            state_bounds=_bounds(name, [normal[s] for s in names], bounds),
             output_range=(
                 None if output_range is None else _pair(name, "output_range", output_range)
             ),
@@ -540,7 +543,8 @@ def _bounds(name: str, states: Sequence[str], table: Any) -> dict[str, tuple[flo
     if not isinstance(table, Mapping):
         raise SymbolicPlantError(f"plant {name!r}: bounds must be a table: state = [low, high]")
     out = {}
-    for key, value in table.items():
+    for given, value in table.items():
+        key = normal_name(given) if isinstance(given, str) else given  # as the states are read
         if key not in states:
             raise SymbolicPlantError(
                 f"plant {name!r}: bounds.{key!s:.40}; allowed: a state name ({', '.join(states)})"
@@ -556,7 +560,8 @@ def _state_units(
     if units is None:
         return ()  # SymbolicPlant takes them from the labels' brackets
     if isinstance(units, Mapping):
-        unknown = sorted(set(units) - set(states))
+        units = {normal_name(k) if isinstance(k, str) else k: v for k, v in units.items()}
+        unknown = sorted(map(str, set(units) - set(states)))
         if unknown:
             raise SymbolicPlantError(
                 f"plant {name!r}: state_units names unknown state(s) {', '.join(unknown)}; "
