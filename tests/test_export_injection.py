@@ -168,6 +168,7 @@ def _build(files: dict[str, str], where: Path, flags: list[str]) -> tuple[str, s
 def _assert_clean_object(nm: str, pre: str) -> None:
     defined = {ln.split()[-1] for ln in nm.splitlines() if re.match(r"^\S+ [A-Z] ", ln)}
     api = {"aiofl_init", "aiofl_start", "aiofl_reset", "aiofl_step", "aiofl_default_params"}
+    api.add("aiofl_fault")  # the fault flag of the non-finite-input policy (issue 34)
     assert defined == api, nm  # global definitions only
     assert TOKEN not in nm and TOKEN not in pre
 

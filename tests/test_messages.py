@@ -366,6 +366,7 @@ def _robustness_result(itae: np.ndarray, isu: np.ndarray, name: str = "design") 
         isu=isu,
         failed=div,
         stopped_at=np.where(div, 0.5, np.nan),
+        status=np.where(div, 1, 0),  # aiofl.layout.STATUS_DIVERGED, STATUS_OK
         nominal={"itae": nominal, "isu": None, "failed": nominal is None, "stopped_at": None},
         t=t,
         error=(0.1 * np.outer(np.ones(k), np.sin(t))).astype(np.float32),
