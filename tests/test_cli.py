@@ -49,7 +49,10 @@ def _click_group() -> Any:
     return typer.main.get_command(app)
 
 
-COMMANDS = ("presets", "show", "simulate", "reproduce", "tune", "analyze", "export", "robustness")
+COMMANDS = (
+    *("presets", "show", "simulate", "reproduce", "tune", "analyze", "export", "robustness"),
+    *("trim", "design", "report"),
+)
 
 
 @pytest.mark.parametrize("flag", ["--version", "-V"])
@@ -269,8 +272,10 @@ def test_simulate_reports_divergence_with_time_and_null_metrics(tmp_path: Path) 
     text = (out / "metrics.json").read_text()
     assert "NaN" not in text and "Infinity" not in text
     rec = json.loads(text)
-    assert rec["failed"] is True
-    assert rec["stopped_at"] == pytest.approx(12.42, abs=0.01)
+    # lost when |y - r| passes ten times max |r| (its numbers would diverge at 12.42 s)
+    assert rec["failed"] is True and rec["status"] == "lost"
+    assert rec["stopped_at"] == pytest.approx(11.98, abs=0.01)
+    assert "verdict: lost at t = 11.98 s: |y - r|" in res.stdout
     for key in ("itae", "isu", "iau", "opi", "iae", "ise"):
         assert rec[key] is None
     data = np.loadtxt(out / "trajectory.csv", delimiter=",", skiprows=1)

@@ -225,7 +225,7 @@ def test_export_of_a_diverging_design_is_refused(tmp_path: Path) -> None:
     out = tmp_path / "c"
     res = runner.invoke(app, ["export", "paper-s1-leso", "--ts", "1e-3", "--out", str(out)])
     assert res.exit_code == 2, res.output
-    assert "aiofl: error: paper-s1-leso diverges at" in res.stderr and not out.exists()
+    assert "aiofl: error: paper-s1-leso is lost at" in res.stderr and not out.exists()
     ok = runner.invoke(app, ["export", "frontier-s1-ladrc", "--ts", "2e-4", "--out", str(out)])
     assert ok.exit_code == 0 and "warning" not in ok.stderr, ok.stderr
     assert (out / "aiofl_controller.c").is_file()

@@ -266,7 +266,10 @@ def test_frontier_sampled_delay_margin_at_1ms_against_the_engine():
     from aiofl.engine.simulation import simulate_batch
 
     res = simulate_batch(cfg.plant, [cfg.controller] * 2, scens, sampling=Sampling(1e-3), dt=1e-4)
-    assert not res.failed[0] and res.failed[1]
+    # past the margin the loop oscillates with a growing amplitude: within 2 s the output
+    # swings by radians (inside the default envelope of ten times max |r|) and u by MV
+    assert not res.failed[0] and res.response["e_peak"][0] < 0.1
+    assert res.failed[1] or res.response["e_peak"][1] > 100 * res.response["e_peak"][0]
 
 
 def test_analyze_sampling_reports_both_delay_margins(tmp_path):

@@ -210,7 +210,8 @@ def test_cli_exports_a_plant_files_model(tmp_path):
 def test_the_plants_name_reaches_only_comments(slfjm):
     """The plant's name (a plant file's, user text) is made inert in the comment block; the
     model's code holds only aiofl's names (xi, PLANT_P, t_j, <math.h>)."""
-    hostile = dataclasses.replace(slfjm, name="x */ #define aiofl_step EVIL /* \u202e")
+    # (a bidirectional control is refused where the name enters: aiofl.text)
+    hostile = dataclasses.replace(slfjm, name="x */ #define aiofl_step EVIL /* ")
     files = export_c(assisted(slfjm), SAMPLING, plant=hostile, plant_source="slfjm")
     for text in files.values():
         code = re.sub(r"/\*.*?\*/", "", text, flags=re.S)

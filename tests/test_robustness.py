@@ -310,6 +310,7 @@ def test_cli_writes_json_and_figure_deterministically(tmp_path: Path) -> None:
     import tomlkit
 
     data["scenario"]["t_final"] = 0.5
+    data["tune"].pop("t_final", None)  # a [tune] horizon longer than the scenario is refused
     data["uncertainty"] = {"draws": 4, "seed": 2, "parameters": {"J_l": {"uniform": 0.2}}}
     cfg_file.write_text(tomlkit.dumps(data))
     outs = []

@@ -266,7 +266,7 @@ def test_dask_path_equals_local_path() -> None:
     ):
         ev = DaskEvaluator(client, chunks=3)  # 10 members -> chunks of 4, 3, 3
         remote = ev(prep.spec, values)
-        assert np.array_equal(local.metrics, remote.metrics)
+        assert np.array_equal(local.metrics, remote.metrics, equal_nan=True)
         assert np.array_equal(local.failed, remote.failed)
         via_dask = tune(cfg, progress=False, scheduler=client)
     via_local = tune(cfg, progress=False)

@@ -335,7 +335,7 @@ def test_robust_dask_chunks_and_resume_equal_the_local_run(tmp_path: Path) -> No
     prep = prepare(cfg, draws=DRAWS)
     values = prep.space.decode(prep.initial)
     local = evaluate_chunk(prep.spec, values)
-    assert local.metrics.shape == (5, 4, 5) and local.failed.shape == (5, 4)
+    assert local.metrics.shape == (5, 4, L.N_SCORE) and local.failed.shape == (5, 4)
     with (
         distributed.LocalCluster(
             n_workers=2, threads_per_worker=1, processes=False, dashboard_address=None

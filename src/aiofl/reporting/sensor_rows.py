@@ -224,7 +224,8 @@ def verdict(by_column: dict[str, dict[str, Any]]) -> str:
     """The best sensor a design survives (:func:`survives`), as one phrase."""
     ideal = by_column.get("ideal")
     if ideal is None or ideal["failed"]:
-        return "diverges even with the ideal sensor"
+        lost = ideal is not None and ideal.get("status") == "lost"
+        return f"{'loses the plant' if lost else 'diverges'} even with the ideal sensor"
     if survives(by_column.get("encoder-12bit"), ideal):
         return "survives a 12-bit encoder"
     if survives(by_column.get("encoder-16bit"), ideal):

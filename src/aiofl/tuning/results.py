@@ -142,7 +142,8 @@ def convergence_figure(result: TuneResult) -> Any:
     st = result.settings
     obj = st.objective if isinstance(st.objective, str) else "weighted sum"
     ax.set_xlabel("generation")
-    ax.set_ylabel(f"objective ({obj}, t_f = {st.t_final:g} s)")
+    tf = "the scenario's horizon" if st.t_final is None else f"{st.t_final:g} s"
+    ax.set_ylabel(f"objective ({obj}, t_f = {tf})")
     ax.set_title(f"{result.source}: {st.budget()}", fontsize=9, parse_math=False)  # a path
     ax.grid(True, alpha=0.3)
     ax.xaxis.set_major_locator(MaxNLocator(integer=True))
@@ -454,7 +455,9 @@ def write_outputs(result: TuneResult, out: str | Path, *, header: str = "") -> d
             notes=figure_notes,
         )
         notes.extend(f"front.png: {n}" for n in figure_notes)
-        title = f"{result.source}: {result.settings.budget()}, t_f = {result.settings.t_final:g} s"
+        tf = result.settings.t_final
+        when = "the scenario's horizon" if tf is None else f"{tf:g} s"
+        title = f"{result.source}: {result.settings.budget()}, t_f = {when}"
         figure("front.png", lambda: front_png(front, title, markers, floor, figure_notes))
     atomic_write_text(out / "summary.json", summary_json())
     return summary

@@ -571,10 +571,8 @@ def tune(
     else:
         ib = int(np.argmin(obj_all))
     best_values = {n: float(values[ib, j]) for j, n in enumerate(space.names)}
-    best = dict(zip(L.SCORE_NAMES, met_all[ib].tolist(), strict=False))  # 5 from a custom evaluator
-    best_metrics = (
-        None if div_all[ib] else {k: v if np.isfinite(v) else None for k, v in best.items()}
-    )
+    best = met_all[ib][: L.N_METRIC]  # the integrals (a custom evaluator gives only them)
+    best_metrics = None if div_all[ib] else dict(zip(L.METRIC_NAMES, best.tolist(), strict=True))
     config = config_with_values(prep.config.raw, prep.config.controller, best_values)
     return TuneResult(
         settings=st,
