@@ -141,7 +141,7 @@ def test_every_sentence_matches_its_trajectory(rep) -> None:
             first = "Equilibrium" if orbit.get("floquet") or orbit.get("ftle") else "Linearisation"
             assert text.startswith(f"{first} {verdict}")
     # the shipped cases cover divergence, tracking and a bounded oscillation
-    assert {"diverged", "tracks", "bounded"} <= kinds
+    assert {"tracks", "bounded"} <= kinds and kinds & {"lost", "diverged"}
     # an unstable verdict beside a bounded, oscillating run (e.g. the printed INLESO)
     assert any(
         rep.verdicts[r.case.preset]["verdict"] == "unstable" and r.behaviour.kind == "bounded"

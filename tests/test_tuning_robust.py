@@ -343,7 +343,7 @@ def test_robust_dask_chunks_and_resume_equal_the_local_run(tmp_path: Path) -> No
         distributed.Client(cluster) as client,
     ):
         remote = DaskEvaluator(client, chunks=2)(prep.spec, values)  # 3 + 2 candidates
-    assert np.array_equal(local.metrics, remote.metrics)
+    assert np.array_equal(local.metrics, remote.metrics, equal_nan=True)
     assert np.array_equal(local.failed, remote.failed)
     full = tune(cfg, draws=DRAWS, progress=False)
     tune(cfg, draws=DRAWS, progress=False, checkpoint_dir=tmp_path, generations=1)

@@ -170,6 +170,12 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
         "aiofl robustness my-run.toml --out robust",
         "aiofl robustness my-run.toml -o robust --draws 1000 --seed 1 --dask-workers 2",
     ),
+    "trim": ("aiofl trim my-run.toml", "aiofl trim maglev.toml --y 0.01 --x0 0.01,0,0.7"),
+    "design": (
+        "aiofl design maglev.toml --y 0.01 --x0 0.01,0,0.7 -o first.toml",
+        "aiofl design tank --y 1.0 --ts 0.01 --sensor encoder-12bit -o tank.toml",
+    ),
+    "report": ("aiofl report my-run.toml --out report", "aiofl report first.toml -o r --force"),
 }
 """Example invocations shown at the end of each command's ``--help``."""
 
