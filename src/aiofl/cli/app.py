@@ -446,22 +446,13 @@ def simulate_command(
         atomic_write_text(
             stage / "trajectory.csv", _csv_text(result, columns, _column_labels(cfg, columns))
         )
-        from aiofl.reporting.figures import figure_png, result_figure, scenario_events
+        from aiofl.reporting.figures import config_figure, figure_png
 
         title = (
             f"{_run_label(config, cfg.name)}: output vs reference, tracking error and "
             "control signal"
         )
-        fig = result_figure(
-            result,
-            title,
-            cfg.scenario.t_final,
-            cfg.controller.structure,
-            cfg.scenario.reference.evaluate,
-            scenario_events(cfg.scenario, cfg.plant.disturbance_unit),
-            output_unit=cfg.plant.output_unit,
-            input_unit=cfg.plant.input_unit,
-        )
+        fig = config_figure(cfg, result, title)
         atomic_write_bytes(stage / "figure.png", figure_png(fig))
     _print_records([record], title=f"aiofl simulate {config}")
     from aiofl.reporting.verdict import command_text, step_text, verdict_text

@@ -11,7 +11,7 @@ from typing import Annotated
 
 import typer
 
-from aiofl.cli.errors import FORCE_OPTION, SENSOR_OPTION, bad_input_exits
+from aiofl.cli.errors import FORCE_OPTION, SENSOR_OPTION, bad_input_exits, parse_numbers
 
 __all__ = ["design_command"]
 
@@ -59,12 +59,7 @@ def design_command(
             raise ValueError(f"--out = {str(out)!r}; allowed: a .toml file")
         if out.exists() and not force:
             raise ValueError(f"--out = {str(out)!r} exists; give --force to replace it")
-        guess = None
-        if x0 is not None:
-            try:
-                guess = [float(v) for v in x0.split(",")]
-            except ValueError:
-                raise ValueError(f"--x0 = {x0!r}; allowed: n comma-separated numbers") from None
+        guess = parse_numbers("--x0", x0)
         for name, v in (("--y", y), ("--ts", ts), ("--omega-c", omega_c), ("--u-max", u_max)):
             if v is not None and not math.isfinite(v):
                 raise ValueError(f"{name} = {v!r}; allowed: a finite number")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import typer
 
-__all__ = ["EXIT_BAD_INPUT", "FORCE_OPTION", "SENSOR_OPTION", "bad_input_exits"]
+__all__ = ["EXIT_BAD_INPUT", "FORCE_OPTION", "SENSOR_OPTION", "bad_input_exits", "parse_numbers"]
 
 EXIT_BAD_INPUT = 2
 
@@ -54,6 +54,22 @@ def _out_or_check(out: Path | None, check: bool) -> Path | None:
             "--out / -o: missing; give the output directory (or --check to only validate)"
         )
     return out
+
+
+def parse_numbers(option: str, text: str | None) -> list[float] | None:
+    """A comma-separated list of finite numbers (``--x0 0.01,0,0.7``), or None when the
+    option is not given; raises ``ValueError`` naming ``option``."""
+    import math
+
+    if text is None:
+        return None
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise ValueError(f"{option} = {text!r}; allowed: comma-separated numbers") from None
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f"{option} = {text!r}; allowed: finite numbers")
+    return values
 
 
 @contextmanager

@@ -13,7 +13,7 @@ from typing import Annotated
 
 import typer
 
-from aiofl.cli.errors import FORCE_OPTION, bad_input_exits
+from aiofl.cli.errors import FORCE_OPTION, bad_input_exits, parse_numbers
 
 __all__ = ["trim_command"]
 
@@ -49,14 +49,7 @@ def trim_command(
     from aiofl.plants.operating_point import trim
 
     with bad_input_exits():
-        guess = None
-        if x0 is not None:
-            try:
-                guess = [float(v) for v in x0.split(",")]
-            except ValueError:
-                raise ValueError(f"--x0 = {x0!r}; allowed: n comma-separated numbers") from None
-            if not all(math.isfinite(v) for v in guess):
-                raise ValueError(f"--x0 = {x0!r}; allowed: finite numbers")
+        guess = parse_numbers("--x0", x0)
         if json_out is not None and json_out.exists() and not force:
             raise ValueError(f"--json = {str(json_out)!r} exists; give --force to replace it")
         if y is not None and not math.isfinite(y):

@@ -148,7 +148,7 @@ def design_report(cfg: Any, label: str, *, draws: int | None = None) -> DesignRe
     """Run and measure ``cfg`` (a :class:`~aiofl.config.RunConfig`) for its report."""
     from aiofl.plants.operating_point import trim
     from aiofl.reporting.cases import computed_record
-    from aiofl.reporting.figures import figure_png, result_figure, scenario_events
+    from aiofl.reporting.figures import config_figure, figure_png
 
     result = cfg.simulate(store=True)
     record = computed_record(
@@ -167,15 +167,8 @@ def design_report(cfg: Any, label: str, *, draws: int | None = None) -> DesignRe
         )
         if t
     ]
-    fig = result_figure(
-        result,
-        f"{label}: output vs reference, tracking error and control signal",
-        cfg.scenario.t_final,
-        cfg.controller.structure,
-        cfg.scenario.reference.evaluate,
-        scenario_events(cfg.scenario, cfg.plant.disturbance_unit),
-        output_unit=cfg.plant.output_unit,
-        input_unit=cfg.plant.input_unit,
+    fig = config_figure(
+        cfg, result, f"{label}: output vs reference, tracking error and control signal"
     )
     notes: list[str] = []
     try:

@@ -46,6 +46,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "Panel",
+    "config_figure",
     "figure_png",
     "panel_letter",
     "result_figure",
@@ -338,6 +339,21 @@ def result_figure(
         input_unit,
     )
     return runs_figure([panel], title)
+
+
+def config_figure(cfg: Any, result: SimulationResult, title: str) -> Figure:
+    """:func:`result_figure` of a run config's run: its horizon, structure, reference,
+    events and the plant's units (``aiofl simulate``'s and ``aiofl report``'s figure)."""
+    return result_figure(
+        result,
+        title,
+        cfg.scenario.t_final,
+        cfg.controller.structure,
+        cfg.scenario.reference.evaluate,
+        scenario_events(cfg.scenario, cfg.plant.disturbance_unit),
+        output_unit=cfg.plant.output_unit,
+        input_unit=cfg.plant.input_unit,
+    )
 
 
 def figure_png(fig: Figure, dpi: int = 100) -> bytes:
