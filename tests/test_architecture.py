@@ -39,6 +39,8 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("aiofl.engine", "aiofl.sensor"),  # the engine; the measurement a user has (sensor)
     ("aiofl.config",),  # TOML -> plant + scenario + controller (+ run settings)
     ("aiofl.analysis",),
+    # from a logged experiment to a plant, b0, rho and a delay
+    ("aiofl.identification",),
     ("aiofl.export",),
     ("aiofl.tuning",),
     ("aiofl.reporting",),
