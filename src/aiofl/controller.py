@@ -114,6 +114,7 @@ _VALUE_RANGES: dict[str, dict[str, float]] = {
     "eso.g_beta": {"ge": 0.0, "le": 2.0},
     "eso.q": {"gt": 0.0, "le": 1e300},
     "eso.r": {"gt": 0.0, "le": 1e300},
+    "eso.u0": {},
     "td.R": {"gt": 0.0},
     "td.a": {"ge": 0.0, "lt": 1.0},
     "td.b": {"gt": 0.0},
@@ -198,7 +199,12 @@ class Controller:
         ``"bumpless"``: ``"output"`` and the differentiator / prefilter at rest at
         :math:`y_m(0)` (:math:`r_1(0) = y_m(0)`, its other states 0), so a plant at rest at
         :math:`y_0 = r` starts with :math:`e = 0, \hat\xi_{\rho+1} = 0`, i.e. u(0) = 0
-        (the exported C's default start).
+        (the exported C's default start).  With ``values["eso.u0"]`` = :math:`u_0` (a
+        start at an operating point, e.g. its holding input :math:`u_e`,
+        :func:`aiofl.plants.operating_point.trim`) the extended state starts at
+        :math:`\hat\xi_{\rho+1}(0) = -b_0 u_0`, the total disturbance of a plant held by
+        :math:`u_0`, so :math:`u(0) = u_0` (industry's bumpless transfer: the new controller
+        takes over the command that holds the plant).
     eso_model
         What the observer is given besides ρ and b0 (:data:`aiofl.layout.ESO_MODEL_KINDS`):
         ``"none"`` (model-free, eq. 5: :math:`\hat\xi_{\rho+1}` estimates the whole total
@@ -298,6 +304,14 @@ class Controller:
                 "plant whose high-frequency gain is negative)"
             )
         self.u_range()  # validates law.u_min / law.u_max
+        u0 = self.value("eso.u0")
+        held = self.eso_init != "zero" and self.eso_model == "none" and self.law == "aiofl"
+        if u0 != 0.0 and not held:
+            raise ValueError(
+                f"controller.eso.u0 = {u0} (a start at the held command u0) needs the active "
+                "law with a model-free observer started at the output; allowed: eso.init = "
+                "'output' or 'bumpless', eso.model = 'none', law = 'aiofl' (or eso.u0 = 0)"
+            )
         if self.eso_gains == "kalman":
             self._check_kalman()
 

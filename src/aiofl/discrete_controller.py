@@ -119,17 +119,18 @@ class DiscreteController(sampled.DiscreteController):
     def init(self, y0: float) -> None:
         y = _real(y0, "y0")
         super().init(y)
-        self._start(self.controller.eso_init == "zero" or _usable(y))
+        zero = self.controller.eso_init == "zero"
+        self._start(zero or _usable(y), 0.0 if zero else self.controller.value("eso.u0"))
 
-    def reset(self, y0: float) -> None:
+    def reset(self, y0: float, u0: float | None = None) -> None:
         y = _real(y0, "y0")
-        super().reset(y)
-        self._start(_usable(y))
+        super().reset(y, u0)
+        self._start(_usable(y), self.controller.value("eso.u0") if u0 is None else float(u0))
 
-    def _start(self, usable: bool) -> None:
-        """After a start: no command yet (0 held), the fault cleared unless the start
-        measurement is not usable."""
-        self._held = 0.0
+    def _start(self, usable: bool, u0: float) -> None:
+        """After a start: the start's command ``u0`` held (``eso.u0``, 0 unless set), the
+        fault cleared unless the start measurement is not usable."""
+        self._held = u0
         self._fault = not usable
 
     def _reference_values(self, r: Any) -> list[float]:

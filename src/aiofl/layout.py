@@ -100,6 +100,9 @@ def _float_columns() -> dict[str, int]:
     # Kalman gains (eso.gains = "kalman"): process- and measurement-noise intensities; the
     # host writes the equivalent eso.omega0 and eso.alpha* from them (controller_batch)
     names += ["eso.q", "eso.r"]
+    # the command held at the start (a bumpless start at an operating point): the extended
+    # state starts at -b0 u0, so u(t0) = u0 (eso.init = "output" / "bumpless")
+    names += ["eso.u0"]
     names += ["td.R", "td.a", "td.b", "td.c", "td.rho", "td.omega"]
     for vec in ("k", "alpha", "delta", "kb", "mu"):
         names += [f"sef.{vec}{i}" for i in range(1, RHO_MAX + 1)]
@@ -123,6 +126,7 @@ F_ESO_G_ALPHA = FLOAT_COLUMNS["eso.g_alpha"]
 F_ESO_G_BETA = FLOAT_COLUMNS["eso.g_beta"]
 F_ESO_Q = FLOAT_COLUMNS["eso.q"]
 F_ESO_R = FLOAT_COLUMNS["eso.r"]
+F_ESO_U0 = FLOAT_COLUMNS["eso.u0"]
 F_TD_R = FLOAT_COLUMNS["td.R"]
 F_TD_A = FLOAT_COLUMNS["td.a"]
 F_TD_B = FLOAT_COLUMNS["td.b"]

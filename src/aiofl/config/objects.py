@@ -114,6 +114,8 @@ def controller_table(c: Controller) -> dict[str, Any]:
         "gains": c.eso_gains,
         **{k: c.value(f"eso.{k}") for k in ("k_alpha", "k_beta", "g_alpha", "g_beta")},
     }
+    if c.value("eso.u0") != 0.0:  # a start at a held command
+        eso["u0"] = c.value("eso.u0")
     if c.eso_gains == "kalman":
         eso.update(q=c.value("eso.q"), r=c.value("eso.r"))
     else:

@@ -494,6 +494,9 @@ def parse_config(
         controller.check_plant(plant, scenario.x0 or None)
         if model.scenario.u_ref == "trim":  # ISU, IAU about the holding input
             scenario = replace(scenario, u_ref=holding_input(plant, scenario))
+        if model.controller.eso.u0 == "trim":  # a start at the holding input
+            u_e = holding_input(plant, scenario, "controller.eso.u0")
+            controller = controller.with_values(**{"eso.u0": u_e})
         columns = len(L.trajectory_columns(plant.n_states))
         check_run_size(sc.t_final, sim.dt, trajectory_columns=columns, decimation=sim.decimation)
     except (ValueError, PlantError) as exc:

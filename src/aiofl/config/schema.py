@@ -205,6 +205,9 @@ class ESOModel(_Model):
     # "zero": xi_hat(0) = 0; "output": xi_hat_1(0) = y_meas(0), the first measurement;
     # "bumpless": "output" and the differentiator / prefilter at rest at y_meas(0)
     init: Literal["zero", "output", "bumpless"] = "zero"
+    # the command held at the start (output / bumpless start): the extended state starts at
+    # -b0 u0, so u(0) = u0; "trim": the holding input at the scenario's initial output
+    u0: Finite | Literal["trim"] = 0.0
     # what the observer is given besides rho and b0: "none" (model-free, eq. 5) or
     # "nominal" (model-assisted: the plant's nominal alpha + beta u at x_hat = Phi^-1(xi_hat))
     model: Literal["none", "nominal"] = "none"
@@ -391,6 +394,8 @@ class ControllerModel(_Model):
         eso_model = eso.pop("model")
         gains = eso.pop("gains")
         q, r = eso.pop("q"), eso.pop("r")
+        if eso["u0"] == "trim":  # the holding input: aiofl.config.run_config resolves it
+            eso["u0"] = 0.0
         if gains == "kalman":
             eso.pop("omega0")  # derived from q and r
             if r is None and not measurement_r > 0:

@@ -259,11 +259,14 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
         elif k == 0 and init_output:
             # ξ̂_1(0) = y_meas(0) = h(x(0)) + n(0), the first measurement; ξ̂_2.. stay 0;
             # bumpless: the differentiator's r_1(0) too (at rest at y_meas(0))
+            # and ξ̂_{ρ+1}(0) = -b0 u0, the holding input's total disturbance (u(0) = u0)
             o_eso = iq[IQ_OESO]
             o_td = iq[IQ_OTD]
             for l in range(_W):
                 z[o_eso, l] = _PH(fns, z[:, l], p[:, l]) + s[S_NOISE, l]
                 zt[o_eso, l] = z[o_eso, l]
+                z[o_eso + rho, l] = -q[L.F_B0, l] * q[L.F_ESO_U0, l]
+                zt[o_eso + rho, l] = z[o_eso + rho, l]
                 if init_td:
                     z[o_td, l] = z[o_eso, l]
                     zt[o_td, l] = z[o_eso, l]

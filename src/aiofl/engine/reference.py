@@ -438,6 +438,8 @@ def reference_simulate(
         first = segment_inputs(0.0)
         y0 = plant.output(z[: s.n], first["plant_params"])  # type: ignore[arg-type]
         z[s.n + s.n_td] = y0 + float(first["noise"])  # type: ignore[arg-type]
+        # ξ̂_{ρ+1}(0) = -b0 u0: the total disturbance of the plant held by eso.u0
+        z[s.n + s.n_td + controller.rho] = -controller.value("law.b0") * controller.value("eso.u0")
         if controller.eso_init == "bumpless" and s.n_td:  # the TD at rest at y_m(0)
             z[s.n] = z[s.n + s.n_td]
     states: list[NDArray[np.float64]] = []

@@ -17,9 +17,7 @@ injection, Han's TD (18), the ITD, saturation), the same compiled SEF-and-law di
 (:func:`aiofl.engine.member._aiofl_command`, :func:`~aiofl.engine.member._iofl_command`)
 and the discrete ones of :mod:`aiofl.components.discrete` (ESO correction and prediction,
 fhan, the prefilter's ZOH update), with the coefficients of the member's discrete row.  The
-ESO starts as the continuous loop's does (``eso.init``: "zero", the default, or "output",
-:math:`\hat\xi_1 = ` the first measurement, or "bumpless", that and the differentiator at
-rest at it; see :func:`_tpl_ctrl_init`).
+ESO starts as the continuous loop's does (``eso.init``, ``eso.u0``: :func:`_tpl_ctrl_init`).
 :class:`DiscreteController` compiles the same :func:`_tpl_ctrl_step` without a plant and
 steps it from Python: the engine's discrete controller, sample by sample (the C export is
 checked against it).
@@ -47,6 +45,7 @@ from numpy.typing import NDArray
 
 from aiofl import layout as L
 from aiofl.cache import cache_enabled
+from aiofl.checks import check_number
 from aiofl.controller import Controller, controller_batch
 from aiofl.engine import bindings, member, plant_table
 from aiofl.engine import compile as compile_
@@ -126,23 +125,27 @@ _FHAN_TD = _OBS_INNOVATION = _OBS_CORRECT = _OBS_PREDICT = _LIN_UPDATE = None
 
 
 # ---------------------------------------------------------------------------- templates
-def _tpl_ctrl_init(iq, cs, y0):  # pragma: no cover - compiled
+def _tpl_ctrl_init(iq, q, cs, y0):  # pragma: no cover - compiled
     r"""Controller state before the first sample, as the continuous loop starts its ESO
     (``eso.init``, :data:`aiofl.layout.ESO_INIT_KINDS`): the TD at rest at 0, the ESO's
     prediction :math:`p_0 = 0` (``"zero"``, the default) or :math:`p_0 = (y_0, 0, ..., 0)`
     with ``y0`` the first measurement (``"output"``: the first innovation is 0); with
     ``"bumpless"`` that prediction and the TD at rest at ``y0`` (:math:`r_1 = y_0`).
-
-    The first sample's correction then gives :math:`\hat\xi_0 = L\,\phi(y_0)` or
-    :math:`(y_0, 0, ..., 0)`.  :math:`p_1` is kept as its change since the previous
-    measurement (``cs[C_P]``) and that measurement (``cs[C_Y]``): ``0, 0`` for zero,
-    ``0, y0`` for output.
+    Started at ``y0``, the extended state is at :math:`-b_0 u_0` (``eso.u0``: the total
+    disturbance of a plant held by :math:`u_0`), so the first command is :math:`u_0`, also
+    the one applied before the first sample (a delayed command's first interval).
+    :math:`p_1` is kept as its change since the previous measurement (``cs[C_P]``) and that
+    measurement (``cs[C_Y]``): ``0, 0`` for zero, ``0, y0`` for output.
     """
     for i in range(N_CS):
         cs[i] = 0.0
     if iq[IQ_EINIT] != L.ESO_INIT_ZERO:  # "output" or "bumpless"
         cs[C_Y] = y0  # p_1 = y0: its change since the measurement, cs[C_P], is 0
         cs[C_X] = y0
+        rho = iq[IQ_RHO]
+        cs[C_P + rho] = -q[L.F_B0] * q[L.F_ESO_U0]
+        cs[C_X + rho] = cs[C_P + rho]
+        cs[C_UPREV] = q[L.F_ESO_U0]
     if iq[IQ_EINIT] == L.ESO_INIT_BUMPLESS and iq[IQ_TD] != L.TD_EXACT:
         if iq[IQ_TD] == L.TD_HAN:
             cs[C_RPREV] = y0  # Han's TD keeps r_1 - r_prev = 0 with r_prev = y0
@@ -293,7 +296,7 @@ def _tpl_sample(fns, k, z, p, pn, s, rrs, rl, iq, q, ctrl, due):  # pragma: no c
             rrs[3, j, l] = rrs[4, j, l]
             rl[0, j] = rrs[4, j, l]
         if k == 0:
-            _CTRL_INIT(iq, cs, yl)
+            _CTRL_INIT(iq, q[l], cs, yl)
         u_before = cs[C_UPREV]
         if iofl:
             nfx = _PNF(fns, _COLUMN(z, l), _COLUMN(pn, l))
@@ -555,18 +558,22 @@ class DiscreteController:
         differentiator at 0, ``y0`` unused), ``"output"`` (:math:`\hat\xi_1 = y_0`, the
         other states 0) or ``"bumpless"`` (that and the differentiator at rest at ``y0``;
         :meth:`reset`)."""
-        self._fn.init(self._iq, self._cs, float(y0))
+        self._fn.init(self._iq, self._q, self._cs, float(y0))
 
-    def reset(self, y0: float) -> None:
-        r"""A bumpless (re)start at the measurement ``y0``, at any sample boundary: the ESO
-        at :math:`\hat\xi = (y_0, 0, ..., 0)` and the differentiator / prefilter at rest at
-        ``y0`` (``eso.init = "bumpless"``), whatever the config's start.  A plant at rest at
-        :math:`y_0 = r` then gets u = 0 at the next sample (:math:`e = 0`,
-        :math:`\hat\xi_{\rho+1} = 0`; with the model-assisted observer the nominal
-        :math:`-\hat\alpha/\hat\beta` at :math:`\Phi^{-1}(y_0, 0, ...)`)."""
+    def reset(self, y0: float, u0: float | None = None) -> None:
+        r"""A bumpless (re)start at ``y0``, at any sample boundary, whatever the config's
+        start: :math:`\hat\xi = (y_0, 0, ..., 0, -b_0 u_0)`, the differentiator at rest at
+        ``y0``; a plant at rest at :math:`y_0 = r` gets :math:`u = u_0` next (the hand-over
+        of a manual command ``u0``; None: the design's ``eso.u0``).  The model-assisted
+        observer starts at its model's :math:`-\hat\alpha/\hat\beta` (``u0`` refused)."""
         iq = self._iq.copy()
         iq[IQ_EINIT] = L.ESO_INIT_BUMPLESS
-        self._fn.init(iq, self._cs, float(y0))
+        q = self._q.copy()
+        if u0 is not None:
+            q[L.F_ESO_U0] = check_number("u0", u0, finite=True)
+            if u0 != 0.0 and self.controller.eso_model != "none":
+                raise ValueError(f"u0 = {u0}: the model-assisted observer takes no u0")
+        self._fn.init(iq, q, self._cs, float(y0))
 
     def _reference(self, r: float | Sequence[float] | NDArray[np.float64]) -> None:
         rv = np.atleast_1d(np.asarray(r, dtype=np.float64))

@@ -139,6 +139,7 @@ def _check(controller: Controller, sampling: Sampling | None, precision: str) ->
 # the parameter each field of aiofl_params comes from (for a non-finite field's message)
 _FIELD_SOURCE = {
     "b0": "law.b0",
+    "u0": "eso.u0",
     "eso": "eso.omega0 / eso.alpha* at this Ts",
     "k_": "eso.k_alpha / eso.k_beta",
     "g_": "eso.g_alpha / eso.g_beta",
@@ -173,6 +174,7 @@ def _used_parameters(c: Controller) -> list[str]:
     """The parameter columns the discrete controller reads, in a readable order."""
     names = ["law.b0", "law.u_max", "law.u_min", "eso.omega0"]
     names += [f"eso.alpha{i}" for i in range(1, c.rho + 2)]
+    names += ["eso.u0"] if c.value("eso.u0") != 0.0 else []
     if c.eso_gains == "kalman":
         names += ["eso.q", "eso.r"]
     if c.eso == "improved":
@@ -197,6 +199,7 @@ def _params_values(
         ("b0", c.value("law.b0")),
         ("u_min", c.value("law.u_min")),
         ("u_max", c.value("law.u_max")),
+        ("u0", c.value("eso.u0")),
         ("eso_dphi", phi),
         ("eso_gamma", row[DS.D_GAM : DS.D_GAM + n]),
         ("eso_k", row[DS.D_K : DS.D_K + n]),
@@ -342,8 +345,10 @@ class _Design:
         u_min, u_max = (_literal(c.value(k), "double") for k in ("law.u_min", "law.u_max"))
         use = [
             "Use: aiofl_init(&s, &aiofl_default_params, y0) once with the first measurement y0",
-            "(bumpless: the ESO at (y0, 0, ..., 0), the differentiator at rest at y0; or",
-            "aiofl_start(&s, &p, y0, AIOFL_START_ZERO / _OUTPUT)); then at every sample",
+            "(bumpless: the ESO at (y0, 0, ..., 0, -b0 u0), the differentiator at rest at y0,",
+            "so the first u is u0 = p->u0, eso.u0; or aiofl_start(&s, &p, y0, AIOFL_START_ZERO",
+            "/ _OUTPUT); aiofl_start_at takes over a command u0 now holding the plant); then",
+            "at every sample",
             "t_k = k*AIOFL_TS: u = aiofl_step(&s, &p, r, y) with y the measurement at t_k and",
             "r[0..rho] = r, r', ..., r^(rho) at t_k"
             + (" (only r[0] is read: the controller has a differentiator)." if self.ntd else "."),

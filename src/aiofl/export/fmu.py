@@ -172,6 +172,8 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
         )
     else:
         calc.append(FmuParameter("law.b0", v("law.b0"), "input gain estimate b0", False))
+    if c.eso_model == "none" and c.eso_init != "zero":  # read at the start
+        out.append(tun("eso.u0", "command held at the start", "p->u0 = (aiofl_real)v;"))
     for name, field in (("law.u_max", "u_max"), ("law.u_min", "u_min")):
         if math.isfinite(v(name)):
             out.append(tun(name, "actuator limit", f"p->{field} = (aiofl_real)v;"))
@@ -359,7 +361,7 @@ def _units(controller: Controller, plant: Plant | None) -> dict[str, str]:
     out = {"Ts": "s"}
     if plant is not None:
         y, u = plant.output_unit, plant.input_unit
-        out |= {"y": y, "r": y, "u": u, "law.u_max": u, "law.u_min": u}
+        out |= {"y": y, "r": y, "u": u, "law.u_max": u, "law.u_min": u, "eso.u0": u}
         out |= {f"r_{i}": derivative_unit(y, i) for i in range(1, 1 + controller.rho)}
     return {k: v for k, v in out.items() if v and v != "-"}
 

@@ -214,14 +214,14 @@ def trim(
     )
 
 
-def holding_input(plant: Any, scenario: Any) -> float:
-    """``[scenario] u_ref = "trim"``: the input :math:`u_e` holding ``plant`` at the
-    scenario's :math:`r(0)`, the search started at its x0; a ``ValueError`` naming
-    ``scenario.u_ref`` when there is none."""
+def holding_input(plant: Any, scenario: Any, field: str = "scenario.u_ref") -> float:
+    """``[scenario] u_ref = "trim"`` (or ``[controller.eso] u0 = "trim"``): the input
+    :math:`u_e` holding ``plant`` at the scenario's :math:`r(0)`, the search started at its
+    x0; a ``ValueError`` naming ``field`` when there is none."""
     try:
         return trim(plant, scenario.initial_value(), x_guess=scenario.x0 or None).u
     except ValueError as exc:
-        raise ValueError(f'scenario.u_ref = "trim": {exc}') from None
+        raise ValueError(f'{field} = "trim": {exc}') from None
 
 
 def _output_guess(

@@ -135,15 +135,22 @@ static aiofl_real aiofl_fhan(aiofl_real x1, aiofl_real x2, aiofl_real r, aiofl_r
 #include "aiofl_model.h" /* static void aiofl_nominal_model(p, xi, &alpha, &beta) */
 #endif
 
-void aiofl_start(aiofl_state *s, const aiofl_params *p, aiofl_signal y0, int mode)
+void aiofl_start_at(aiofl_state *s, const aiofl_params *p, aiofl_signal y0, aiofl_real u0,
+                    int mode)
 {
     int i;
-    (void)p; /* the start does not depend on the design's numbers */
-    /* the ESO's prediction (y0, 0, ..., 0), or 0: p[0] holds p_1 - y_prev = 0 */
+    /* the ESO's prediction (y0, 0, ..., 0, -b0 u0), or 0: p[0] holds p_1 - y_prev = 0 */
     for (i = 0; i <= AIOFL_RHO; ++i) {
         s->p[i] = AIOFL_K(0.0);
         s->xhat[i] = AIOFL_K(0.0);
     }
+    if (mode == AIOFL_START_ZERO) u0 = AIOFL_K(0.0);
+#if AIOFL_ESO_MODEL
+    u0 = AIOFL_K(0.0); /* the model-assisted observer starts at its model's holding input */
+#else
+    s->p[AIOFL_RHO] = -p->b0 * u0;
+    s->xhat[AIOFL_RHO] = s->p[AIOFL_RHO];
+#endif
     s->y_prev = mode == AIOFL_START_ZERO ? 0 : y0;
 #if AIOFL_TD != AIOFL_TD_EXACT
     for (i = 0; i < AIOFL_NTD; ++i) s->td[i] = AIOFL_K(0.0);
@@ -151,10 +158,15 @@ void aiofl_start(aiofl_state *s, const aiofl_params *p, aiofl_signal y0, int mod
     s->r_prev = mode == AIOFL_START_BUMPLESS ? y0 : 0;
 #endif
 #if AIOFL_DELAY
-    s->u_prev = AIOFL_K(0.0);
+    s->u_prev = u0;
 #endif
-    s->u_held = AIOFL_K(0.0);
-    s->fault = mode != AIOFL_START_ZERO && !aiofl_usable(y0);
+    s->u_held = u0;
+    s->fault = mode != AIOFL_START_ZERO && (!aiofl_usable(y0) || !aiofl_finite(u0));
+}
+
+void aiofl_start(aiofl_state *s, const aiofl_params *p, aiofl_signal y0, int mode)
+{
+    aiofl_start_at(s, p, y0, p->u0, mode);
 }
 
 int aiofl_fault(const aiofl_state *s)

@@ -27,7 +27,7 @@ typedef double aiofl_signal;
 /* The fault policy (the same in aiofl.DiscreteController and the FMU): a measurement y, or a
    reference value the step reads, that is not finite or beyond +-AIOFL_SIGNAL_MAX, or an
    update that would make the command or the state non-finite, is a fault: aiofl_step
-   returns the last command it returned (0 after a start) and aiofl_fault(s) is 1 (a
+   returns the last command it returned (p->u0 after a start) and aiofl_fault(s) is 1 (a
    faulted input changes nothing; after an update that overflowed the state is not used
    again); every later sample is ignored, the command held, until the next
    aiofl_start / aiofl_init / aiofl_reset (a start at a y0 that is not usable is a fault
@@ -46,6 +46,7 @@ typedef struct {
     aiofl_real b0;    /* law.b0 */
     aiofl_real u_min; /* actuator range [u_min, u_max] (+-HUGE_VAL when open) */
     aiofl_real u_max;
+    aiofl_real u0;    /* eso.u0: the command held at a start at y0 (bumpless / output) */
     /* ESO, delta form: xhat = p + L phi(e);  p+ = xhat + (DPHI xhat + GAMMA u + K phi) */
     aiofl_real eso_dphi[AIOFL_RHO + 1][AIOFL_RHO + 1]; /* PHI - I, upper triangular */
     aiofl_real eso_gamma[AIOFL_RHO + 1];
@@ -98,6 +99,10 @@ typedef struct {
 extern const aiofl_params aiofl_default_params;
 
 void aiofl_start(aiofl_state *s, const aiofl_params *p, aiofl_signal y0, int mode);
+/* a start that takes over the command u0 now holding the plant (a manual or another
+   controller's; aiofl_start uses the design's p->u0): the ESO's extended state at -b0 u0 */
+void aiofl_start_at(aiofl_state *s, const aiofl_params *p, aiofl_signal y0, aiofl_real u0,
+                    int mode);
 void aiofl_init(aiofl_state *s, const aiofl_params *p, aiofl_signal y0);
 void aiofl_reset(aiofl_state *s, const aiofl_params *p, aiofl_signal y0);
 aiofl_real aiofl_step(aiofl_state *s, const aiofl_params *p, const aiofl_signal *r, aiofl_signal y);
