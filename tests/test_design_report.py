@@ -50,6 +50,8 @@ def test_report_of_a_users_design(tmp_path):
     assert data["margins"]["continuous loop: verdict"] == "stable"
     assert data["operating_point"]["open_loop_unstable"] is True
     assert (out / "figure.png").read_bytes()[:4] == b"\x89PNG"
+    assert data["export"] == {}  # a continuous design: no Ts to export at, said in a note
+    assert any(n.startswith("export not checked: a continuous design") for n in data["notes"])
     # an existing OUT is refused without --force, as by every command
     res = CliRunner().invoke(app, ["report", str(DATA / "maglev-ladrc.toml"), "-o", str(out)])
     assert res.exit_code == 2 and "--force" in res.output
@@ -61,7 +63,15 @@ def test_report_of_a_sampled_design_with_uncertainty(tmp_path):
     assert res.exit_code == 0, res.output
     text = _page_text(out / "report.html")
     assert "(the controller unsampled: a limit)" in text
-    assert "sampled loop at Ts = 0.001 s: spectral radius" in text
+    at = "sampled loop at Ts = 0.001 s (what the processor runs)"
+    assert f"{at}: spectral radius" in text and "Export check" in text
+    data = json.loads((out / "report.json").read_text())
+    assert data["margins"][f"{at}: spectral radius"].endswith("(stable)")
+    assert float(data["margins"][f"{at}: phase margin [deg]"]) > 0
+    # the exported C runs the config's loop with the engine's discrete controller beside it
+    agree = data["export"]["exported C (double) vs the engine's discrete controller: max |u_C - u|"]
+    du, rest = agree.split(" over ")
+    assert float(du) < 1e-9 and rest.startswith("6000 samples")
     assert "Robustness over the [uncertainty] draws" in text
     data = json.loads((out / "report.json").read_text())
     assert data["robustness"]["draws"] == 4

@@ -145,10 +145,12 @@ def loop(
     disturbance: tuple[float, float] = (0.0, 0.0),
     delay: int = 0,
     n_sub: int = 10,
+    u_start: float = 0.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Drive ``plant`` (true parameters scaled by ``scale``; a step disturbance
     ``(amplitude, time)``) with ``step`` at Ts; returns (t, y, u) at the samples (u the
-    command computed at t_k; with ``delay`` it is applied over the next interval)."""
+    command computed at t_k; with ``delay`` it is applied over the next interval, the first
+    interval getting ``u_start``, the command the controller holds at its start)."""
     names = plant.param_names
     p = plant.param_vector().copy()
     for k, v in (scale or {}).items():
@@ -163,7 +165,7 @@ def loop(
         t = k * ts
         y = float(h(x, p))
         u = step(reference(ref, t, rho), y)
-        applied = (us[k - 1] if k else 0.0) if delay else u
+        applied = (us[k - 1] if k else u_start) if delay else u
         ys[k], us[k] = y, u
         d = disturbance[0] if disturbance[0] and t >= disturbance[1] else 0.0
         x = adv(x, applied, d, p, ts / n_sub, n_sub)
@@ -222,6 +224,7 @@ def float_holds(cfg: Any, sampling: Any, files: dict[str, dict[str, str]]) -> st
                 scale=dict(sc.plant_scale),
                 delay=sampling.delay,
                 disturbance=(sc.disturbance_amplitude, sc.disturbance_time),
+                u_start=start_command(c),
             )
             if len(t) < round(sc.t_final / sampling.ts):
                 return f"the {prec} build diverges at {t[-1]:.3g} s"
@@ -234,3 +237,62 @@ def float_holds(cfg: Any, sampling: Any, files: dict[str, dict[str, str]]) -> st
         f"in float its ITAE differs from double by {100 * di:.3g} % and its ISU by "
         f"{100 * ds:.3g} % (allowed {100 * FLOAT_ITAE_TOL:g} %, {100 * FLOAT_ISU_TOL:g} %)"
     )
+
+
+def start_command(controller: Any) -> float:
+    """The command a controller holds from its start to its first sample: ``eso.u0``
+    (0 with a zero start)."""
+    return 0.0 if controller.eso_init == "zero" else controller.value("eso.u0")
+
+
+def engine_agreement(cfg: Any, sampling: Any, files: dict[str, str]) -> dict[str, float]:
+    r"""The exported C (``files``, prefix ``aiofl``) against the engine's discrete
+    controller (:class:`aiofl.engine.sampled.DiscreteController`) in the config's closed
+    loop at ``sampling.ts``: both started as the config says and fed the same measurement
+    and reference at every sample, the plant driven by the C's command.
+
+    Returns ``{"samples", "max_abs_du", "max_abs_u", "relative"}``: the largest
+    :math:`|u_C - u_{engine}|`, the largest :math:`|u|` and their ratio (double precision
+    C: rounding only, ~1e-13).  Raises RuntimeError without a C compiler.
+    """
+    import tempfile
+
+    from aiofl.engine.sampled import DiscreteController
+
+    if CC is None:
+        raise RuntimeError("no C compiler (cc or gcc) on PATH")
+    c, sc = cfg.controller, cfg.scenario
+    model = cfg.plant if c.eso_model != "none" else None
+    eng = DiscreteController(c, sampling, model, tuple(sc.x0))
+    du: list[float] = []
+    with tempfile.TemporaryDirectory(prefix="aiofl-export-check-") as tmp:
+        cc = CController(build(Path(tmp), files), "double")
+
+        def step(r: list[float], y: float) -> float:
+            if not du:
+                cc.start(y, c.eso_init)
+                eng.init(y)
+            u_c, u_e = cc.step(r, y), eng.step(r[: c.rho + 1], y)
+            du.append(abs(u_c - u_e))
+            return u_c
+
+        _, _, u = loop(
+            step,
+            cfg.plant,
+            sc.reference,
+            c.rho,
+            sampling.ts,
+            sc.t_final,
+            x0=sc.x0,
+            scale=dict(sc.plant_scale),
+            delay=sampling.delay,
+            disturbance=(sc.disturbance_amplitude, sc.disturbance_time),
+            u_start=start_command(c),
+        )
+    worst, peak = max(du), float(np.max(np.abs(u)))
+    return {
+        "samples": float(len(du)),
+        "max_abs_du": worst,
+        "max_abs_u": peak,
+        "relative": worst / peak if peak > 0 else worst,
+    }

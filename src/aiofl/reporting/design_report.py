@@ -13,6 +13,9 @@ the paper, for the user's own config.
   spectral radius of its linearised sampled loop
   (:class:`aiofl.analysis.sampled_loop.SampledLoop`), each labelled: the continuous figures
   of a sampled design are a limit, not what the processor runs;
+- the export check, for a sampled design: the exported C against the engine's discrete
+  controller in the config's loop, and whether single precision holds
+  (:mod:`aiofl.export.c_check`);
 - the design with its own sensor beside the ideal one (a limit), and on 16- and 12-bit
   encoders when the output is an angle;
 - with an ``[uncertainty]`` table, its draws and box corners
@@ -51,6 +54,7 @@ class DesignReport:
     operating_point: dict[str, Any] | None
     operating_text: str
     margins: list[tuple[str, str]]
+    export: list[tuple[str, str]]
     sensors: list[list[str]]
     robustness: dict[str, Any] | None
     notes: list[str] = field(default_factory=list)
@@ -63,6 +67,7 @@ class DesignReport:
             "verdict": self.verdict,
             "operating_point": self.operating_point,
             "margins": dict(self.margins),
+            "export": dict(self.export),
             "sensors": self.sensors,
             "robustness": self.robustness,
             "notes": self.notes,
@@ -94,21 +99,66 @@ def _margins(cfg: Any) -> tuple[list[tuple[str, str]], list[str]]:
     except Exception as exc:  # a loop the linearisation cannot take: said, not fatal
         notes.append(f"continuous linearisation not computed ({type(exc).__name__}: {exc})")
     if cfg.sampling is not None:
-        from aiofl.analysis.sampled_loop import SampledLoop
+        from aiofl.analysis.sampled_loop import sampled_margins
 
+        at = f"sampled loop at Ts = {cfg.sampling.ts:g} s (what the processor runs)"
         try:
-            loop = SampledLoop(cfg)
-            rho = loop.spectral_radius(cfg.sampling.ts)
-            word = "n/a" if rho is None else ("stable" if rho < 1.0 else "unstable")
-            rows.append(
-                (
-                    f"sampled loop at Ts = {cfg.sampling.ts:g} s: spectral radius",
-                    f"{_fmt(rho, 6)} ({word})",
-                )
-            )
+            m = sampled_margins(cfg)
+            if "reason" in m:
+                notes.append(f"sampled linearisation not computed ({m['reason']})")
+            else:
+                radius = m["spectral_radius"]
+                word = "stable" if radius < 1.0 else "unstable"
+                rows += [
+                    (f"{at}: spectral radius", f"{_fmt(radius, 6)} ({word})"),
+                    (f"{at}: gain margin [dB]", _fmt(m.get("gain_margin_db"))),
+                    (f"{at}: phase margin [deg]", _fmt(m.get("phase_margin_deg"))),
+                    (f"{at}: delay margin [s]", _fmt(m.get("delay_margin_s"))),
+                ]
         except Exception as exc:  # as above
             notes.append(f"sampled linearisation not computed ({type(exc).__name__}: {exc})")
     return rows, notes
+
+
+def _export_check(cfg: Any) -> tuple[list[tuple[str, str]], list[str]]:
+    """The exported C against the engine's discrete controller in the config's loop, and
+    whether single precision holds (:mod:`aiofl.export.c_check`); notes when not checked."""
+    if cfg.sampling is None:
+        return [], [
+            "export not checked: a continuous design has no sample time (aiofl export CONFIG "
+            "--ts TS samples it, checks it and writes the C)"
+        ]
+    if cfg.controller.law != "aiofl":
+        return [], ["export not checked: the classical IOFL law is not exported"]
+    from aiofl.export import ExportError, export_c
+    from aiofl.export.c_check import engine_agreement, float_holds
+
+    try:
+        files = {
+            prec: dict(
+                export_c(
+                    cfg.controller,
+                    cfg.sampling,
+                    precision=prec,
+                    title=cfg.name,
+                    plant=cfg.plant,
+                    x0=cfg.scenario.x0,
+                )
+            )
+            for prec in ("double", "float")
+        }
+        agree = engine_agreement(cfg, cfg.sampling, files["double"])
+        why = float_holds(cfg, cfg.sampling, files)
+    except (ExportError, RuntimeError, ValueError) as exc:
+        return [], [f"export not checked ({exc})"]
+    n = int(agree["samples"])
+    return [
+        (
+            "exported C (double) vs the engine's discrete controller: max |u_C - u|",
+            f"{agree['max_abs_du']:.3g} over {n} samples ({agree['relative']:.2g} of max |u|)",
+        ),
+        ("exported C in float", "holds (ITAE, ISU as in double)" if why is None else why),
+    ], []
 
 
 def _sensor_rows(cfg: Any) -> list[list[str]]:
@@ -178,6 +228,8 @@ def design_report(cfg: Any, label: str, *, draws: int | None = None) -> DesignRe
         op, op_text = None, f"no operating point: {exc}"
     margins, why = _margins(cfg)
     notes += why
+    exported, why = _export_check(cfg)
+    notes += why
     robust = None
     if cfg.uncertainty is not None:
         from aiofl.analysis.corners import run_box_robustness
@@ -193,6 +245,7 @@ def design_report(cfg: Any, label: str, *, draws: int | None = None) -> DesignRe
         operating_point=op,
         operating_text=op_text,
         margins=margins,
+        export=exported,
         sensors=_sensor_rows(cfg),
         robustness=robust,
         notes=notes,
@@ -250,6 +303,10 @@ def design_html(rep: DesignReport, description: str = "") -> str:
         html_table(["Loop and figure", "Value"], [list(r) for r in rep.margins], cls="settings")
         if rep.margins
         else "<p>none computed</p>",
+        "<h2>Export check</h2>",
+        html_table(["Check", "Result"], [list(r) for r in rep.export], cls="settings")
+        if rep.export
+        else "<p>not checked (see the notes)</p>",
         "<h2>Sensors</h2>",
         html_table(
             ["Sensor", "Verdict", "ITAE", "ISU", "peak |u|", "noise in u"],

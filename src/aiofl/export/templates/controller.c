@@ -146,6 +146,7 @@ void aiofl_start_at(aiofl_state *s, const aiofl_params *p, aiofl_signal y0, aiof
     }
     if (mode == AIOFL_START_ZERO) u0 = AIOFL_K(0.0);
 #if AIOFL_ESO_MODEL
+    (void)p;
     u0 = AIOFL_K(0.0); /* the model-assisted observer starts at its model's holding input */
 #else
     s->p[AIOFL_RHO] = -p->b0 * u0;
