@@ -43,7 +43,7 @@ def main() -> None:
 
     plant = get_plant("slfjm")
     ts = 1e-3
-    n = int(round(args.seconds / ts)) + 1
+    n = round(args.seconds / ts) + 1
     t = np.arange(n) * ts
     rng = np.random.default_rng(args.seed)
     u = 0.5 * np.repeat(rng.choice([-1.0, 1.0], n // 50 + 1), 50)[:n]

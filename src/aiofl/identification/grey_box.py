@@ -508,21 +508,21 @@ def fit_plant(
     n_free = len(space.names)
     if not (isinstance(holdout, int | float) and 0.0 <= holdout <= 0.5):
         raise GreyBoxError(f"holdout = {holdout!r}; allowed: 0 <= holdout <= 0.5")
-    n_fit = log.n_samples - (int(round(holdout * log.n_samples)) if validation is None else 0)
+    n_fit = log.n_samples - (round(holdout * log.n_samples) if validation is None else 0)
     if n_fit - n_free < MIN_SAMPLES:
         raise GreyBoxError(
             f"{n_fit} samples to fit {n_free} parameters; allowed: at least {MIN_SAMPLES} more"
         )
     if not (math.isfinite(delay) and delay >= 0):
         raise GreyBoxError(f"delay = {delay!r} s; allowed: a finite delay >= 0")
-    d = int(round(delay / log.ts))
+    d = round(delay / log.ts)
     if d >= n_fit // 2:
         raise GreyBoxError(f"delay = {delay:g} s is {d} samples; allowed: less than half the log")
     pop = max(16, 8 * n_free) if population is None else population
     gens = 25 if generations is None else generations
     if not (isinstance(pop, int) and 4 <= pop <= MAX_POPULATION):
         raise GreyBoxError(f"population = {pop!r}; allowed: an integer 4 .. {MAX_POPULATION}")
-    if not (isinstance(gens, int) and 0 <= gens and pop * gens <= MAX_EVALUATIONS):
+    if not (isinstance(gens, int) and gens >= 0 and pop * gens <= MAX_EVALUATIONS):
         raise GreyBoxError(
             f"generations = {gens!r}; allowed: an integer >= 0 with population x generations "
             f"<= {MAX_EVALUATIONS}"

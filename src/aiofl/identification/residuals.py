@@ -146,7 +146,7 @@ def residual_tests(residual: ArrayLike, u: ArrayLike, *, max_lag: int = 25) -> R
     if e.ndim != 1 or e.shape != uu.shape:
         raise ValueError(f"residual {e.shape} and u {uu.shape} must be 1-D of the same length")
     n = e.shape[0]
-    if not (isinstance(max_lag, int | np.integer) and 1 <= max_lag and 4 * max_lag < n):
+    if not (isinstance(max_lag, int | np.integer) and max_lag >= 1 and 4 * max_lag < n):
         raise ValueError(
             f"max_lag = {max_lag!r} for {n} samples; allowed: an integer 1 <= max_lag < N/4"
         )
