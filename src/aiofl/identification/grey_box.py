@@ -91,6 +91,9 @@ DEFAULT_RANGE = (0.2, 5.0)
 MIN_SAMPLES = 20
 """Fewest samples of a log to fit."""
 
+_CONTINUATION = 0.7
+"""Each continuation step multiplies the output-injection gain by this factor."""
+
 _FD_STEP = 1e-6  # forward-difference step in the unit cube
 _Z95 = 1.959964  # the two-sided 95 % point of N(0, 1)
 
@@ -305,14 +308,7 @@ def _injection_gain(
     from scipy.signal import place_poles
 
     n = plant.n_states
-    a = np.empty((n, n))
-    c = np.empty(n)
-    for i in range(n):
-        step = 1e-6 * max(1.0, abs(x0[i]))
-        e = np.zeros(n)
-        e[i] = step
-        a[:, i] = (plant.rhs(x0 + e, 0.0, 0.0, p) - plant.rhs(x0 - e, 0.0, 0.0, p)) / (2 * step)
-        c[i] = (plant.output(x0 + e, p) - plant.output(x0 - e, p)) / (2 * step)
+    a, c = _linearisation(plant, p, x0)
     if omega is None:
         omega = 2.0 * max(1.0, float(np.max(np.abs(np.linalg.eigvals(a)))))
     if not (math.isfinite(omega) and omega > 0):
@@ -412,6 +408,61 @@ def _global_stage(
     return np.atleast_1d(np.asarray(res.X, dtype=np.float64)), float(np.atleast_1d(res.F)[0])
 
 
+def _polish(obj: _Objective, z0: NDArray[np.float64]) -> NDArray[np.float64]:
+    """scipy's bounded trust-region least squares from z0, the batched Jacobian."""
+    from scipy.optimize import least_squares
+
+    sol = least_squares(
+        obj.one, z0, jac=obj.jacobian, bounds=(0.0, 1.0), x_scale=1.0, method="trf",
+        xtol=1e-10, ftol=1e-12, gtol=1e-10, max_nfev=200,
+    )  # fmt: skip
+    return np.asarray(sol.x, dtype=np.float64)
+
+
+def _linearisation(
+    plant: Plant, p: NDArray[np.float64], x0: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """A = ∂(f + g·0)/∂x and C = ∂h/∂x at x0 (central differences on the Python plant)."""
+    n = plant.n_states
+    a = np.empty((n, n))
+    c = np.empty(n)
+    for i in range(n):
+        step = 1e-6 * max(1.0, abs(x0[i]))
+        e = np.zeros(n)
+        e[i] = step
+        a[:, i] = (plant.rhs(x0 + e, 0.0, 0.0, p) - plant.rhs(x0 - e, 0.0, 0.0, p)) / (2 * step)
+        c[i] = (plant.output(x0 + e, p) - plant.output(x0 - e, p)) / (2 * step)
+    return a, c
+
+
+def _continuation(
+    obj: _Objective, z: NDArray[np.float64], gain: NDArray[np.float64], log: Log
+) -> tuple[NDArray[np.float64], float]:
+    """Shrink the injection gain by :data:`_CONTINUATION` per step, polishing each time,
+    while the linearised predictor stays stable at the current estimate and the residual's
+    RMS grows by less than 20 %; the last accepted estimate and gain factor."""
+
+    def rms(zz: NDArray[np.float64]) -> float:
+        r = obj.one(zz)
+        return float(np.sqrt(np.mean(r * r)))
+
+    scale, best = 1.0, rms(z)
+    while scale > 1e-3:
+        trial = scale * _CONTINUATION
+        p = obj.params(z[None, :])[0]
+        a, c = _linearisation(obj.plant, p, obj.x0)
+        if np.max(np.linalg.eigvals(a - trial * np.outer(gain, c)).real) >= 0.0:
+            break
+        obj.gain = gain * trial
+        z_try = _polish(obj, z)
+        value = rms(z_try)
+        if not value < 1.2 * best:
+            break
+        z, scale, best = z_try, trial, value
+    obj.gain = gain * scale
+    return z, scale
+
+
 def _covariance(
     jac_theta: NDArray[np.float64], s2: float
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -440,6 +491,14 @@ def _covariance(
     np.fill_diagonal(sub_corr, 1.0)
     corr[np.ix_(ok, ok)] = sub_corr
     return std, corr
+
+
+def _output_kind(gain: NDArray[np.float64] | None, scale: float) -> str:
+    if gain is None:
+        return "simulation"
+    if scale == 0.0:
+        return "simulation (reached from the output-injection predictor by continuation)"
+    return f"one-step prediction (output injection, gain x {scale:g})"
 
 
 # ------------------------------------------------------------------------------ the fit
@@ -496,8 +555,6 @@ def fit_plant(
         Naming the argument (free names with the plant's parameters, bounds, sizes) or
         the log's column and row.
     """
-    from scipy.optimize import least_squares
-
     start_time = time.perf_counter()
     _check_log(log, "log")
     if validation is not None:
@@ -543,11 +600,10 @@ def fit_plant(
         z0, _ = _global_stage(obj, pop, gens, seed)
     else:
         z0 = space.z(np.clip(obj.nominal[space.index], space.low, space.high))
-    sol = least_squares(
-        obj.one, z0, jac=obj.jacobian, bounds=(0.0, 1.0), x_scale=1.0, method="trf",
-        xtol=1e-10, ftol=1e-12, gtol=1e-10, max_nfev=200,
-    )  # fmt: skip
-    z_hat = np.asarray(sol.x, dtype=np.float64)
+    z_hat = _polish(obj, z0)
+    scale = 1.0
+    if gain is not None:  # continuation towards a smaller gain (module notes)
+        z_hat, scale = _continuation(obj, z_hat, gain, log.part(0, n_fit))
     theta = space.theta(z_hat)
     resid = obj.one(z_hat)
     jac_theta = obj.jacobian(z_hat) / space.dtheta_dz(theta)
@@ -584,6 +640,6 @@ def fit_plant(
         evaluations=obj.evaluations,
         seconds=time.perf_counter() - start_time,
         noise_std=math.sqrt(s2),
-        output="simulation" if gain is None else "one-step prediction (output injection)",
+        output=_output_kind(gain, scale),
         delay_samples=d,
     )
