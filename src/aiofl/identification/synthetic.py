@@ -7,9 +7,16 @@ Runge–Kutta method (DOP853, tight tolerances) from one sample to the next, the
 over each sample (zero-order hold) and delayed by ``delay`` seconds; the output
 :math:`y_k = h(x(t_k))` is then corrupted as a rig would: additive Gaussian noise, and
 quantisation to the encoder's step.
+
+A closed-loop log (``feedback``): the input applied on :math:`[t_k, t_{k+1})` is computed at
+:math:`t_k` by a sampled control law from the reference :math:`r_k` and the *measured*
+output :math:`y_k` (noisy and quantised, as the rig's controller sees it), so the noise
+reaches the input as it does on a rig.
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -34,6 +41,7 @@ def simulate_log(
     seed: int = 0,
     rtol: float = 1e-10,
     atol: float = 1e-12,
+    feedback: Callable[[int, float, float], float] | None = None,
 ) -> Log:
     """Simulate ``plant`` driven by the sampled input ``u`` and return the log a rig would give.
 
@@ -57,6 +65,11 @@ def simulate_log(
         Quantisation step of the measured output (0: none): ``y = quantum * round(y / quantum)``.
     seed
         Seed of the noise.
+    feedback
+        A sampled control law ``u_k = feedback(k, r_k, y_k)`` closing the loop: ``u`` is
+        then the reference :math:`r_k`, :math:`y_k` the measured output (the noise and
+        quantisation of :func:`measure`, the same realisation); the log's ``u`` is the
+        applied input and its ``r`` the reference.
     """
     tt = np.asarray(t, dtype=np.float64)
     uu = np.asarray(u, dtype=np.float64)
@@ -71,11 +84,19 @@ def simulate_log(
     frac = delay - whole * ts
     y_true = np.empty_like(tt)
     y_true[0] = plant.output(x, p)
+    applied = uu.copy() if feedback is None else np.zeros_like(uu)
+    noise = np.zeros_like(tt)
+    if feedback is not None and noise_std > 0:  # the draws of measure(), in order
+        noise = np.random.default_rng(seed).normal(0.0, noise_std, tt.shape)
 
     def held(k: int) -> float:
-        return float(uu[k]) if k >= 0 else 0.0
+        return float(applied[k]) if k >= 0 else 0.0
 
     for k in range(tt.shape[0] - 1):
+        if feedback is not None:
+            y_k = y_true[k] + noise[k]
+            y_k = quantum * np.round(y_k / quantum) if quantum > 0 else y_k
+            applied[k] = float(feedback(k, float(uu[k]), float(y_k)))
         t0, t1 = float(tt[k]), float(tt[k + 1])
         pieces = []
         if frac > 1e-12 * ts:
@@ -96,9 +117,12 @@ def simulate_log(
                 raise RuntimeError(f"the reference simulation failed at t = {a:g} s: {sol.message}")
             x = sol.y[:, -1]
         y_true[k + 1] = plant.output(x, p)
-    return Log(
-        tt.copy(), uu.copy(), measure(y_true, noise_std=noise_std, quantum=quantum, seed=seed)
-    )
+    y = measure(y_true, noise_std=noise_std, quantum=quantum, seed=seed)
+    if feedback is None:
+        return Log(tt.copy(), uu.copy(), y)
+    y_last = float(y[-1])
+    applied[-1] = float(feedback(tt.shape[0] - 1, float(uu[-1]), y_last))
+    return Log(tt.copy(), applied, y, r=uu.copy())
 
 
 def measure(
