@@ -98,8 +98,9 @@ def _design_text(first_text: str, plant_ref: str, overrides: dict[str, float], t
 
     doc = tomlkit.parse(first_text)
     doc["plant"] = plant_ref
-    if overrides:
-        doc["plant_overrides"] = overrides
+    if overrides:  # the true plant of the runs: the library plant with the fitted values
+        scenario = doc.setdefault("scenario", tomlkit.table())
+        scenario["plant_overrides"] = overrides
     doc["uncertainty"] = table
     head = (
         "# The starting design on the fitted plant, with the [uncertainty] box of the fit\n"
@@ -340,7 +341,7 @@ def _write(
                 atomic_write_text(stage / "fitted_plant.toml", text)
                 plant_ref = "fitted_plant.toml"
                 res["written"].append("fitted_plant.toml")
-            else:  # a library plant: its fitted values as plant_overrides
+            else:  # a library plant: its fitted values as [scenario] plant_overrides
                 plant_ref = plant
                 overrides = {p.name: float(p.value) for p in fit.parameters}
             table = res["uncertainty"]
