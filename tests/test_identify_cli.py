@@ -455,6 +455,10 @@ def test_identify_grey_box_writes_a_ready_to_tune_design(
     assert dict(cfg.scenario.plant_overrides) == pytest.approx(
         {n: 1.1 * get_plant("dcmotor_arm").params[n] for n in ("J", "b")}
     )
+    assert cfg.raw["tune"]["robust"]["draws"] == 16  # ready for aiofl tune, robust scoring
+    assert cfg.raw["tune"]["parameters"]["eso.omega0"] == {"lo": 10.0, "hi": 200.0, "log": True}
+    res = _invoke("tune", str(out / "design.toml"), "--check")
+    assert res.exit_code == 0, res.output
     assert "[uncertainty]" in (out / "uncertainty.toml").read_text()
     assert (out / "fit.png").stat().st_size > 1000
     assert "fitted_plant.toml" not in {p.name for p in out.iterdir()}
