@@ -51,7 +51,7 @@ def _click_group() -> Any:
 
 COMMANDS = (
     *("presets", "show", "simulate", "reproduce", "tune", "analyze", "export", "robustness"),
-    *("trim", "design", "report"),
+    *("trim", "design", "report", "excite", "identify"),
 )
 
 

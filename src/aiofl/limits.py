@@ -16,6 +16,8 @@ limit                          what it bounds
 :data:`MAX_EVALUATIONS`        members of a whole tuning run, population x generations
 :data:`MAX_PLANT_FILE_BYTES`   a plant file, read before it is parsed
 :data:`MAX_STATES`             the states of a symbolic plant (and of a size-only instance)
+:data:`MAX_LOG_BYTES`          a logged experiment's file (CSV or .npz), read before parsing
+:data:`MAX_LOG_SAMPLES`        the samples (rows) of a logged experiment or an excitation
 =============================  ===========================================================
 """
 
@@ -24,6 +26,8 @@ from __future__ import annotations
 __all__ = [
     "DT_MAX",
     "MAX_EVALUATIONS",
+    "MAX_LOG_BYTES",
+    "MAX_LOG_SAMPLES",
     "MAX_NOISE_SAMPLES",
     "MAX_PLANT_FILE_BYTES",
     "MAX_POPULATION",
@@ -59,6 +63,13 @@ MAX_POPULATION = 10_000
 #: members of a whole tuning run (population x generations): every one is kept in memory
 #: and written to evaluations.csv (~100 bytes a row), so 10^6 is ~100 MB of output
 MAX_EVALUATIONS = 1_000_000
+#: most samples of a logged experiment (aiofl.identification.log) and of an excitation
+#: signal: 2·10^6 rows are 33 min at 1 kHz; a grey-box fit simulates the whole log once per
+#: candidate, so a longer log is a typo in the logger or a job for decimation first
+MAX_LOG_SAMPLES = 2_000_000
+#: largest log file read (256 MiB): 2·10^6 rows of four columns at ~30 characters a cell
+#: fit, checked before a byte is parsed (an .npz's arrays are checked from their headers)
+MAX_LOG_BYTES = 256 * 2**20
 
 
 def check_run_size(

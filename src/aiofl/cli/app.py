@@ -176,6 +176,16 @@ EXAMPLES: dict[str, tuple[str, ...]] = {
         "aiofl design tank --y 1.0 --ts 0.01 --sensor encoder-12bit -o tank.toml",
     ),
     "report": ("aiofl report my-run.toml --out report", "aiofl report first.toml -o r --force"),
+    "excite": (
+        "aiofl excite --kind prbs --amplitude 0.5 --band 20 --duration 10 --ts 1e-3 -o u.csv",
+        "aiofl excite --kind chirp --amplitude 1 --f0 0.5 --f1 50 --duration 20 --ts 1e-3 "
+        "-o chirp.csv --c-array chirp.h --c-name u_chirp",
+    ),
+    "identify": (
+        "aiofl identify log.csv -o id",
+        "aiofl identify rig.csv --input volt --output angle --ts 1e-3 --plant arm.toml "
+        "--free J,b --bounds J=1e-4:1e-2 --holdout 0.3 -o id --force",
+    ),
 }
 """Example invocations shown at the end of each command's ``--help``."""
 
@@ -596,6 +606,8 @@ register_feature("robustness", "aiofl.cli.robustness:robustness_command")
 register_feature("trim", "aiofl.cli.trim:trim_command")
 register_feature("design", "aiofl.cli.design:design_command")
 register_feature("report", "aiofl.cli.report:report_command")
+register_feature("excite", "aiofl.cli.excite:excite_command")
+register_feature("identify", "aiofl.cli.identify:identify_command")
 
 
 def _finish_commands() -> None:
