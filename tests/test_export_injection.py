@@ -169,6 +169,7 @@ def _assert_clean_object(nm: str, pre: str) -> None:
     defined = {ln.split()[-1] for ln in nm.splitlines() if re.match(r"^\S+ [A-Z] ", ln)}
     api = {"aiofl_init", "aiofl_start", "aiofl_reset", "aiofl_step", "aiofl_default_params"}
     api.add("aiofl_fault")  # the fault flag of the non-finite-input policy (issue 34)
+    api.add("aiofl_start_at")  # a start that takes over a held command (eso.u0, issue 33)
     assert defined == api, nm  # global definitions only
     assert TOKEN not in nm and TOKEN not in pre
 
