@@ -41,6 +41,14 @@ not determine (a singular value below :math:`10^{-10}` of the largest, columns s
 unit norm) gives its parameters an infinite standard error: they are not identifiable
 from this log.
 
+**Coverage, measured.**  On the library pendulum (m, l, c free, off nominal by +20 %, -10 %,
++30 %; a 1.2-s, 500-Hz PRBS log of the scipy simulator; white Gaussian output noise
+σ = 0.01 rad, no quantisation), over 1000 seeded noise realisations each fitted by the local
+stage, the 95 % intervals held the truth 95.3 %, 95.3 % and 94.6 % of the time, and the
+standardised errors :math:`(\hat\theta - \theta)/\sigma` had means within 0.03 of 0 and
+standard deviations 0.998, 0.993, 1.002 (``tests/test_grey_box_coverage.py`` checks 100 of
+them: 90-99 % each).  With quantisation or coloured noise the intervals are optimistic.
+
 **Fit.**  MATLAB ``compare``'s normalised-root-mean-square fit
 :math:`100\,(1 - \lVert y - \hat y\rVert / \lVert y - \bar y\rVert)` on the log, and on a
 validation log (or the held-out tail of this one).
@@ -492,6 +500,10 @@ def fit_plant(
     max_lag: int = 25,
 ) -> GreyBoxFit:
     """Fit the ``free`` parameters of ``plant`` to ``log`` (see the module notes).
+
+    Open-loop (output-error) fits with white output noise state honest intervals: over
+    1000 noise realisations of a 3-parameter pendulum log the 95 % intervals held the
+    truth 94.6-95.3 % of the time (module notes, "Coverage, measured").
 
     Parameters
     ----------
