@@ -14,7 +14,13 @@ import pytest
 
 from aiofl.config.schema import ConfigModel
 from aiofl.identification.fitted_plant import fitted_plant_file, uncertainty_table
-from aiofl.identification.grey_box import GreyBoxError, fit_percent, fit_plant
+from aiofl.identification.grey_box import (
+    CLOSED_LOOP_INTERVALS,
+    OPEN_LOOP_INTERVALS,
+    GreyBoxError,
+    fit_percent,
+    fit_plant,
+)
 from aiofl.identification.log import Log, LogError
 from aiofl.identification.synthetic import measure, simulate_log
 from aiofl.plants.base import Plant
@@ -73,6 +79,8 @@ def test_correlation_matrix_and_fits(arm: tuple) -> None:
     assert set(rec["parameters"]) == set(TRUTH)
     assert set(rec["parameters"]["J"]) >= {"value", "std", "low", "high"}
     assert rec["output"] == "simulation"
+    assert rec["intervals"] == OPEN_LOOP_INTERVALS
+    assert all(p.bias == 0.0 for p in fit.parameters)
 
 
 def test_a_held_out_tail_gives_the_validation_fit(arm: tuple) -> None:
@@ -211,3 +219,14 @@ def test_an_open_loop_unstable_plant_from_its_closed_loop_log() -> None:
     assert fit.estimate("a").value == pytest.approx(24.0, rel=0.02)
     assert fit.estimate("b").value == pytest.approx(4.5, rel=0.02)
     assert fit.fit_percent > 95
+    # the stated 95 % intervals include the injection's estimated bias and hold the truth,
+    # where the statistical σ alone (the bias taken out) would not
+    assert fit.intervals == CLOSED_LOOP_INTERVALS
+    assert fit.to_record()["intervals"] == CLOSED_LOOP_INTERVALS
+    for name, true in (("a", 24.0), ("b", 4.5)):
+        est = fit.estimate(name)
+        lo, hi = est.interval95
+        assert lo <= true <= hi, est
+        statistical = math.sqrt(est.std**2 - est.bias**2)
+        assert abs(est.value - true) > 1.96 * statistical, est
+        assert est.std < 0.01 * est.value  # still a useful interval (under 2 % wide)

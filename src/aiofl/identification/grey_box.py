@@ -41,6 +41,14 @@ not determine (a singular value below :math:`10^{-10}` of the largest, columns s
 unit norm) gives its parameters an infinite standard error: they are not identifiable
 from this log.
 
+**Coverage, measured.**  On the library pendulum (m, l, c free, off nominal by +20 %, -10 %,
++30 %; a 1.2-s, 500-Hz PRBS log of the scipy simulator; white Gaussian output noise
+σ = 0.01 rad, no quantisation), over 1000 seeded noise realisations each fitted by the local
+stage, the 95 % intervals held the truth 95.3 %, 95.3 % and 94.6 % of the time, and the
+standardised errors :math:`(\hat\theta - \theta)/\sigma` had means within 0.03 of 0 and
+standard deviations 0.998, 0.993, 1.002 (``tests/test_grey_box_coverage.py`` checks 100 of
+them: 90-99 % each).  With quantisation or coloured noise the intervals are optimistic.
+
 **Fit.**  MATLAB ``compare``'s normalised-root-mean-square fit
 :math:`100\,(1 - \lVert y - \hat y\rVert / \lVert y - \bar y\rVert)` on the log, and on a
 validation log (or the held-out tail of this one).
@@ -56,15 +64,13 @@ linearisation at ``x0`` (nominal parameters, u = 0) has observer poles
 (:mod:`aiofl.identification.output_injection`).  The measured noise then enters the
 predictor through L and, with an output-only noise, biases the estimates in proportion to
 L (the predictor's implied noise model is not the true one; Ljung §13.4).  So after the
-fit with L the gain is shrunk by :data:`_CONTINUATION` per step, polishing each time,
-while the linearised predictor :math:`A(\hat\theta) - sLC` stays stable and the residual's
-RMS grows by less than 20 %; the record's ``output`` gives the final factor s.  (Going on
-to s = 0, the consistent output-error fit, fails on an unstable plant: its cost is so
-narrow that least squares leaves its basin.)  The :math:`\hat y_k` are one-step-ahead
+fit with L the gain is shrunk step by step towards 0 and the stated standard errors
+include the bias estimated from the last two steps
+(:func:`aiofl.identification.output_injection.continuation`, whose notes give the rule and
+what it measured); the record's ``output`` gives the final gain factor s and its
+``intervals`` says :data:`CLOSED_LOOP_INTERVALS`.  The :math:`\hat y_k` are one-step-ahead
 predictions (they use :math:`y_{k-1}`), so the fit percentage is a predictor's, higher
-than a simulation's, and the residual is coloured, so the stated standard errors are
-optimistic: on the test's inverted pendulum (a closed-loop PRBS log, noise σ = 1e-3 rad,
-a 12-bit encoder) both estimates were 0.8 % off, with σ 0.03-0.04 % of their values.
+than a simulation's.
 """
 
 from __future__ import annotations
@@ -82,8 +88,9 @@ from aiofl.engine.driven import DEFAULT_SUBSTEPS, simulate_driven
 from aiofl.identification.log import Log, LogError
 from aiofl.identification.output_injection import (
     InjectionError,
+    continuation,
+    continuation_bias,
     injection_gain,
-    linearisation,
 )
 from aiofl.identification.residuals import ResidualTests, residual_tests
 from aiofl.limits import MAX_EVALUATIONS, MAX_POPULATION
@@ -91,7 +98,9 @@ from aiofl.plants.base import Plant
 from aiofl.text import normal_name
 
 __all__ = [
+    "CLOSED_LOOP_INTERVALS",
     "DEFAULT_RANGE",
+    "OPEN_LOOP_INTERVALS",
     "GreyBoxError",
     "GreyBoxFit",
     "ParameterEstimate",
@@ -105,8 +114,12 @@ DEFAULT_RANGE = (0.2, 5.0)
 MIN_SAMPLES = 20
 """Fewest samples of a log to fit."""
 
-_CONTINUATION = 0.7
-"""Each continuation step multiplies the output-injection gain by this factor."""
+OPEN_LOOP_INTERVALS = "output error: s^2 (J^T J)^-1, exact for white output noise"
+"""The record's ``intervals`` of a simulation-error fit."""
+
+CLOSED_LOOP_INTERVALS = "closed-loop (output injection): intervals include the estimated bias"
+"""The record's ``intervals`` of an output-injection fit (module notes)."""
+
 
 _FD_STEP = 1e-6  # forward-difference step in the unit cube
 _Z95 = 1.959964  # the two-sided 95 % point of N(0, 1)
@@ -125,6 +138,8 @@ class ParameterEstimate:
     std: float
     low: float
     high: float
+    bias: float = 0.0
+    """The estimated bias magnitude included in ``std`` (closed-loop fits; module notes)."""
 
     @property
     def interval95(self) -> tuple[float, float]:
@@ -150,6 +165,7 @@ class GreyBoxFit:
     noise_std: float = float("nan")
     output: str = "simulation"
     delay_samples: int = 0
+    intervals: str = OPEN_LOOP_INTERVALS
 
     def estimate(self, name: str) -> ParameterEstimate:
         """The estimate of parameter ``name``."""
@@ -174,6 +190,7 @@ class GreyBoxFit:
                     "std": num(p.std),
                     "low": p.low,
                     "high": p.high,
+                    "bias": num(p.bias),
                     "interval95": [num(v) for v in p.interval95],
                 }
                 for p in self.parameters
@@ -182,6 +199,7 @@ class GreyBoxFit:
             "fit_percent": self.fit_percent,
             "validation_fit_percent": self.validation_fit_percent,
             "output": self.output,
+            "intervals": self.intervals,
             "noise_std": num(self.noise_std),
             "delay_samples": self.delay_samples,
             "residual_tests": self.residuals.to_record(),
@@ -408,34 +426,6 @@ def _polish(obj: _Objective, z0: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.asarray(sol.x, dtype=np.float64)
 
 
-def _continuation(
-    obj: _Objective, z: NDArray[np.float64], gain: NDArray[np.float64], log: Log
-) -> tuple[NDArray[np.float64], float]:
-    """Shrink the injection gain by :data:`_CONTINUATION` per step, polishing each time,
-    while the linearised predictor stays stable at the current estimate and the residual's
-    RMS grows by less than 20 %; the last accepted estimate and gain factor."""
-
-    def rms(zz: NDArray[np.float64]) -> float:
-        r = obj.one(zz)
-        return float(np.sqrt(np.mean(r * r)))
-
-    scale, best = 1.0, rms(z)
-    while scale > 1e-3:
-        trial = scale * _CONTINUATION
-        p = obj.params(z[None, :])[0]
-        a, c = linearisation(obj.plant, p, obj.x0)
-        if np.max(np.linalg.eigvals(a - trial * np.outer(gain, c)).real) >= 0.0:
-            break
-        obj.gain = gain * trial
-        z_try = _polish(obj, z)
-        value = rms(z_try)
-        if not value < 1.2 * best:
-            break
-        z, scale, best = z_try, trial, value
-    obj.gain = gain * scale
-    return z, scale
-
-
 def _covariance(
     jac_theta: NDArray[np.float64], s2: float
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
@@ -492,6 +482,10 @@ def fit_plant(
     max_lag: int = 25,
 ) -> GreyBoxFit:
     """Fit the ``free`` parameters of ``plant`` to ``log`` (see the module notes).
+
+    Open-loop (output-error) fits with white output noise state honest intervals: over
+    1000 noise realisations of a 3-parameter pendulum log the 95 % intervals held the
+    truth 94.6-95.3 % of the time (module notes, "Coverage, measured").
 
     Parameters
     ----------
@@ -578,14 +572,17 @@ def fit_plant(
         z0 = space.z(np.clip(obj.nominal[space.index], space.low, space.high))
     z_hat = _polish(obj, z0)
     scale = 1.0
+    bias = np.zeros(n_free)
     if gain is not None:  # continuation towards a smaller gain (module notes)
-        z_hat, scale = _continuation(obj, z_hat, gain, log.part(0, n_fit))
+        z_hat, scale, z_prev = continuation(obj, z_hat, gain, _polish)
+        bias = continuation_bias(space.theta(z_prev), space.theta(z_hat))
     theta = space.theta(z_hat)
     resid = obj.one(z_hat)
     jac_theta = obj.jacobian(z_hat) / space.dtheta_dz(theta)
     rss = float(resid @ resid)
     s2 = rss / (n_fit - n_free)
     std, corr = _covariance(jac_theta, s2)
+    std = np.sqrt(std**2 + bias**2)
 
     fitted = plant.param_vector({k: float(v) for k, v in zip(space.names, theta, strict=True)})
     y_all = obj.simulate(z_hat[None, :])[0]
@@ -599,8 +596,10 @@ def fit_plant(
         val = fit_percent(log.y[n_fit:], y_all[n_fit:])
     tests = residual_tests(est_y - np.nan_to_num(y_all[:n_fit]), log.u[:n_fit], max_lag=max_lag)
     estimates = tuple(
-        ParameterEstimate(name, float(v), float(s), float(lo), float(hi))
-        for name, v, s, lo, hi in zip(space.names, theta, std, space.low, space.high, strict=True)
+        ParameterEstimate(name, float(v), float(sd), float(lo), float(hi), float(b))
+        for name, v, sd, lo, hi, b in zip(
+            space.names, theta, std, space.low, space.high, bias, strict=True
+        )
     )
     new_params = dict(zip(plant.param_names, (float(v) for v in fitted), strict=True))
     return GreyBoxFit(
@@ -618,4 +617,5 @@ def fit_plant(
         noise_std=math.sqrt(s2),
         output=_output_kind(gain, scale),
         delay_samples=d,
+        intervals=OPEN_LOOP_INTERVALS if gain is None else CLOSED_LOOP_INTERVALS,
     )
