@@ -15,8 +15,8 @@ import aiofl
 from aiofl.config import load_config
 from aiofl.engine.discrete import Sampling, sample_steps
 from aiofl.engine.reference import reference_simulate
-from aiofl.engine.sampled import DiscreteController
 from aiofl.engine.simulation import simulate, simulate_batch
+from aiofl.engine.standalone import DiscreteController
 from aiofl.scenario import Reference
 
 H0 = 1.0  # the tank's level at rest and the reference

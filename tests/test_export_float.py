@@ -17,7 +17,7 @@ import pytest
 
 from aiofl.config import load_config
 from aiofl.engine.discrete import Sampling
-from aiofl.engine.sampled import DiscreteController
+from aiofl.engine.standalone import DiscreteController
 from aiofl.export import export_c
 from aiofl.export.c_check import (
     CC,

@@ -115,6 +115,7 @@ _VALUE_RANGES: dict[str, dict[str, float]] = {
     "eso.q": {"gt": 0.0, "le": 1e300},
     "eso.r": {"gt": 0.0, "le": 1e300},
     "eso.u0": {},
+    "eso.delay": {"ge": 0.0, "le": 1.0},  # and a whole number of samples, <= 8 (discrete)
     "td.R": {"gt": 0.0},
     "td.a": {"ge": 0.0, "lt": 1.0},
     "td.b": {"gt": 0.0},

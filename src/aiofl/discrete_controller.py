@@ -1,7 +1,7 @@
 r"""The controller object for test rigs and hardware in the loop: ``u = ctrl.step(r, y)``.
 
 :class:`DiscreteController` is the engine's discrete controller
-(:class:`aiofl.engine.sampled.DiscreteController`: the compiled update ``aiofl simulate
+(:class:`aiofl.engine.standalone.DiscreteController`: the compiled update ``aiofl simulate
 --ts`` runs and the exported C is checked against) with a constructor from a config::
 
     ctrl = aiofl.DiscreteController.from_config("assisted-s1-ladrc")   # its sensor's Ts
@@ -34,7 +34,7 @@ from numpy.typing import NDArray
 from aiofl import layout as L
 from aiofl.config import RunConfig, load_config
 from aiofl.controller import Controller
-from aiofl.engine import member, sampled
+from aiofl.engine import member, standalone
 from aiofl.engine.discrete import Sampling
 from aiofl.engine.sample_time import SIGNAL_MAX, TS_MAX, TS_MIN, check_ts
 
@@ -72,9 +72,9 @@ def _usable(value: float) -> bool:
     return abs(value) <= SIGNAL_MAX
 
 
-class DiscreteController(sampled.DiscreteController):
+class DiscreteController(standalone.DiscreteController):
     __doc__ = (
-        (sampled.DiscreteController.__doc__ or "")
+        (standalone.DiscreteController.__doc__ or "")
         + """
     Refusals and faults (the same in the exported C and the FMU,
     :mod:`aiofl.engine.sample_time`): the sample time must be a number in [1e-9, 1] s at

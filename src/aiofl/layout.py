@@ -103,6 +103,10 @@ def _float_columns() -> dict[str, int]:
     # the command held at the start (a bumpless start at an operating point): the extended
     # state starts at -b0 u0, so u(t0) = u0 (eso.init = "output" / "bumpless")
     names += ["eso.u0"]
+    # the known measurement delay [s] (a whole number of samples) the discrete controller
+    # compensates: its ESO is fed the command that delay old and its reference is delayed
+    # by it, aligned with the delayed measurement (aiofl.engine.sampled)
+    names += ["eso.delay"]
     names += ["td.R", "td.a", "td.b", "td.c", "td.rho", "td.omega"]
     for vec in ("k", "alpha", "delta", "kb", "mu"):
         names += [f"sef.{vec}{i}" for i in range(1, RHO_MAX + 1)]
@@ -127,6 +131,9 @@ F_ESO_G_BETA = FLOAT_COLUMNS["eso.g_beta"]
 F_ESO_Q = FLOAT_COLUMNS["eso.q"]
 F_ESO_R = FLOAT_COLUMNS["eso.r"]
 F_ESO_U0 = FLOAT_COLUMNS["eso.u0"]
+F_ESO_DELAY = FLOAT_COLUMNS["eso.delay"]
+KNOWN_DELAY_MAX = 8
+"""The longest known delay a discrete controller compensates, in samples."""
 F_TD_R = FLOAT_COLUMNS["td.R"]
 F_TD_A = FLOAT_COLUMNS["td.a"]
 F_TD_B = FLOAT_COLUMNS["td.b"]

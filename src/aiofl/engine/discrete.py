@@ -109,7 +109,8 @@ D_L = D_K + STRIDE  #: ESO L
 PF_STRIDE = L.RHO_MAX  #: row stride of the prefilter's Φ
 D_PF_PHI = D_L + STRIDE  #: linear prefilter Φ - I, ρ×ρ with row stride PF_STRIDE
 D_PF_GAM = D_PF_PHI + PF_STRIDE * PF_STRIDE  #: linear prefilter Γ
-N_DISC = D_PF_GAM + PF_STRIDE
+D_KDELAY = D_PF_GAM + PF_STRIDE  #: the known measurement delay compensated, in samples
+N_DISC = D_KDELAY + 1
 ESO_ZOH, ESO_EULER = 0, 1
 TDM_FHAN, TDM_EULER = 0, 1
 
@@ -288,6 +289,19 @@ def delay_steps(key: str, tau: float, dt: float, sampled: bool) -> int:
     return m
 
 
+def known_delay_samples(tau: float, ts: float) -> int:
+    """``controller.eso.delay`` (the known measurement delay, [s]) in samples of ``ts``: a
+    ValueError naming it unless it is a whole number of samples, at most
+    :data:`aiofl.layout.KNOWN_DELAY_MAX`."""
+    d = round(tau / ts)
+    if abs(tau - d * ts) > 1e-9 * ts or not 0 <= d <= L.KNOWN_DELAY_MAX:
+        raise ValueError(
+            f"controller.eso.delay = {tau:g} s at ts = {ts:g} s; allowed: a whole number of "
+            f"samples, 0 .. {L.KNOWN_DELAY_MAX} ts (0 .. {L.KNOWN_DELAY_MAX * ts:g} s)"
+        )
+    return d
+
+
 def check_delays(scen: NDArray[np.float64], disc: NDArray[np.float64] | None, dt: float) -> None:
     """:func:`delay_steps` for every member's scenario row (``scen``, one row per member;
     ``disc`` its discrete rows, None or ``D_STEPS`` 0 for a continuous member)."""
@@ -314,6 +328,7 @@ def _row(
     row[D_UQ] = s.u_quantum
     row[D_TDM] = TDM_FHAN if s.td == "fhan" else TDM_EULER
     row[D_H0] = s.h0 if s.h0 is not None else s.ts
+    row[D_KDELAY] = known_delay_samples(float(floats[L.F_ESO_DELAY]), s.ts)
     eso_kind = int(ints[L.I_ESO])
     if int(ints[L.I_LAW]) == L.LAW_IOFL and int(ints[L.I_TD]) != L.TD_EXACT:
         raise ValueError(

@@ -18,7 +18,7 @@ disabled nothing is started.
 ``python -m aiofl.engine.prepare PLANT SPEC...`` is that process: ``PLANT`` a registered
 plant's name or a plant file, each ``SPEC`` an instance as ``c1``, ``c32``, ``s1``, ``s32``
 (continuous or sampled, lane width), or ``dc``: the discrete controller's update compiled
-without a plant (:class:`aiofl.engine.sampled.DiscreteController`, which the sampled loop's
+without a plant (:class:`aiofl.engine.standalone.DiscreteController`, which the sampled loop's
 linearisation and the exports step).  ``PLANT`` may also be ``--states=N``: the
 plant-independent instances (``c1``, ``s1``) of every N-state plant, compiled without
 one.
@@ -128,13 +128,13 @@ CONTROLLER = "dc"
 
 
 def prepare_controller() -> None:
-    """Compile (or load) :class:`~aiofl.engine.sampled.DiscreteController`'s entries (setup,
+    """Compile (or load) :class:`~aiofl.engine.standalone.DiscreteController`'s entries (setup,
     start, step, n steps, one step from each of several states) by stepping a plain LADRC
     once through each: the argument types are those of every controller without a plant
     model."""
     from aiofl.controller import Controller
     from aiofl.engine.discrete import Sampling
-    from aiofl.engine.sampled import DiscreteController
+    from aiofl.engine.standalone import DiscreteController
 
     values = {"eso.omega0": 10.0, "sef.omega_c": 2.0, "td.omega": 5.0, "law.b0": 1.0}
     ladrc = Controller.from_structure("LADRC", rho=1, values=values)

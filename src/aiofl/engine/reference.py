@@ -526,7 +526,7 @@ def reference_sampled_simulate(
     r"""The sampled loop with its transport delays, event by event (slow; for cross-checks).
 
     The controller is the engine's discrete update stepped from Python
-    (:class:`aiofl.engine.sampled.DiscreteController`, whose update the tests check
+    (:class:`aiofl.engine.standalone.DiscreteController`, whose update the tests check
     separately); everything around it is written here independently of the time loop: the
     plant integrated by ``solve_ivp`` between events, the ADC reading
     :math:`y(\max(t_k - \tau_{out}, 0))` plus the noise held at :math:`t_k`, the DAC
@@ -535,7 +535,7 @@ def reference_sampled_simulate(
     parameter change.  Events at one time are taken in the order: measurement, controller
     update, command change.
     """
-    from aiofl.engine.sampled import DiscreteController
+    from aiofl.engine.standalone import DiscreteController
 
     sc = scenario
     ts = float(sampling.ts)  # type: ignore[attr-defined]

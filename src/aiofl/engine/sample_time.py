@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine.discrete import Sampling, sampling_rows
+from aiofl.engine.discrete import Sampling, known_delay_samples, sampling_rows
 
 __all__ = [
     "SIGNAL_MAX",
@@ -99,7 +99,9 @@ def discrete_row(
     """The engine's discrete coefficient row of ``controller`` sampled by ``sampling``
     (``jac``: a model-assisted observer's model Jacobian).  A sample time the design cannot
     be discretised at (non-finite coefficients, a pole placement that fails) raises
-    ValueError naming ``name`` with the range a scan found (:func:`design_ts_range`)."""
+    ValueError naming ``name`` with the range a scan found (:func:`design_ts_range`); a
+    known delay (``eso.delay``) that is not a whole number of samples, naming it."""
+    known_delay_samples(controller.value("eso.delay"), sampling.ts)
     try:
         with np.errstate(all="ignore"):
             return _row(controller, sampling, jac)

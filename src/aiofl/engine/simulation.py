@@ -424,6 +424,13 @@ def pack(
         if s.envelope is None:
             scen_d[j, L.S_ENVELOPE] = s.default_envelope(_output_at(plant, x0_d[j], p_before_d[j]))
     check_delays(scen_d[rows], disc, dt)  # transport delays: sampled, k·dt, bounded
+    continuous = np.ones(len(batch.floats), dtype=bool) if disc is None else disc[:, D_STEPS] == 0
+    if np.any(continuous & (batch.floats[:, L.F_ESO_DELAY] != 0.0)):
+        raise ValueError(
+            "controller.eso.delay (a known measurement delay to compensate) needs a sampled "
+            "controller ([sensor] ts or aiofl simulate --ts); allowed: eso.delay = 0 for a "
+            "continuous one"
+        )
     n_save = n_steps // decimation + 1 if store else 0
     n_cols = len(L.trajectory_columns(n))
     rec = Batch(
