@@ -38,8 +38,10 @@ import sys
 from typing import Any
 
 import numpy as np
+from numba import njit
 
 from aiofl import layout as L
+from aiofl.components.fastmath import FASTMATH
 from aiofl.engine import bindings, plant_table
 from aiofl.engine import discrete as DS
 from aiofl.engine.discrete import (
@@ -47,6 +49,7 @@ from aiofl.engine.discrete import (
     D_GAM,
     D_H0,
     D_K,
+    D_KDELAY,
     D_L,
     D_PF_GAM,
     D_PF_PHI,
@@ -98,7 +101,12 @@ C_Y = C_UPREV + 1  #: the previous sample's measurement (the ESO's first state i
 C_RPREV = C_Y + 1  #: the previous sample's reference (Han's TD keeps r_1 - r_prev)
 C_PROF = C_RPREV + 1  #: the differentiator's profile r_1.. used at the last sample
 C_SCR = C_PROF + L.RHO_MAX  #: scratch for the prefilter update
-N_CS = C_SCR + L.RHO_MAX
+#: older commands u_{k-2}, u_{k-3}, ... (a known delay's ESO input, ``eso.delay``)
+C_UHIST = C_SCR + L.RHO_MAX
+#: the last references r, r', ..., one row of RHO_MAX + 1 per sample, newest first
+C_RHIST = C_UHIST + L.KNOWN_DELAY_MAX
+C_RFILL = C_RHIST + L.KNOWN_DELAY_MAX * (L.RHO_MAX + 1)  #: 1 once the rows hold references
+N_CS = C_RFILL + 1
 
 # placeholders bound per instance (see _bind and aiofl.engine.instances)
 _W = 32
@@ -133,6 +141,8 @@ def _tpl_ctrl_init(iq, q, cs, y0):  # pragma: no cover - compiled
         cs[C_P + rho] = -q[L.F_B0] * q[L.F_ESO_U0]
         cs[C_X + rho] = cs[C_P + rho]
         cs[C_UPREV] = q[L.F_ESO_U0]
+        for j in range(L.KNOWN_DELAY_MAX):  # held before the start, as far back as it reads
+            cs[C_UHIST + j] = q[L.F_ESO_U0]
     if iq[IQ_EINIT] == L.ESO_INIT_BUMPLESS and iq[IQ_TD] != L.TD_EXACT:
         if iq[IQ_TD] == L.TD_HAN:
             cs[C_RPREV] = y0  # Han's TD keeps r_1 - r_prev = 0 with r_prev = y0
@@ -162,6 +172,9 @@ def _tpl_ctrl_step(fns, iq, q, dsc, cs, scr, y, rr, ri, pn):  # pragma: no cover
     td_kind = iq[IQ_TD]
     exact = td_kind == L.TD_EXACT
     ts = dsc[D_TS]
+    known = int(dsc[D_KDELAY])  # the known measurement delay d, in samples
+    if known > 0:  # the reference d samples old, aligned with the measurement: rr[ri] <- it
+        _delay_reference(cs, rr, ri, n1, known)
 
     e = _OBS_INNOVATION(cs, C_P, C_Y, y)  # y - p_1
     phi = e
@@ -198,7 +211,10 @@ def _tpl_ctrl_step(fns, iq, q, dsc, cs, scr, y, rr, ri, pn):  # pragma: no cover
     u = _aiofl_command(iq, q, rr, ri, cs, C_PROF, cs, C_X, rff, a_hat, b_hat)
     u = _SATURATE(u, q[L.F_UMIN], q[L.F_UMAX])  # actuator range [u_min, u_max]
 
-    um = cs[C_UPREV] if dsc[D_DELAY] > 0.0 else u
+    # the command the plant got over the interval the measurements span: u_k, u_{k-1} with
+    # the computation delay, and d samples older with a known measurement delay
+    lag = int(dsc[D_DELAY]) + known
+    um = u if lag == 0 else (cs[C_UPREV] if lag == 1 else cs[C_UHIST + lag - 2])
     if model:  # Γ holds b0: its input is (α̂ + β̂ u_m)/b0
         um = (a_hat + b_hat * um) / q[L.F_B0]
     _OBS_PREDICT(cs, C_P, C_X, C_Y, n1, dsc, D_PHI, STRIDE, D_GAM, D_K, um, phi, y, dx1)
@@ -222,8 +238,31 @@ def _tpl_ctrl_step(fns, iq, q, dsc, cs, scr, y, rr, ri, pn):  # pragma: no cover
         cs[C_TD] = a
     elif td_kind == L.TD_LINEAR:  # exact ZOH
         _LIN_UPDATE(cs, C_TD, rho, dsc, D_PF_PHI, PF_STRIDE, D_PF_GAM, r, scr, C_SCR)
+    for j in range(lag - 2, 0, -1):  # the commands a known delay reads, one sample older
+        cs[C_UHIST + j] = cs[C_UHIST + j - 1]
+    if lag >= 2:
+        cs[C_UHIST] = cs[C_UPREV]
     cs[C_UPREV] = u
     return u
+
+
+@njit(inline="always", fastmath=FASTMATH, error_model="numpy")
+def _delay_reference(cs, rr, ri, n1, d):  # pragma: no cover - compiled
+    """Replace the reference values ``rr[ri, :n1]`` (r, r', ... at t_k) by those of d
+    samples ago, and keep them: the controller then tracks :math:`r(t_k - dT_s)`, aligned
+    with a measurement d samples old (its first call holds the first values over the past)."""
+    nr = L.RHO_MAX + 1
+    if cs[C_RFILL] == 0.0:
+        for j in range(d):
+            for i in range(n1):
+                cs[C_RHIST + j * nr + i] = rr[ri, i]
+        cs[C_RFILL] = 1.0
+    for i in range(n1):
+        now = rr[ri, i]
+        rr[ri, i] = cs[C_RHIST + (d - 1) * nr + i]
+        for j in range(d - 1, 0, -1):
+            cs[C_RHIST + j * nr + i] = cs[C_RHIST + (j - 1) * nr + i]
+        cs[C_RHIST + i] = now
 
 
 def _tpl_ctrl_run(fns, iq, q, dsc, cs, scr, y, rr, ri, pn, n):  # pragma: no cover - compiled
@@ -231,7 +270,9 @@ def _tpl_ctrl_run(fns, iq, q, dsc, cs, scr, y, rr, ri, pn, n):  # pragma: no cov
     reference ``rr[ri]`` (a controller settling at an operating point); returns the last
     u, ``cs`` updated."""
     u = 0.0
+    keep = rr[ri].copy()  # a known delay's step replaces rr[ri] by older values
     for _ in range(n):
+        rr[ri] = keep
         u = _CTRL_STEP(fns, iq, q, dsc, cs, scr, y, rr, ri, pn)
     return u
 
@@ -240,7 +281,9 @@ def _tpl_ctrl_step_each(fns, iq, q, dsc, states, scr, ys, rr, ri, pn, us):  # pr
     """One sample of :func:`_tpl_ctrl_step` from each row of ``states`` (updated in place)
     with measurement ``ys[k]``, its command into ``us[k]``: the perturbed states of a
     finite-difference Jacobian in one call."""
+    keep = rr[ri].copy()  # a known delay's step replaces rr[ri] by older values
     for k in range(states.shape[0]):
+        rr[ri] = keep
         us[k] = _CTRL_STEP(fns, iq, q, dsc, states[k], scr, ys[k], rr, ri, pn)
 
 
@@ -391,6 +434,7 @@ def _bind(ns: dict[str, Any], cd: Any = None) -> None:
 
     ns.update({k: v for k, v in vars(DS).items() if k.isupper() and isinstance(v, int)})
     ns.update({k: v for k, v in globals().items() if k.startswith("C_") or k == "N_CS"})
+    ns["_delay_reference"] = _delay_reference
     ns.update(
         _FHAN_TD=cd.fhan_td_step,
         _OBS_INNOVATION=cd.observer_innovation,
