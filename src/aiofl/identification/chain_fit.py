@@ -233,9 +233,10 @@ class _Problem:
     def solve(self, theta: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The columns' least-squares weights and the model output for θ."""
         cols = self.columns(theta)
-        if not np.all(np.isfinite(cols)):
+        with np.errstate(over="ignore", invalid="ignore"):  # an unstable trial's columns
+            norms = np.linalg.norm(cols, axis=0)
+        if not np.all(np.isfinite(norms)):
             return np.full(cols.shape[1], np.nan), np.full(self.target.shape, np.nan)
-        norms = np.linalg.norm(cols, axis=0)
         norms[norms == 0] = 1.0
         beta = _lstsq(cols / norms, self.target)
         beta = beta / norms
