@@ -183,6 +183,10 @@ def test_bad_logs_and_arguments_are_refused_by_name():
     bad[17] = np.nan
     with pytest.raises(LogError, match="column 'y', row 17"):
         identify_chain(Log(t, u, bad))
+    jitter = t.copy()
+    jitter[50] += 0.5 * TS
+    with pytest.raises(LogError, match="column 't', row 50: step"):
+        identify_chain(Log(jitter, u, y))
     with pytest.raises(LogError, match="at least"):
         identify_chain(Log(t[:30], u[:30], y[:30]))
     with pytest.raises(ValueError, match="rho_max = 9"):

@@ -71,6 +71,8 @@ MAX_DELAY_SAMPLES = 2_000
 MIN_SAMPLES_PER_PARAMETER = 20
 #: the window half-width (samples) of the velocity sign the friction term uses
 SIGN_WIDTH = 10
+#: the largest deviation of a time step from the mean step (the fit assumes uniform samples)
+UNIFORM_TOLERANCE = 0.01
 
 
 @dataclass(frozen=True)
@@ -178,6 +180,14 @@ def _check(log: Log, rho_max: int, rho: int | None, delay_max: float | None) -> 
     if np.any(steps <= 0):
         row = int(np.flatnonzero(steps <= 0)[0]) + 1
         raise LogError(f"column 't', row {row}: time does not increase; allowed: increasing")
+    ts_mean = (log.t[-1] - log.t[0]) / (n - 1)
+    off = np.flatnonzero(np.abs(steps - ts_mean) > UNIFORM_TOLERANCE * ts_mean)
+    if off.size:
+        row = int(off[0]) + 1
+        raise LogError(
+            f"column 't', row {row}: step {steps[off[0]]:.6g} s; allowed: uniform sampling, "
+            f"every step within {UNIFORM_TOLERANCE:.0%} of {ts_mean:.6g} s (resample the log)"
+        )
     if np.ptp(log.u) == 0:
         raise LogError(
             "column 'u': constant input; allowed: an input that excites the plant (a step, "

@@ -31,8 +31,9 @@ observer's own response to u (its disturbance estimate from u alone, about
 large in magnitude, negative when too small.  The observer is affine in b0 (b0 enters only
 through :math:`\Gamma = b_0\Gamma_1`), so ``b0_best``, the b0 with the least disturbance
 RMS, is one linear least-squares step.  The verdict is "small and smooth" when
-``rms`` ≤ :data:`RMS_MAX`, ``roughness`` ≤ :data:`ROUGHNESS_MAX` and ``|u_share|`` ≤
-:data:`U_SHARE_MAX`; otherwise it gives the reasons.  The figures discriminate a wrong b0
+``rms`` ≤ :data:`RMS_MAX`, ``roughness`` ≤ :data:`ROUGHNESS_MAX` (or the rough part,
+``rms · roughness``, ≤ :data:`NOISE_PART_MAX`) and ``|u_share|`` ≤ :data:`U_SHARE_MAX`;
+otherwise it gives the reasons.  The figures discriminate a wrong b0
 best with ω0 above the input's switching rate; below it the observer cannot follow u and
 a wrong b0 shows mostly in ``rms``.  The thresholds are this project's (a
 disturbance half as large as the control it would cancel is no longer "small"), not a
@@ -57,6 +58,10 @@ __all__ = ["RMS_MAX", "ROUGHNESS_MAX", "U_SHARE_MAX", "OfflineESO", "offline_eso
 RMS_MAX = 0.5
 #: the largest roughness (1: white noise) still called smooth
 ROUGHNESS_MAX = 0.3
+#: a rough disturbance whose rough part is below this fraction of b0·u's RMS (rms ×
+#: roughness) is still called smooth: a plant with almost no disturbance leaves only the
+#: noise in the estimate, rough but negligible
+NOISE_PART_MAX = 0.05
 #: the largest correlation of the disturbance with the observer's response to u before b0
 #: is called wrong (a slow observer sees the plant's own dynamics, driven by u, correlate
 #: with u too: 0.82 on a fourth-order chain with the right b0 and omega0 = 15 rad/s)
@@ -138,7 +143,7 @@ def _verdict(rms: float, roughness: float, u_share: float, b0_best: float) -> st
             f"{'large' if u_share > 0 else 'small'} in magnitude (the disturbance is least "
             f"with b0 = {b0_best:.4g})"
         )
-    if roughness > ROUGHNESS_MAX:
+    if roughness > ROUGHNESS_MAX and rms * roughness > NOISE_PART_MAX:
         reasons.append(
             f"noisy (roughness {roughness:.2f}, white noise 1, allowed {ROUGHNESS_MAX:g}): "
             "omega0 too high for the noise, or rho too high"
