@@ -100,18 +100,19 @@ def test_a_delay_is_found_within_one_sample():
 
 
 def test_the_b0_interval_covers_the_truth_95_percent_of_the_time():
-    """100 noise realisations of one 1-s experiment (σ = 2 encoder steps, quantised): the
-    95 % interval b0 ± 1.96 std must cover the truth 90-99 % of the time."""
+    """200 noise realisations of one 1-s experiment (σ = 2 encoder steps, quantised): the
+    95 % interval b0 ± 1.96 std must cover the truth 90-99 % of the time (measured: 195;
+    600 realisations of two experiments, with the friction term tried, gave 96.2 %)."""
     b0 = 20.0
     n = 1001
     t = np.arange(n) * TS
     truth = simulate_log(chain_plant(2, b0, 2.0), t, prbs(n, 20, seed=3))
     covered = 0
-    for seed in range(100):
+    for seed in range(200):
         y = measure(truth.y, noise_std=2 * QUANTUM, quantum=QUANTUM, seed=seed)
-        est = identify_chain(Log(t, truth.u, y), rho=2, delay_max=0.005)
+        est = identify_chain(Log(t, truth.u, y), rho=2, delay_max=0.005, friction=False)
         covered += abs(est.b0 - b0) <= 1.96 * est.b0_std
-    assert 90 <= covered <= 99
+    assert 180 <= covered <= 198
 
 
 def test_coulomb_friction_does_not_bias_b0():
