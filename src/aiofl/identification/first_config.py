@@ -61,6 +61,7 @@ __all__ = [
     "NOISE_FRACTION",
     "chain_plant_file",
     "first_config",
+    "noise_gain",
     "omega0_rules",
 ]
 
