@@ -24,12 +24,12 @@ edge of what the sampling resolves (:data:`~aiofl.identification.chain_fit.POLE_
 so its extra parameters buy almost nothing and the criterion refuses them.
 
 **Friction.**  A Coulomb friction force :math:`F_c\operatorname{sign}\dot y` is a
-disturbance a linear chain cannot explain; left out, it biases b0 (a 20 % friction biased
-it by 40 % in ``benchmarks/bench_identify.py``).  With ``friction=None`` (automatic) the
-orders ρ ≥ 2 are fitted with the term (the sign of ẏ from a Savitzky–Golay slope of the
-log, :func:`~aiofl.identification.chain_fit.velocity_sign`), and the chosen order keeps it
-only when its BIC is lower with it.  For ρ = 1 sign(ẏ) is the sign of u under a binary
-input, so the term cannot be told from b0 u and is not fitted.
+disturbance a linear chain cannot explain; left out, it biases b0 (a friction of 15 % of
+b0·|u| biased it by +39 % in ``benchmarks/bench_identify.py``).  With ``friction=None``
+(automatic) the orders ρ ≥ 2 are fitted with the term (the sign of ẏ from a
+Savitzky–Golay slope of the log, :func:`~aiofl.identification.chain_fit.velocity_sign`),
+and the chosen order keeps it only when its BIC is lower with it.  For ρ = 1 sign(ẏ) is
+the sign of u under a binary input, so the term cannot be told from b0 u and is not fitted.
 
 **Uncertainty.**  ``b0_std`` and ``delay_std`` come from the least-squares covariance at
 the optimum, made robust to correlated residuals (Newey–West;
