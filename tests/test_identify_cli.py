@@ -13,7 +13,6 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import sys
 import types
@@ -492,12 +491,6 @@ def test_identify_grey_box_of_a_plant_file(
         assert "design.toml not written" in res.stderr
 
 
-@pytest.mark.skipif(
-    importlib.util.find_spec("aiofl.identification.chain") is None
-    or importlib.util.find_spec("aiofl.identification.grey_box") is None,
-    reason="the model-free and grey-box routes (chain.py, grey_box.py) are on other branches; "
-    "the lead removes this skip when they are merged",
-)
 def test_identify_end_to_end_on_a_synthetic_log(tmp_path: Path) -> None:
     from aiofl.identification.excitation import prbs
 

@@ -283,14 +283,17 @@ def identify_command(
         estimation=(0, estimation.n_samples),
         validation=val_label,
     )
-    result = _run(estimation, val_log, model, free_map, cl_cfg, plant, delay, k, seed, rho_max, rho)
+    # the grey-box fit simulates a held-out tail on from the fitted part's end state (the
+    # whole log, scored on its tail), not from rest
+    grey = (data, None, holdout) if holdout is not None else (estimation, val_log, 0.0)
+    result = _run(estimation, grey, model, free_map, cl_cfg, plant, delay, k, seed, rho_max, rho)
     _write(out, result, log_rec, settings, data, estimation)
     _summary(result, data, out)
 
 
 def _run(
     est: Any,
-    val: Any,
+    grey: tuple[Any, Any, float],
     model: Any,
     free_map: Any,
     cl_cfg: Any,
@@ -301,11 +304,13 @@ def _run(
     rho_max: int,
     rho: int | None,
 ) -> dict[str, Any]:
-    """Both routes over the checked log; the results by name."""
+    """Both routes over the checked log (the model-free one on its estimation part ``est``,
+    the grey-box one on ``grey`` = (log, validation log, held-out fraction)); the results
+    by name."""
     import time as clock
 
     from aiofl.identification.chain import identify_chain
-    from aiofl.identification.first_config import first_config
+    from aiofl.identification.first_config import chain_plant_file, first_config
     from aiofl.identification.offline_eso import offline_eso
 
     res: dict[str, Any] = {"plant": plant}
@@ -315,17 +320,20 @@ def _run(
         res["chain_seconds"] = clock.perf_counter() - t0
         res["estimate"] = est_chain
         res["first"] = first_config(est_chain, est)
+        res["chain_plant"] = chain_plant_file(est_chain, est)
         res["eso"] = offline_eso(est, est_chain.rho, est_chain.b0, _omega0(res["first"]))
         if model is not None:
-            from aiofl.identification.grey_box import fit_plant, uncertainty_table
+            from aiofl.identification.fitted_plant import uncertainty_table
+            from aiofl.identification.grey_box import fit_plant
 
             used_delay = est_chain.delay if delay == "auto" else float(delay)
             res["delay"] = used_delay
             res["fit"] = fit_plant(
-                est,
+                grey[0],
                 model,
                 free_map,
-                validation=val,
+                validation=grey[1],
+                holdout=grey[2],
                 delay=used_delay,
                 closed_loop=cl_cfg,
                 seed=seed,
@@ -346,6 +354,7 @@ def _write(
     """OUT's files, staged and swapped in as a whole."""
     import tomlkit
 
+    from aiofl.identification.first_config import CHAIN_PLANT_FILE
     from aiofl.identification.records import identification_record, record_json
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
     from aiofl.reporting.figures import figure_png
@@ -353,7 +362,8 @@ def _write(
 
     name = Path(str(data.source)).name
     fit = res.get("fit")
-    res["written"] = ["identification.json", "first.toml", "eso.png", "candidates.png"]
+    res["written"] = ["identification.json", "first.toml", CHAIN_PLANT_FILE]
+    res["written"] += ["eso.png", "candidates.png"]
     with bad_input_exits(run=True), atomic_output_dir(out) as stage:
         extra = None
         if fit is not None:
@@ -402,7 +412,8 @@ def _write(
             settings=settings,
         )
         atomic_write_text(stage / "identification.json", record_json(record))
-        atomic_write_text(stage / "first.toml", res["first"])
+        atomic_write_text(stage / "first.toml", res["first"])  # its plant: the chain, beside
+        atomic_write_text(stage / CHAIN_PLANT_FILE, res["chain_plant"])
         atomic_write_bytes(
             stage / "eso.png",
             figure_png(eso_figure(res["eso"], est, f"{name}: the ESO run offline over the log")),
