@@ -382,9 +382,16 @@ def stand_ins(monkeypatch: pytest.MonkeyPatch) -> dict[str, Any]:
     modules = {
         "chain": {"identify_chain": identify_chain},
         "offline_eso": {"offline_eso": offline_eso},
-        "first_config": {"first_config": first_config},
-        "grey_box": {"fit_plant": fit_plant, "uncertainty_table": uncertainty_table},
-        "fitted_plant": {"fitted_plant_file": lambda fit, source: "# fitted\n"},
+        "first_config": {
+            "first_config": first_config,
+            "chain_plant_file": lambda estimate, log: "# the identified chain\n",
+            "CHAIN_PLANT_FILE": "identified-chain.toml",
+        },
+        "grey_box": {"fit_plant": fit_plant},
+        "fitted_plant": {
+            "fitted_plant_file": lambda fit, source: "# fitted\n",
+            "uncertainty_table": uncertainty_table,
+        },
     }
     for name, members in modules.items():
         module = types.ModuleType(f"aiofl.identification.{name}")
@@ -438,7 +445,8 @@ def test_identify_grey_box_writes_a_ready_to_tune_design(
     )
     assert res.exit_code == 0, res.output
     n_est, free, kw = stand_ins["fit"]
-    assert n_est == N - 100 and kw["validation"].n_samples == 100  # the last quarter held out
+    # the whole log, the last quarter held out: simulated on from the fitted part's end
+    assert n_est == N and kw["validation"] is None and kw["holdout"] == 0.25
     assert free == {"J": (1e-4, 1e-2), "b": None} and stand_ins["k"] == 3.0
     rec = json.loads((out / "identification.json").read_text())
     grey = rec["grey_box"]

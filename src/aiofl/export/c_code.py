@@ -175,6 +175,7 @@ def _used_parameters(c: Controller) -> list[str]:
     names = ["law.b0", "law.u_max", "law.u_min", "eso.omega0"]
     names += [f"eso.alpha{i}" for i in range(1, c.rho + 2)]
     names += ["eso.u0"] if c.value("eso.u0") != 0.0 else []
+    names += ["eso.delay"] if c.value("eso.delay") != 0.0 else []
     if c.eso_gains == "kalman":
         names += ["eso.q", "eso.r"]
     if c.eso == "improved":
@@ -294,6 +295,7 @@ class _Design:
             "TD_FHAN": int(c.td == "han" and s.td == "fhan"),
             "SEF": _SEF[c.sef],
             "DELAY": int(bool(s.delay)),
+            "KDELAY": int(self.row[DS.D_KDELAY]),  # eso.delay, in samples
         }
         self.options = opts
         sig = repr(

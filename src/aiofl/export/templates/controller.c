@@ -3,7 +3,9 @@
  * prefix applied and a generated header of the options, constants and parameter struct).
  * Options (from the header): AIOFL_ESO_IMPROVED (INLESO injection), AIOFL_ESO_MODEL
  * (model-assisted), AIOFL_TD (exact / han / improved / linear), AIOFL_TD_FHAN, AIOFL_SEF
- * (linear / nonlinear / improved), AIOFL_DELAY (one-sample computation delay).
+ * (linear / nonlinear / improved), AIOFL_DELAY (one-sample computation delay), AIOFL_KDELAY
+ * (a known measurement delay in samples: the ESO is fed the command that much older and the
+ * reference is delayed as much, aligned with the measurement).
  *
  * One sample, the engine's update (aiofl.engine.sampled._tpl_ctrl_step):
  *   ESO correction   xhat = p + L phi(e),            e = y - p_1
@@ -161,6 +163,10 @@ void aiofl_start_at(aiofl_state *s, const aiofl_params *p, aiofl_signal y0, aiof
 #if AIOFL_DELAY
     s->u_prev = u0;
 #endif
+#if AIOFL_KDELAY
+    for (i = 0; i < AIOFL_DELAY + AIOFL_KDELAY; ++i) s->u_old[i] = u0;
+    s->r_full = 0;
+#endif
     s->u_held = u0;
     s->fault = mode != AIOFL_START_ZERO && (!aiofl_usable(y0) || !aiofl_finite(u0));
 }
@@ -208,6 +214,9 @@ aiofl_real aiofl_step(aiofl_state *s, const aiofl_params *p, const aiofl_signal 
 #if AIOFL_ESO_MODEL
     aiofl_real a_hat, b_hat, xi[AIOFL_RHO];
 #endif
+#if AIOFL_KDELAY
+    aiofl_signal r_then[AIOFL_RHO + 1];
+#endif
 
     /* the fault policy (aiofl_controller.h): unusable inputs change nothing */
     if (s->fault) return s->u_held;
@@ -221,6 +230,19 @@ aiofl_real aiofl_step(aiofl_state *s, const aiofl_params *p, const aiofl_signal 
         s->fault = 1;
         return s->u_held;
     }
+#if AIOFL_KDELAY /* the reference AIOFL_KDELAY samples old, aligned with the measurement */
+    if (!s->r_full) {
+        for (j = 0; j < AIOFL_KDELAY; ++j)
+            for (i = 0; i <= AIOFL_RHO; ++i) s->r_old[j][i] = AIOFL_TD == AIOFL_TD_EXACT || !i ? r[i] : 0;
+        s->r_full = 1;
+    }
+    for (i = 0; i <= AIOFL_RHO; ++i) {
+        r_then[i] = s->r_old[AIOFL_KDELAY - 1][i];
+        for (j = AIOFL_KDELAY - 1; j > 0; --j) s->r_old[j][i] = s->r_old[j - 1][i];
+        s->r_old[0][i] = AIOFL_TD == AIOFL_TD_EXACT || !i ? r[i] : 0;
+    }
+    r = r_then;
+#endif
 
     /* ESO correction, e = y - p_1 = (y - y_prev) - (p_1 - y_prev) */
     e = (aiofl_real)(y - s->y_prev) - s->p[0];
@@ -279,7 +301,11 @@ aiofl_real aiofl_step(aiofl_state *s, const aiofl_params *p, const aiofl_signal 
 
     /* ESO prediction, delta form (PHI - I upper triangular, its first column 0):
        p_1+ - y = (xhat_1 - y) + delta_1,  p_i+ = xhat_i + delta_i */
-#if AIOFL_DELAY
+#if AIOFL_KDELAY /* the command applied over the interval the measurements span */
+    um = s->u_old[AIOFL_DELAY + AIOFL_KDELAY - 1];
+    for (j = AIOFL_DELAY + AIOFL_KDELAY - 1; j > 0; --j) s->u_old[j] = s->u_old[j - 1];
+    s->u_old[0] = u;
+#elif AIOFL_DELAY
     um = s->u_prev;
     s->u_prev = u;
 #else

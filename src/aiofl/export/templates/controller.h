@@ -92,6 +92,11 @@ typedef struct {
 #if AIOFL_DELAY
     aiofl_real u_prev; /* the command applied over the current interval */
 #endif
+#if AIOFL_KDELAY /* a known measurement delay of AIOFL_KDELAY samples (eso.delay) */
+    aiofl_real u_old[AIOFL_DELAY + AIOFL_KDELAY]; /* u_(k-1), u_(k-2), ...: the ESO's input */
+    aiofl_signal r_old[AIOFL_KDELAY][AIOFL_RHO + 1]; /* the last references, newest first */
+    int r_full; /* 1 once r_old holds references */
+#endif
     aiofl_real u_held; /* the last command returned (held after a fault) */
     int fault;         /* 1 after a fault, until the next start */
 } aiofl_state;
