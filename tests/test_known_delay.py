@@ -21,7 +21,7 @@ from aiofl.engine.discrete import Sampling
 from aiofl.engine.simulation import simulate
 from aiofl.engine.standalone import DiscreteController
 from aiofl.export import export_c
-from aiofl.export.c_check import CC, CController, build, loop
+from aiofl.export.c_check import CC, STRICT_FLOAT, CController, build, loop
 from aiofl.plants import get_plant
 from aiofl.scenario import Reference, Scenario
 
@@ -143,3 +143,55 @@ def test_c_told_of_the_delay_equals_the_engine(tmp_path, td, computation):
     ref = Reference(amplitude=0.3, omega=2.0)
     _, _, u_c = loop(step, plant, ref, 2, TS, 2.0, delay=computation)
     np.testing.assert_allclose(u_c, np.array(u_eng), rtol=0, atol=1e-12 * np.max(np.abs(u_c)))
+    # and the float build compiles under the strict conversion warnings
+    build(tmp_path / "float", export_c(ctrl, sampling, precision="float"), STRICT_FLOAT)
+
+
+@pytest.mark.skipif(CC is None, reason="no C compiler 'cc' on PATH")
+def test_fmu_told_of_the_delay_equals_the_engine(tmp_path):
+    """The FMU of a design told of 2 samples of delay (eso.delay shown as a fixed parameter)
+    gives the engine's discrete controller's commands on the same y_k, r_k (FMPy)."""
+    fmpy = pytest.importorskip("fmpy")
+    from fmpy.fmi2 import FMU2Slave
+
+    from aiofl.export.fmu import export_fmu_for_config
+
+    base = load_config("dcmotor-arm-ladrc")
+    ctrl = base.controller.with_values(**{"eso.delay": 2e-3})
+    cfg = dataclasses.replace(base, controller=ctrl)
+    sampling = Sampling(1e-3)
+    name, data = export_fmu_for_config(cfg, sampling, precision="double", config="x", prefix="kd")
+    path = tmp_path / name
+    path.write_bytes(data)
+    md = fmpy.read_model_description(str(path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    assert "eso.delay" in vr and "eso.delay" not in [
+        v.name for v in md.modelVariables if v.variability == "tunable"
+    ]
+    inputs = [v.name for v in md.modelVariables if v.causality == "input"]
+    s = FMU2Slave(
+        guid=md.guid,
+        unzipDirectory=fmpy.extract(str(path), unzipdir=str(tmp_path / "x")),
+        modelIdentifier=md.coSimulation.modelIdentifier,
+        instanceName="kd",
+    )
+    eng = DiscreteController(ctrl, sampling)
+    rng = np.random.default_rng(0)
+    ys = np.cumsum(rng.normal(0, 1e-3, 200))
+    rs = np.stack([0.2 * np.sin(np.arange(200) * 1e-3 * np.array([1.0])) for _ in range(4)], 1)
+    s.instantiate()
+    s.setupExperiment(startTime=0.0)
+    s.enterInitializationMode()
+    vin = [vr[n] for n in inputs]
+    s.setReal(vin, [ys[0], *rs[0, : len(vin) - 1]])
+    s.exitInitializationMode()
+    eng.init(ys[0])
+    u_f, u_e = [], []
+    for k in range(200):
+        s.setReal(vin, [ys[k], *rs[k, : len(vin) - 1]])
+        u_f.append(s.getReal([vr["u"]])[0])
+        u_e.append(eng.step(rs[k, : ctrl.rho + 1], ys[k]))
+        s.doStep(currentCommunicationPoint=k * 1e-3, communicationStepSize=1e-3)
+    s.terminate()
+    s.freeInstance()
+    np.testing.assert_allclose(u_f, u_e, rtol=0, atol=1e-12 * np.max(np.abs(u_e)))

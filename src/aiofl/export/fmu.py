@@ -150,6 +150,9 @@ def fmu_parameters(controller: Controller, sampling: Sampling) -> list[FmuParame
         calc.append(FmuParameter("eso.omega0", v("eso.omega0"), "observer bandwidth", False))
     if c.td == "linear":
         calc.append(FmuParameter("td.omega", v("td.omega"), "prefilter bandwidth", False))
+    if v("eso.delay") != 0.0:
+        what = "known measurement delay compensated [s] (fixed at export)"
+        calc.append(FmuParameter("eso.delay", v("eso.delay"), what, False))
 
     def tun(name: str, what: str, *setter: str, minimum: float | None = None, nz: bool = False):
         return FmuParameter(name, v(name), what, True, minimum, nz, tuple(setter))
@@ -358,7 +361,7 @@ def _units(controller: Controller, plant: Plant | None) -> dict[str, str]:
     """The unit of each Real variable that has one, by variable name: y and r in the
     plant's output unit, r_i in its derivatives', u and the actuator limits in its input
     unit, Ts in s (an undeclared unit, ``""`` or ``"-"``, is left out)."""
-    out = {"Ts": "s"}
+    out = {"Ts": "s", "eso.delay": "s"}
     if plant is not None:
         y, u = plant.output_unit, plant.input_unit
         out |= {"y": y, "r": y, "u": u, "law.u_max": u, "law.u_min": u, "eso.u0": u}

@@ -242,6 +242,9 @@ aiofl_real aiofl_step(aiofl_state *s, const aiofl_params *p, const aiofl_signal 
         s->r_old[0][i] = AIOFL_TD == AIOFL_TD_EXACT || !i ? r[i] : 0;
     }
     r = r_then;
+#if AIOFL_SEF == AIOFL_SEF_LINEAR && AIOFL_TD == AIOFL_TD_EXACT
+    rff = (aiofl_real)r[AIOFL_RHO]; /* the feed-forward of the delayed reference */
+#endif
 #endif
 
     /* ESO correction, e = y - p_1 = (y - y_prev) - (p_1 - y_prev) */
