@@ -61,12 +61,12 @@ from aiofl.components.feedback import linear_sef_gains
 from aiofl.controller import Controller, controller_batch
 from aiofl.engine.discrete import Sampling
 
-__all__ = ["TwoDof", "ladrc_two_dof", "two_dof_closed_loop", "format_two_dof_text"]
+__all__ = ["TwoDof", "format_two_dof_text", "ladrc_two_dof", "two_dof_closed_loop"]
 
 
 @dataclass(frozen=True)
 class TwoDof:
-    """The 2-DOF form of a linear ADRC, :math:`u = F r - C y` (module docstring).
+    r"""The 2-DOF form of a linear ADRC, :math:`u = F r - C y` (module docstring).
 
     Attributes
     ----------
@@ -143,8 +143,8 @@ def _pieces(c: Controller) -> dict[str, Any]:
 
 
 def _prefilter_matrices(pf: NDArray[np.float64]) -> tuple[Any, Any, Any, Any]:
-    """(A_r, B_r) of the prefilter and (c_s, c_r) of its output
-    :math:`\\dot r_\\rho = c_s^T s + c_r r`."""
+    r"""(A_r, B_r) of the prefilter and (c_s, c_r) of its output
+    :math:`\dot r_\rho = c_s^T s + c_r r`."""
     rho = pf.size
     a = np.eye(rho, k=1)
     a[rho - 1, :] = -pf
@@ -388,8 +388,9 @@ def _roots_text(roots: NDArray[np.complex128], var: str) -> str:
 
 def _zpk_text(sys: Any, var: str) -> str:
     """Gain, zeros and poles of a SISO realisation in factored form: poles the eigenvalues,
-    zeros the invariant zeros (finite generalised eigenvalues of the Rosenbrock pencil), gain matched at one point away from
-    both (the coefficients of a z-polynomial hide poles clustered near z = 1)."""
+    zeros the invariant zeros (finite generalised eigenvalues of the Rosenbrock pencil),
+    gain matched at one point away from both (the coefficients of a z-polynomial hide
+    poles clustered near z = 1)."""
     poles = np.linalg.eigvals(np.asarray(sys.A, dtype=np.float64))
     from scipy.linalg import eigvals
 
