@@ -55,6 +55,8 @@ __all__ = [
     "LAG_MAX",
     "MEASUREMENT_DELAY_MAX",
     "RigLoop",
+    "check_loop_options",
+    "continuous_disk_margin",
     "disk_margin",
     "format_loop_view_text",
     "loop_view",
@@ -65,6 +67,14 @@ LAG_MAX = 10.0
 """Largest actuator lag [s] the analysis takes (a lag longer than 10 s is not an actuator)."""
 MEASUREMENT_DELAY_MAX = 1000
 """Most samples of measurement delay (one state each in the analysed loop)."""
+
+
+def check_loop_options(lag: float, delay_samples: int, noise_std: float | None = None) -> None:
+    """Raise ValueError naming the option unless ``lag``, ``delay_samples`` and
+    ``noise_std`` are in range (for a CLI that checks before any work)."""
+    _check_options(lag, delay_samples)
+    if noise_std is not None and not (math.isfinite(noise_std) and noise_std >= 0.0):
+        raise ValueError(f"noise_std = {noise_std!r}; allowed: a finite number >= 0")
 
 
 def _check_options(lag: float, delay_samples: int) -> None:
@@ -218,10 +228,14 @@ def _h2_discrete(a: Any, b: Any, c: Any, d: float) -> float:
 
 
 def _h2_continuous(a: Any, b: Any, c: Any, d: float) -> float:
-    from scipy.linalg import solve_continuous_lyapunov
+    from scipy.linalg import matrix_balance, solve_continuous_lyapunov
 
     if d != 0.0:
         return math.inf
+    # balanced first: the solver judges "λ_i + λ_j close to 0" relative to ‖A‖, which a
+    # closed loop with b0-scaled entries (‖A‖ ~ 1e7) makes look singular
+    a, (sc, _) = matrix_balance(a, separate=True, permute=False)
+    b, c = b / sc[:, None], c * sc[None, :]
     p = solve_continuous_lyapunov(a, -b @ b.T)
     return float(math.sqrt(max(float((c @ p @ c.T)[0, 0]), 0.0)))
 
@@ -302,6 +316,17 @@ def _continuous_rows(
             }
         rows.append(row)
     return rows
+
+
+def continuous_disk_margin(lin: Any) -> dict[str, Any]:
+    """The disk margin of a :class:`aiofl.analysis.linearize.Linearization`'s loop broken at
+    the plant input: ``{"disk_margin", "disk_gain_margin_db", "disk_phase_margin_deg",
+    "disk_frequency"}`` (None values when the closed loop is not stable)."""
+    from aiofl.analysis.frequency import frequency_grid
+
+    loop = lin.loop_transfer()
+    stable = lin.verdict() == "stable"
+    return _disk_row(loop, frequency_grid(lin.eigenvalues, np.linalg.eigvals(loop.A)), stable)
 
 
 def _disk_row(loop: Any, grid: NDArray[np.float64], stable: bool) -> dict[str, Any]:
@@ -387,9 +412,7 @@ def loop_view(
         "noise_to_u": {...}, ...}, ...], "noise_std", "noise_source"}``; a row that could
         not be computed has ``"reason"``.
     """
-    _check_options(lag, delay_samples)
-    if noise_std is not None and not (math.isfinite(noise_std) and noise_std >= 0.0):
-        raise ValueError(f"noise_std = {noise_std!r}; allowed: a finite number >= 0")
+    check_loop_options(lag, delay_samples, noise_std)
     source = "given"
     if noise_std is None:
         var = float(config.scenario.noise_variance)
