@@ -19,6 +19,7 @@ from aiofl.engine.discrete import Sampling
 from aiofl.engine.sampled import DiscreteController
 from aiofl.plants.symbolic import SymbolicPlant
 from aiofl.scenario import Reference, Scenario
+from chain_plant import chain3
 
 GAIN = 2.0  # the chain's input gain: y''' = GAIN u
 TS = 1e-3
@@ -163,12 +164,6 @@ def test_sampled_disk_margin_equals_python_controls_on_the_2dof_loop(sampled, de
 def engine_step():
     """The engine's continuous loop on the chain y''' = 2u (a compiled kernel shared with
     tests/test_plant_table.py), a 0.5 step through the linear prefilter."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from chain_plant import chain3
-
     from aiofl.engine.simulation import simulate
 
     scen = Scenario(reference=Reference(kind="step", amplitude=0.5), t_final=1.5)
@@ -240,7 +235,7 @@ def test_discrete_2dof_step_response_equals_the_engines_controller(delay: int, t
 
 def test_2dof_refuses_a_nonlinear_controller() -> None:
     c = Controller(eso="improved", td="han", sef="nonlinear", rho=2, n_feedback=2)
-    with pytest.raises(ValueError, match="eso = 'improved'.*sef = 'nonlinear'"):
+    with pytest.raises(ValueError, match=r"eso = 'improved'.*sef = 'nonlinear'"):
         ladrc_two_dof(c)
 
 
