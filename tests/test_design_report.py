@@ -68,6 +68,14 @@ def test_report_of_a_sampled_design_with_uncertainty(tmp_path):
     data = json.loads((out / "report.json").read_text())
     assert data["margins"][f"{at}: spectral radius"].endswith("(stable)")
     assert float(data["margins"][f"{at}: phase margin [deg]"]) > 0
+    # disk margins and the encoder's noise in u, each row labelled with what it includes
+    lv = "sampled at Ts = 1 ms: ZOH + 0-sample computation delay"
+    alpha = data["margins"][f"{lv}: disk margin α (gain ±dB, phase ±deg)"]
+    assert 0 < float(alpha.split()[0]) < 2
+    noise = data["margins"][
+        f"{lv}: RMS of u from the measurement noise (ADC quantum q = 0.00153398 (q²/12))"
+    ]
+    assert 0 < float(noise.split()[0]) < 1 and noise.endswith("V")
     # the exported C runs the config's loop with the engine's discrete controller beside it
     agree = data["export"]["exported C (double) vs the engine's discrete controller: max |u_C - u|"]
     du, rest = agree.split(" over ")

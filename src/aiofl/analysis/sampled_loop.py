@@ -55,7 +55,7 @@ from numpy.typing import NDArray
 from aiofl.analysis.closed_loop import DEFAULT_AMPLITUDE, ClosedLoop
 from aiofl.engine.discrete import Sampling
 
-__all__ = ["SampledLoop", "sampled_margins", "zoh"]
+__all__ = ["SampledLoop", "sampled_margins", "unit_circle_margins", "zoh"]
 
 
 def zoh(a: NDArray[np.float64], b: NDArray[np.float64], ts: float) -> tuple[Any, Any]:
@@ -357,31 +357,26 @@ class SampledLoop:
         return float(np.max(np.abs(np.linalg.eigvals(m))))
 
 
-def sampled_margins(config: Any, ts: float | None = None) -> dict[str, Any]:
-    r"""The sampled loop's stability and margins at ``ts`` (default: the config's own
-    sample time), to stand beside the continuous loop's (:mod:`aiofl.analysis.frequency`).
+def unit_circle_margins(
+    a: NDArray[np.float64], b: NDArray[np.float64], c: NDArray[np.float64], ts: float
+) -> dict[str, Any]:
+    r"""Gain and phase margins of :math:`L(z) = -c(zI-a)^{-1}b` on the unit circle
+    :math:`z = e^{j\omega T_s}`, :math:`\omega` up to the Nyquist frequency :math:`\pi/T_s`:
+    crossings bracketed on a log grid (3000 points over six decades), refined by
+    :func:`scipy.optimize.brentq`; the headline margins chosen as the continuous ones (the
+    gain margin closest to 0 dB, the smallest |phase margin|), distances at the crossings.
+    The delay margin is :math:`\min_i \varphi_i/\omega_{gc,i}` over the gain crossovers
+    (:math:`\varphi_i` in :math:`[0, 2\pi)`): the delay :math:`e^{-j\omega\tau}` that puts a
+    crossing on −1 (exact for a whole number of samples, :math:`z^{-k}`; a fraction of a
+    sample acts through the hold, :meth:`SampledLoop.delay_margin`).
 
-    Returns ``{"ts", "spectral_radius", "stable", "gain_margin_db", "phase_crossover",
-    "phase_margin_deg", "gain_crossover", "delay_margin_s"}``: the gain and phase margins
-    of :math:`L(z) = -C(zI-A)^{-1}B` (:meth:`SampledLoop.broken_loop`) on the unit circle
-    :math:`z = e^{j\omega T_s}`, :math:`\omega` up to the Nyquist frequency
-    :math:`\pi/T_s` (crossings bracketed on a log grid, refined by
-    :func:`scipy.optimize.brentq`; headline margins chosen as the continuous ones: the gain
-    margin closest to 0 dB, the smallest phase margin; like them, distances at the
-    crossings); the delay margin the smallest transport delay that makes the loop
-    unstable (:meth:`SampledLoop.delay_margin`).  ``{"ts", "reason"}`` when there is no
-    linearisation.
+    Returns ``{"gain_margin_db", "phase_crossover", "phase_margin_deg", "gain_crossover",
+    "delay_margin_s"}`` (None where there is no crossing).
     """
     import math
 
     from scipy.optimize import brentq
 
-    ts = float(ts if ts is not None else (config.sampling.ts if config.sampling else config.dt))
-    loop = SampledLoop(config)
-    radius = loop.spectral_radius(ts)
-    if radius is None:
-        return {"ts": ts, "reason": loop.reason or "the sampled loop's matrix is not finite"}
-    a, b, c = loop.broken_loop(ts)
     eye = np.eye(a.shape[0])
 
     def at(w: float) -> complex:
@@ -398,7 +393,7 @@ def sampled_margins(config: Any, ts: float | None = None) -> dict[str, Any]:
     with np.errstate(divide="ignore", invalid="ignore"):
         w_gc = roots(lambda x: math.log(abs(at(x))), np.log(np.abs(lw)))
         w_pc = [x for x in roots(lambda x: at(x).imag, lw.imag) if at(x).real < 0]
-    gm_db = wpc = pm = wgc = None
+    gm_db = wpc = pm = wgc = dm = None
     if w_pc:
         gms = [-20.0 * math.log10(abs(at(x))) for x in w_pc]
         i = int(np.argmin(np.abs(gms)))
@@ -407,6 +402,43 @@ def sampled_margins(config: Any, ts: float | None = None) -> dict[str, Any]:
         pms = [float(np.remainder(np.angle(at(x), deg=True), 360.0) - 180.0) for x in w_gc]
         i = int(np.argmin(np.abs(pms)))
         pm, wgc = pms[i], w_gc[i]
+        dm = min(
+            math.radians(float(np.remainder(p, 360.0))) / x for p, x in zip(pms, w_gc, strict=True)
+        )
+    return {
+        "gain_margin_db": gm_db,
+        "phase_crossover": wpc,
+        "phase_margin_deg": pm,
+        "gain_crossover": wgc,
+        "delay_margin_s": dm,
+    }
+
+
+def sampled_margins(config: Any, ts: float | None = None) -> dict[str, Any]:
+    r"""The sampled loop's stability and margins at ``ts`` (default: the config's own
+    sample time), to stand beside the continuous loop's (:mod:`aiofl.analysis.frequency`).
+
+    Returns ``{"ts", "spectral_radius", "stable", "gain_margin_db", "phase_crossover",
+    "phase_margin_deg", "gain_crossover", "delay_margin_s"}``: the gain and phase margins
+    of :math:`L(z) = -C(zI-A)^{-1}B` (:meth:`SampledLoop.broken_loop`) on the unit circle
+    :math:`z = e^{j\omega T_s}`, :math:`\omega` up to the Nyquist frequency
+    :math:`\pi/T_s` (crossings bracketed on a log grid, refined by
+    :func:`scipy.optimize.brentq`; headline margins chosen as the continuous ones: the gain
+    margin closest to 0 dB, the smallest phase margin; like them, distances at the
+    crossings); the delay margin the smallest transport delay that makes the loop
+    unstable (:meth:`SampledLoop.delay_margin`).  ``{"ts", "reason"}`` when there is no
+    linearisation.
+    """
+    ts = float(ts if ts is not None else (config.sampling.ts if config.sampling else config.dt))
+    loop = SampledLoop(config)
+    radius = loop.spectral_radius(ts)
+    if radius is None:
+        return {"ts": ts, "reason": loop.reason or "the sampled loop's matrix is not finite"}
+    a, b, c = loop.broken_loop(ts)
+    m = unit_circle_margins(a, b, c, ts)
+    gm_db, wpc, pm, wgc = (
+        m[k] for k in ("gain_margin_db", "phase_crossover", "phase_margin_deg", "gain_crossover")
+    )
     dm = loop.delay_margin(ts)
     return {
         "ts": ts,

@@ -20,7 +20,12 @@
   estimate), the tracking orbit's Floquet multipliers (sine) or largest finite-time
   Lyapunov exponent (step, samples); ``--json`` adds ``"orbit": {"equilibrium",
   "limit_cycle": {"amplitude_y", "amplitude_u", "frequency", "describing"}, "floquet":
-  {"multipliers", "largest"}, "ftle", "verdict"}`` and ``"reconciled_verdict"``.
+  {"multipliers", "largest"}, "ftle", "verdict"}`` and ``"reconciled_verdict"``.  The
+  continuous loop's disk margin (``"disk_margin"``, ``"disk_gain_margin_db"``,
+  ``"disk_phase_margin_deg"``; :mod:`aiofl.analysis.loop_view`).  ``--loop-view`` adds the
+  margin rows of the loop continuous and sampled, with ``--lag`` (actuator lag) and
+  ``--measurement-delay`` (samples), disk margins and the noise in u (``"loop_view"``);
+  ``--two-dof`` a linear ADRC's C and F (:mod:`aiofl.analysis.two_dof`, ``"two_dof"``).
 
 sympy, numpy and the engine are imported inside the command, so registering it keeps
 ``aiofl --help`` fast.
@@ -30,7 +35,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any
 
 import typer
 
@@ -106,6 +111,41 @@ def analyze_command(
             "what it gave up.",
         ),
     ] = DEFAULT_BUDGET,
+    two_dof: Annotated[
+        bool,
+        typer.Option(
+            "--two-dof",
+            help="With --closed-loop: a linear ADRC's equivalent 2-DOF form u = F·r − C·y, "
+            "continuous and (if the config is sampled) discrete (aiofl.analysis.two_dof).",
+        ),
+    ] = False,
+    loop_view: Annotated[
+        bool,
+        typer.Option(
+            "--loop-view",
+            help="With --closed-loop: margins (classical and disk) and noise-to-u of the loop "
+            "continuous and as sampled, each row labelled with what it includes "
+            "(aiofl.analysis.loop_view); implied by --lag, --measurement-delay, --noise-std.",
+        ),
+    ] = False,
+    lag: Annotated[
+        float,
+        typer.Option("--lag", help="Actuator lag τ [s] in the loop-view rows (first order)."),
+    ] = 0.0,
+    measurement_delay: Annotated[
+        int,
+        typer.Option(
+            "--measurement-delay", help="Samples of measurement delay in the loop-view rows."
+        ),
+    ] = 0,
+    noise_std: Annotated[
+        float | None,
+        typer.Option(
+            "--noise-std",
+            help="Measurement noise σ per sample for the RMS of u (default: the config's "
+            "noise and ADC quantum, q/√12).",
+        ),
+    ] = None,
     force: Annotated[bool, FORCE_OPTION] = False,
 ) -> None:
     """Analyse a plant symbolically (Section III), a closed loop by linearisation, or the
@@ -145,6 +185,24 @@ def analyze_command(
         if r_op is not None and not math.isfinite(r_op):
             raise ValueError(f"--r-op = {r_op}; allowed: a finite number")
         _check_budget_option(budget)
+        want_view = loop_view or lag != 0.0 or measurement_delay != 0 or noise_std is not None
+        if (want_view or two_dof) and not closed_loop:
+            raise ValueError(
+                "--two-dof, --loop-view, --lag, --measurement-delay and --noise-std apply "
+                "only with --closed-loop"
+            )
+        if want_view:
+            from aiofl.analysis.loop_view import check_loop_options
+
+            try:
+                check_loop_options(lag, measurement_delay, noise_std)
+            except ValueError as exc:  # name the options as typed
+                raise ValueError(
+                    str(exc)
+                    .replace("delay_samples", "--measurement-delay")
+                    .replace("noise_std", "--noise-std")
+                    .replace("lag =", "--lag =")
+                ) from None
         if figure is not None:
             _check_figure_path(figure, closed_loop, force=force)
         if closed_loop:
@@ -191,6 +249,16 @@ def analyze_command(
 
                 info["margins_of"] = "the continuous loop (no sampling)"
                 info["sampled_loop"] = sampled_margins(cfg)
+            extra_lines = _loop_extras(
+                cfg,
+                lin,
+                info,
+                two_dof,
+                want_view and r_op is None,
+                lag,
+                measurement_delay,
+                noise_std,
+            )
             note = warnings_note(caught)
             if note is not None:
                 info["numerical_warnings"] = note
@@ -213,6 +281,8 @@ def analyze_command(
                 console.print(
                     terminal_text(format_linearization_text(lin, cfg.name, info), lines=True)
                 )
+                if extra_lines:
+                    console.print(terminal_text("\n".join(extra_lines), lines=True))
                 if "orbit" in info:
                     from aiofl.analysis.orbit import format_orbit_text
 
@@ -241,6 +311,77 @@ def analyze_command(
             typer.echo(terminal_text(format_analysis_latex(analysis), lines=True))
         else:
             console.print(terminal_text(format_analysis_text(analysis), lines=True))
+
+
+def _loop_extras(
+    cfg: Any,
+    lin: Any,
+    info: dict[str, Any],
+    two_dof: bool,
+    view: bool,
+    lag: float,
+    delay_samples: int,
+    noise_std: float | None,
+) -> list[str]:
+    """The disk margin of the continuous loop (always), the loop-view rows and the 2-DOF
+    form (when asked) into ``info``; returns their text lines."""
+    from aiofl.analysis.loop_view import (
+        continuous_disk_margin,
+        format_loop_view_text,
+        loop_view,
+    )
+
+    lines: list[str] = []
+    disk = continuous_disk_margin(lin)
+    info.update(disk)
+    if disk["disk_margin"] is not None:
+        lines.append(
+            f"  disk margin (continuous loop, skew 0): α = {disk['disk_margin']:.4g}, gain "
+            f"×/÷ {disk['disk_gain_margin_db']:.4g} dB and phase ± "
+            f"{disk['disk_phase_margin_deg']:.4g}° at once"
+        )
+    if view:
+        v = loop_view(
+            cfg, lag=lag, delay_samples=delay_samples, noise_std=noise_std, linearization=lin
+        )
+        info["loop_view"] = v
+        u_unit = f"{cfg.plant.input_unit} " if cfg.plant.input_unit else ""
+        lines += format_loop_view_text(v, cfg.plant.output_unit or "", u_unit)
+    if two_dof:
+        from aiofl.analysis.two_dof import format_two_dof_text, ladrc_two_dof
+
+        try:
+            forms = [ladrc_two_dof(cfg.controller)]
+            if cfg.sampling is not None:
+                forms.append(ladrc_two_dof(cfg.controller, cfg.sampling))
+        except ValueError as exc:
+            info["two_dof"] = {"reason": str(exc)}
+            lines.append(f"2-DOF form: not available: {exc}")
+        else:
+            info["two_dof"] = [_form_dict(f) for f in forms]
+            lines += format_two_dof_text(forms)
+    return lines
+
+
+def _form_dict(form: Any) -> dict[str, Any]:
+    """JSON of a :class:`aiofl.analysis.two_dof.TwoDof`: polynomial coefficients."""
+
+    def poly(tf: Any) -> dict[str, list[float]]:
+        return {
+            "num": [float(v) for v in tf.num[0][0]],
+            "den": [float(v) for v in tf.den[0][0]],
+        }
+
+    nr = len(form.reference_inputs)
+    return {
+        "label": form.label,
+        "dt": form.dt,
+        "C": poly(form.feedback),
+        "F": {
+            name: poly(form.prefilter if nr == 1 else form.prefilter[0, j])
+            for j, name in enumerate(form.reference_inputs)
+        },
+    }
 
 
 def _check_budget_option(budget: float) -> None:

@@ -87,8 +87,12 @@ def _margins(cfg: Any) -> tuple[list[tuple[str, str]], list[str]]:
     rows: list[tuple[str, str]] = []
     notes: list[str] = []
     cont = "continuous loop" + (" (the controller unsampled: a limit)" if cfg.sampling else "")
+    lin = None
     try:
-        v = closed_loop_verdict(cfg)
+        from aiofl.analysis.linearize import linearize_closed_loop
+
+        lin = linearize_closed_loop(cfg)
+        v = closed_loop_verdict(cfg, linearization=lin)
         rows += [
             (f"{cont}: verdict", str(v.get("verdict"))),
             (f"{cont}: gain margin [dB]", _fmt(v.get("gain_margin_db"))),
@@ -117,7 +121,43 @@ def _margins(cfg: Any) -> tuple[list[tuple[str, str]], list[str]]:
                 ]
         except Exception as exc:  # as above
             notes.append(f"sampled linearisation not computed ({type(exc).__name__}: {exc})")
+    if lin is not None:
+        rows += _loop_view_rows(cfg, lin, notes)
     return rows, notes
+
+
+def _loop_view_rows(cfg: Any, lin: Any, notes: list[str]) -> list[tuple[str, str]]:
+    """Disk margins and the noise in u of each loop-view row, labelled with what the row
+    includes (:mod:`aiofl.analysis.loop_view`)."""
+    from aiofl.analysis.loop_view import loop_view
+
+    out: list[tuple[str, str]] = []
+    try:
+        view = loop_view(cfg, linearization=lin)
+    except Exception as exc:  # as above
+        notes.append(f"disk margins not computed ({type(exc).__name__}: {exc})")
+        return out
+    unit = cfg.plant.input_unit or ""
+    for row in view["rows"]:
+        if "reason" in row or not row.get("stable"):
+            continue
+        lab = row["label"]
+        out.append(
+            (
+                f"{lab}: disk margin α (gain ±dB, phase ±deg)",
+                f"{_fmt(row['disk_margin'])} ({_fmt(row['disk_gain_margin_db'])} dB, "
+                f"{_fmt(row['disk_phase_margin_deg'])}°)",
+            )
+        )
+        nz = row.get("noise_to_u")
+        if nz is not None and nz.get("u_rms") is not None:
+            out.append(
+                (
+                    f"{lab}: RMS of u from the measurement noise ({view['noise_source']})",
+                    f"{_fmt(nz['u_rms'])} {unit}".strip(),
+                )
+            )
+    return out
 
 
 def _export_check(cfg: Any) -> tuple[list[tuple[str, str]], list[str]]:
