@@ -442,7 +442,7 @@ def omega0_ceiling(
             )
         )
     elif noise_variance > 0:
-        why = "a continuous controller" if ts is None else "no input scale"
+        why = "a continuous controller" if ts is None else (scale_label or "no input scale")
         caps.append(Cap("noise", math.nan, f"not computed: {why}", _NOISE_SOURCE))
     else:
         caps.append(Cap("noise", math.inf, "noise-free measurement: no noise cap", _NOISE_SOURCE))
@@ -470,19 +470,27 @@ def _input_scale(cfg: Any) -> tuple[float | None, str]:
         y_op = reference_operating_value(cfg.scenario.reference)
         u_op = float(trim(cfg.plant, y_op).u)
     except Exception:  # no equilibrium there: no scale to compare the noise with
-        return None, "no actuator limit and no operating point"
+        return None, (
+            "no actuator limit (law.u_max) and no operating point: no scale for the "
+            "command's noise (give u_scale)"
+        )
     if not math.isfinite(u_op) or u_op == 0.0:
-        return None, "no actuator limit and a zero holding input"
+        return None, (
+            f"no actuator limit (law.u_max) and a zero holding input at y = {y_op:g}: "
+            "no scale for the command's noise (give u_scale)"
+        )
     return abs(u_op), f"|u*| = {abs(u_op):.4g}, the input holding y = {y_op:g}"
 
 
-def config_ceiling(cfg: Any) -> Ceiling:
+def config_ceiling(cfg: Any, *, u_scale: float | None = None) -> Ceiling:
     """:func:`omega0_ceiling` for a run config (:class:`aiofl.config.RunConfig`): ρ, b0,
     α, ω0/ω_c and the feedback count from its controller, Ts and the computation delay
     from ``[controller.discrete]``, the measurement noise per sample from its sensor
     (:func:`aiofl.components.kalman.measurement_noise_intensity` / Ts), the loop delay from
-    the scenario, the input's scale from ``law.u_max``/``u_min`` or the trim.  The noise
-    cap needs a linear ESO and a linear SEF (it is reported as not computed otherwise)."""
+    the scenario, the input's scale ``u_scale`` if given, else from ``law.u_max``/``u_min``
+    or the trim.  The noise cap needs a linear ESO and a linear SEF (it is reported as not
+    computed otherwise); a model-assisted observer (``eso.model = "nominal"``) is taken as
+    the model-free one of the same ω0 (noted)."""
     from aiofl.components.kalman import measurement_noise_intensity
 
     ctl = cfg.controller
@@ -515,11 +523,21 @@ def config_ceiling(cfg: Any) -> Ceiling:
             "n_feedback": int(ctl.n_feedback) if ctl.n_feedback is not None else rho,
         }
         if var > 0:
-            scale, label = _input_scale(cfg)
-            notes.append(
-                f"noise cap at the design's omega0/omega_c = {w0 / wc:.3g}, b0 = "
-                f"{float(ctl.value('law.b0')):.4g}, R_d = {var:.3g} per sample"
-            )
+            if u_scale is not None:
+                _positive("u_scale", u_scale)
+                scale, label = float(u_scale), "the given input scale"
+            else:
+                scale, label = _input_scale(cfg)
+            if ctl.eso_model != "none":
+                notes.append(
+                    "model-assisted observer: the noise cap is the model-free ESO's of the "
+                    "same omega0 (its gains differ by the nominal model's Jacobian)"
+                )
+            if scale is not None:
+                notes.append(
+                    f"noise cap at the design's omega0/omega_c = {w0 / wc:.3g}, b0 = "
+                    f"{float(ctl.value('law.b0')):.4g}, R_d = {var:.3g} per sample"
+                )
     ceiling = omega0_ceiling(
         rho=rho,
         b0=float(ctl.value("law.b0")),
