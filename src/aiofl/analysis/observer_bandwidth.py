@@ -88,7 +88,7 @@ DELAY_PRODUCT = 0.3
 #: the largest command noise (standard deviation), as a fraction of the input's scale
 NOISE_FRACTION = 0.05
 #: the lowest ω0·Ts the noise cap searches down to
-_LOWEST_OMEGA0_TS = 1e-6
+_LOWEST_OMEGA0_TS = 1e-4
 
 
 @dataclass(frozen=True)
@@ -216,9 +216,10 @@ def delay_cap(delay: float, *, told: bool = False) -> Cap:
     return Cap("delay", DELAY_PRODUCT / delay, rule, _DELAY_SOURCE)
 
 
-def _positive(name: str, value: float) -> None:
+def _positive(name: str, value: float) -> float:
     if isinstance(value, bool) or not (math.isfinite(value) and value > 0):
         raise ValueError(f"{name} = {value!r}; allowed: a finite number > 0")
+    return float(value)
 
 
 def _feedback_row(rho: int, b0: float, omega_c: float, n_feedback: int) -> NDArray[np.float64]:
@@ -254,16 +255,19 @@ def noise_gain(
     ts: float,
     *,
     ratio: float = OBSERVER_RATIO,
+    omega_c: float | None = None,
     alphas: ArrayLike | None = None,
     n_feedback: int | None = None,
 ) -> float:
     r""":math:`|FL|`: the LADRC's command change per unit of measurement at the same sample
     (its high-frequency gain), L the exact-ZOH current observer's gain
     (:func:`aiofl.components.discrete.current_observer_gain`), F the law's gains on
-    :math:`\hat\xi` with :math:`\omega_c = \omega_0/` ``ratio``."""
+    :math:`\hat\xi` with :math:`\omega_c = \omega_0/` ``ratio`` (or ``omega_c`` held
+    fixed when given, as in every function here)."""
     _check_design(rho, b0, omega0, ts, ratio)
     gain = _observer_gain(rho, omega0, ts, alphas)
-    f = _feedback_row(rho, b0, omega0 / ratio, rho if n_feedback is None else n_feedback)
+    wc = omega0 / ratio if omega_c is None else _positive("omega_c", omega_c)
+    f = _feedback_row(rho, b0, wc, rho if n_feedback is None else n_feedback)
     return abs(float(f @ gain))
 
 
@@ -274,6 +278,7 @@ def noise_loop(
     ts: float,
     *,
     ratio: float = OBSERVER_RATIO,
+    omega_c: float | None = None,
     alphas: ArrayLike | None = None,
     n_feedback: int | None = None,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], float]:
@@ -296,7 +301,8 @@ def noise_loop(
     _check_design(rho, b0, omega0, ts, ratio)
     phi, gam = eso_zoh(rho, b0, ts)
     el = _observer_gain(rho, omega0, ts, alphas)
-    f = _feedback_row(rho, b0, omega0 / ratio, rho if n_feedback is None else n_feedback)
+    wc = omega0 / ratio if omega_c is None else _positive("omega_c", omega_c)
+    f = _feedback_row(rho, b0, wc, rho if n_feedback is None else n_feedback)
     n = rho + 1
     c = np.eye(1, n)[0]
     m = np.eye(n) - np.outer(el, c)
@@ -321,6 +327,7 @@ def noise_rms_gain(
     ts: float,
     *,
     ratio: float = OBSERVER_RATIO,
+    omega_c: float | None = None,
     alphas: ArrayLike | None = None,
     n_feedback: int | None = None,
 ) -> float:
@@ -329,11 +336,15 @@ def noise_rms_gain(
     a white measurement noise.  ``inf`` when the loop is not stable (spectral radius >= 1)."""
     from scipy.linalg import solve_discrete_lyapunov
 
-    a, b, c, d = noise_loop(rho, b0, omega0, ts, ratio=ratio, alphas=alphas, n_feedback=n_feedback)
+    a, b, c, d = noise_loop(
+        rho, b0, omega0, ts, ratio=ratio, omega_c=omega_c, alphas=alphas, n_feedback=n_feedback
+    )
     if not np.all(np.isfinite(a)) or np.max(np.abs(np.linalg.eigvals(a))) >= 1.0 - 1e-12:
         return math.inf
-    # in the scaled coordinates t^(i-1) x_i, t^(i-1) p_i (t = 1/omega0) entries are O(1)
-    unit = ts / min(omega0 * ts, 1.0)  # 1/omega0, or Ts when omega0 Ts > 1
+    # in the scaled coordinates t^(i-1) x_i, t^(i-1) p_i (t = 1/max(omega0, omega_c), or
+    # Ts when that is shorter) the entries are of order one
+    fastest = max(omega0, omega0 / ratio if omega_c is None else omega_c)
+    unit = ts / min(fastest * ts, 1.0)
     scale = unit ** np.concatenate([np.arange(rho), np.arange(rho + 1)], dtype=np.float64)
     a_s = a * scale[:, None] / scale[None, :]
     b_s, c_s = b * scale, c / scale
@@ -372,13 +383,15 @@ def noise_cap(
     u_scale: float,
     scale_label: str = "the input's scale",
     ratio: float = OBSERVER_RATIO,
+    omega_c: float | None = None,
     alphas: ArrayLike | None = None,
     n_feedback: int | None = None,
     upper: float | None = None,
 ) -> Cap:
     r"""The largest ω0 with :math:`\sqrt{R_d}\lVert T_{nu}\rVert_2 \le`
     :data:`NOISE_FRACTION` · ``u_scale`` (module notes), searched over
-    :math:`[10^{-6}/T_s,` ``upper`` :math:`]` (default :math:`\pi/T_s`).  ``inf`` for a
+    :math:`[\max(10^{-4}/T_s, \omega_c),` ``upper`` :math:`]` (default :math:`\pi/T_s`;
+    :math:`\omega_c` only when held).  ``inf`` for a
     noise-free measurement."""
     _positive("ts", ts)
     if not (math.isfinite(noise_variance) and noise_variance >= 0):
@@ -389,11 +402,12 @@ def noise_cap(
     sigma = math.sqrt(noise_variance)
     budget = NOISE_FRACTION * u_scale
     hi = math.pi / ts if upper is None else float(upper)
-    lo = _LOWEST_OMEGA0_TS / ts
+    # the floor: ω0 Ts = 1e-4, and with ω_c held no observer slower than the loop
+    lo = max(_LOWEST_OMEGA0_TS / ts, omega_c or 0.0)
 
     def std_u(w0: float) -> float:
         return sigma * noise_rms_gain(
-            rho, b0, w0, ts, ratio=ratio, alphas=alphas, n_feedback=n_feedback
+            rho, b0, w0, ts, ratio=ratio, omega_c=omega_c, alphas=alphas, n_feedback=n_feedback
         )
 
     w, how = largest_omega0(std_u, budget, lo, min(hi, math.pi / ts))
@@ -404,7 +418,8 @@ def noise_cap(
     if how == "not binding":
         return Cap("noise", math.inf, rule + f"; met up to omega0 = {w:.4g}", _NOISE_SOURCE)
     if how == "exceeded":
-        rule += f"; exceeded already at omega0 = {w:.3g} ({_LOWEST_OMEGA0_TS:g}/Ts)"
+        floor = "omega_c" if omega_c and w == omega_c else f"{_LOWEST_OMEGA0_TS:g}/Ts"
+        rule += f"; exceeded already at omega0 = {w:.3g} rad/s ({floor}, the search's floor)"
     return Cap("noise", w, rule, _NOISE_SOURCE)
 
 
@@ -418,6 +433,7 @@ def omega0_ceiling(
     u_scale: float | None = None,
     scale_label: str = "the input's scale",
     ratio: float = OBSERVER_RATIO,
+    omega_c: float | None = None,
     alphas: ArrayLike | None = None,
     n_feedback: int | None = None,
     told: bool = False,
@@ -437,6 +453,7 @@ def omega0_ceiling(
                 u_scale=u_scale,
                 scale_label=scale_label,
                 ratio=ratio,
+                omega_c=omega_c,
                 alphas=alphas,
                 n_feedback=n_feedback,
             )
@@ -482,22 +499,25 @@ def _input_scale(cfg: Any) -> tuple[float | None, str]:
     return abs(u_op), f"|u*| = {abs(u_op):.4g}, the input holding y = {y_op:g}"
 
 
-def config_ceiling(cfg: Any, *, u_scale: float | None = None) -> Ceiling:
+def config_ceiling(
+    cfg: Any, *, u_scale: float | None = None, hold_omega_c: bool = False
+) -> Ceiling:
     """:func:`omega0_ceiling` for a run config (:class:`aiofl.config.RunConfig`): ρ, b0,
     α, ω0/ω_c and the feedback count from its controller, Ts and the computation delay
     from ``[controller.discrete]``, the measurement noise per sample from its sensor
     (:func:`aiofl.components.kalman.measurement_noise_intensity` / Ts), the loop delay from
     the scenario, the input's scale ``u_scale`` if given, else from ``law.u_max``/``u_min``
     or the trim.  The noise cap needs a linear ESO and a linear SEF (it is reported as not
-    computed otherwise); a model-assisted observer (``eso.model = "nominal"``) is taken as
-    the model-free one of the same ω0 (noted)."""
+    computed otherwise); it scans ω0 at the design's ratio ω0/ω_c, or with ``hold_omega_c``
+    at the design's ω_c (a search that tunes ω0 alone); a model-assisted observer
+    (``eso.model = "nominal"``) is taken as the model-free one of the same ω0 (noted)."""
     from aiofl.components.kalman import measurement_noise_intensity
 
     ctl = cfg.controller
     rho = int(ctl.rho)
     ts = None if cfg.sampling is None else float(cfg.sampling.ts)
     notes: list[str] = []
-    told = bool(ctl.value("eso.delay")) if "eso.delay" in _float_names() else False
+    told = bool(ctl.value("eso.delay"))
     tau = _loop_delay(cfg)
     var = 0.0
     if ts is not None:
@@ -519,6 +539,7 @@ def config_ceiling(cfg: Any, *, u_scale: float | None = None) -> Ceiling:
         wc = float(ctl.value("sef.omega_c"))
         kwargs = {
             "ratio": w0 / wc,
+            "omega_c": wc if hold_omega_c else None,
             "alphas": [float(ctl.value(f"eso.alpha{i}")) for i in range(1, rho + 2)],
             "n_feedback": int(ctl.n_feedback) if ctl.n_feedback is not None else rho,
         }
@@ -535,8 +556,12 @@ def config_ceiling(cfg: Any, *, u_scale: float | None = None) -> Ceiling:
                 )
             if scale is not None:
                 notes.append(
-                    f"noise cap at the design's omega0/omega_c = {w0 / wc:.3g}, b0 = "
-                    f"{float(ctl.value('law.b0')):.4g}, R_d = {var:.3g} per sample"
+                    (
+                        f"noise cap at the design's omega_c = {wc:.4g} rad/s, b0 = "
+                        if hold_omega_c
+                        else f"noise cap at the design's omega0/omega_c = {w0 / wc:.3g}, b0 = "
+                    )
+                    + f"{float(ctl.value('law.b0')):.4g}, R_d = {var:.3g} per sample"
                 )
     ceiling = omega0_ceiling(
         rho=rho,
@@ -559,9 +584,3 @@ def config_ceiling(cfg: Any, *, u_scale: float | None = None) -> Ceiling:
         )
         ceiling = Ceiling(caps, ceiling.notes)
     return ceiling
-
-
-def _float_names() -> Sequence[str]:
-    from aiofl import layout as L
-
-    return tuple(L.FLOAT_COLUMNS)

@@ -214,6 +214,7 @@ class _Prepared:
     source: str
     objectives: tuple[Any, ...] = ()  # nsga2: parsed Quantity objects
     constraints: tuple[Any, ...] = ()  # nsga2: parsed Constraint objects
+    notes: tuple[str, ...] = ()  # what preparing changed (tune.omega0_ceiling)
 
 
 def _check_parameters(cfg: RunConfig, settings: TuneSettings) -> None:
@@ -276,6 +277,9 @@ def prepare(
     overrides = {k: v for k, v in overrides.items() if v is not None}
     st = parse_tune_settings({**st.model_dump(exclude_none=True), **overrides})
     st = st.with_horizon(cfg.scenario.t_final, source)  # t_final: the scenario's by default
+    from aiofl.tuning.ceiling import clip_to_ceiling
+
+    st, ceiling_note = clip_to_ceiling(cfg, st, source)  # tune.omega0_ceiling
     _check_parameters(cfg, st)
     try:  # the tuning horizon's size, before any member is allocated
         check_run_size(
@@ -349,7 +353,17 @@ def prepare(
     }
     fingerprint = hashlib.sha256(json.dumps(fp_data, sort_keys=True).encode()).hexdigest()
     return _Prepared(
-        cfg, st, space, spec, coeffs, initial, fingerprint, source, objectives, constraints
+        cfg,
+        st,
+        space,
+        spec,
+        coeffs,
+        initial,
+        fingerprint,
+        source,
+        objectives,
+        constraints,
+        (ceiling_note,) if ceiling_note else (),
     )
 
 
