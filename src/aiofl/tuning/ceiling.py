@@ -29,15 +29,15 @@ _NAME = "eso.omega0"
 
 def clip_to_ceiling(
     cfg: RunConfig, settings: TuneSettings, source: str = ""
-) -> tuple[TuneSettings, str | None]:
+) -> tuple[TuneSettings, tuple[str, ...]]:
     """``settings`` with ``eso.omega0``'s upper bound clipped to the config's ω0 ceiling,
-    and the sentence saying so (None when ``omega0_ceiling`` is off).  Raises
+    and the sentence saying so (none when ``omega0_ceiling`` is off).  Raises
     :class:`aiofl.config.ConfigError` naming ``tune.omega0_ceiling`` when it cannot apply."""
     from aiofl.analysis.observer_bandwidth import config_ceiling
     from aiofl.config import ConfigError
 
     if not settings.omega0_ceiling:
-        return settings, None
+        return settings, ()
     where = f"invalid [tune]{' of ' + source if source else ''}: tune.omega0_ceiling = true"
     bounds = settings.parameters.get(_NAME)
     if bounds is None:
@@ -51,13 +51,13 @@ def clip_to_ceiling(
     if cap is None:
         return settings, (
             f"omega0 ceiling: no cap applies (continuous, no delay, noise-free); "
-            f'"{_NAME}" bounds kept [{bounds.lo:g}, {bounds.hi:g}] rad/s'
+            f'"{_NAME}" bounds kept [{bounds.lo:g}, {bounds.hi:g}] rad/s',
         )
     w = cap.omega0
     if w >= bounds.hi:
         return settings, (
             f'omega0 ceiling {w:.4g} rad/s ({cap.name}) is above "{_NAME}".hi = {bounds.hi:g}: '
-            "bounds kept"
+            "bounds kept",
         )
     if not w > bounds.lo:
         raise ConfigError(
@@ -71,4 +71,4 @@ def clip_to_ceiling(
         f"{cap.name} cap ({cap.rule})"
     )
     assert math.isfinite(w)
-    return settings.model_copy(update={"parameters": params}), note
+    return settings.model_copy(update={"parameters": params}), (note,)

@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
+from aiofl.tuning.ceiling import clip_to_ceiling
 from aiofl.tuning.checkpoint import (
     CHECKPOINT,
     CHECKPOINT_FORMAT,
@@ -277,9 +278,7 @@ def prepare(
     overrides = {k: v for k, v in overrides.items() if v is not None}
     st = parse_tune_settings({**st.model_dump(exclude_none=True), **overrides})
     st = st.with_horizon(cfg.scenario.t_final, source)  # t_final: the scenario's by default
-    from aiofl.tuning.ceiling import clip_to_ceiling
-
-    st, ceiling_note = clip_to_ceiling(cfg, st, source)  # tune.omega0_ceiling
+    st, notes = clip_to_ceiling(cfg, st, source)  # tune.omega0_ceiling: eso.omega0's hi
     _check_parameters(cfg, st)
     try:  # the tuning horizon's size, before any member is allocated
         check_run_size(
@@ -353,17 +352,7 @@ def prepare(
     }
     fingerprint = hashlib.sha256(json.dumps(fp_data, sort_keys=True).encode()).hexdigest()
     return _Prepared(
-        cfg,
-        st,
-        space,
-        spec,
-        coeffs,
-        initial,
-        fingerprint,
-        source,
-        objectives,
-        constraints,
-        (ceiling_note,) if ceiling_note else (),
+        cfg, st, space, spec, coeffs, initial, fingerprint, source, objectives, constraints, notes
     )
 
 
