@@ -221,3 +221,18 @@ def test_tune_clips_the_omega0_bound(config_path):
     bad.write_text(text)
     res = runner.invoke(app, ["tune", str(bad), "--check", "--omega0-ceiling"])
     assert res.exit_code == 2 and "omega0_ceiling" in res.output
+
+
+def test_config_delay_cap_counts_the_loop_delay(config_path):
+    """tau = the scenario's input + output delay, plus Ts with a one-sample computation
+    delay: 1 ms + 0.5 ms + 1 ms -> omega0 <= 0.3 / 2.5 ms = 120 rad/s."""
+    from aiofl.config import load_config
+
+    text = config_path.read_text()
+    text = text.replace("noise_hold = 1e-3", "noise_hold = 1e-3\ninput_delay = 1e-3")
+    text = text.replace("noise_hold = 1e-3", "noise_hold = 1e-3\noutput_delay = 5e-4", 1)
+    text = text.replace("ts = 1e-3\n", "ts = 1e-3\ndelay = 1\n", 1)
+    path = config_path.with_name("delayed.toml")
+    path.write_text(text)
+    delay = ob.config_ceiling(load_config(str(path))).caps[1]
+    assert delay.name == "delay" and delay.omega0 == pytest.approx(0.3 / 2.5e-3, rel=1e-12)
