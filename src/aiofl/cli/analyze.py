@@ -146,6 +146,23 @@ def analyze_command(
             "noise and ADC quantum, q/√12).",
         ),
     ] = None,
+    ceiling: Annotated[
+        bool,
+        typer.Option(
+            "--ceiling",
+            help="Only the observer bandwidth ceiling of a config: the caps on omega0 from "
+            "the sample time, the loop delay and the sensor's noise, and the binding one "
+            "(aiofl.analysis.observer_bandwidth); --closed-loop prints it too.",
+        ),
+    ] = False,
+    u_scale: Annotated[
+        float | None,
+        typer.Option(
+            "--u-scale",
+            help="The command scale the noise cap compares the command's noise with "
+            "(default: the actuator's half-range, else |u| holding the operating point).",
+        ),
+    ] = None,
     force: Annotated[bool, FORCE_OPTION] = False,
 ) -> None:
     """Analyse a plant symbolically (Section III), a closed loop by linearisation, or the
@@ -159,6 +176,9 @@ def analyze_command(
     from aiofl.cli.errors import bad_input_exits
     from aiofl.text import terminal_text
 
+    if ceiling:
+        _print_ceiling(target, u_scale, as_json=as_json, alone=True)
+        return
     if sampling:
         from aiofl.cli.sampling import run_sampling
 
@@ -244,6 +264,10 @@ def analyze_command(
 
                 info["orbit"] = orbit_analysis(cfg, info, unit=cfg.plant.output_unit, budget=budget)
                 info["reconciled_verdict"] = info["orbit"]["verdict"]
+            if as_json:  # the observer bandwidth ceiling (aiofl.analysis.observer_bandwidth)
+                from aiofl.analysis.observer_bandwidth import config_ceiling
+
+                info["omega0_ceiling"] = config_ceiling(cfg, u_scale=u_scale).to_dict()
             if cfg.sampling is not None and r_op is None:  # the loop as it runs, labelled
                 from aiofl.analysis.sampled_loop import sampled_margins
 
@@ -289,6 +313,8 @@ def analyze_command(
                     console.print(terminal_text(format_orbit_text(info["orbit"]), lines=True))
                 if note is not None:
                     typer.echo(f"aiofl: note: {note}", err=True)
+            if not as_json:
+                _print_ceiling(target, u_scale, as_json=False, alone=False)
             return
         if r_op is not None:
             raise ValueError("--r-op applies only with --closed-loop")
@@ -382,6 +408,28 @@ def _form_dict(form: Any) -> dict[str, Any]:
             for j, name in enumerate(form.reference_inputs)
         },
     }
+
+
+def _print_ceiling(target: str, u_scale: float | None, *, as_json: bool, alone: bool) -> None:
+    """Print the observer bandwidth ceiling of a run config (text or JSON); with
+    ``alone`` the config is loaded here (bad input: exit 2)."""
+    import json
+
+    from aiofl.analysis.observer_bandwidth import config_ceiling
+    from aiofl.cli.configs import load_run_config
+    from aiofl.cli.errors import bad_input_exits
+    from aiofl.text import terminal_text
+
+    with bad_input_exits():
+        if u_scale is not None and not (math.isfinite(u_scale) and u_scale > 0):
+            raise ValueError(f"--u-scale = {u_scale}; allowed: a finite number > 0")
+        cfg = load_run_config(target)
+        result = config_ceiling(cfg, u_scale=u_scale)
+    if as_json:
+        typer.echo(json.dumps(result.to_dict(), indent=2))
+        return
+    text = result.format_text(cfg.controller.value("eso.omega0"))
+    typer.echo(terminal_text(("" if alone else "\n") + text, lines=True))
 
 
 def _check_budget_option(budget: float) -> None:

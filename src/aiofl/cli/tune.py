@@ -72,6 +72,14 @@ def tune_command(
         ),
     ] = None,
     sensor: Annotated[str | None, SENSOR_OPTION] = None,
+    omega0_ceiling: Annotated[
+        bool,
+        typer.Option(
+            "--omega0-ceiling",
+            help="Clip eso.omega0's upper search bound to the rig's observer bandwidth "
+            "ceiling (sample time, loop delay, sensor noise; as tune.omega0_ceiling = true).",
+        ),
+    ] = False,
     force: Annotated[bool, FORCE_OPTION] = False,
 ) -> None:
     """Tune a controller's parameters per the config's [tune] table (pymoo: GA, DE, CMA-ES
@@ -113,13 +121,23 @@ def tune_command(
                 target = target.with_sensor(sensor, source=f"{config} with --sensor {sensor}")
             if ts is not None:
                 target = target.with_sample_time(ts)
-        prep = prepare(target, None, seed=seed, generations=generations, population=population)
+        ceiling = True if omega0_ceiling else None  # None: the [tune] table's setting
+        prep = prepare(
+            target,
+            None,
+            seed=seed,
+            generations=generations,
+            population=population,
+            omega0_ceiling=ceiling,
+        )
         if resume and out is not None and (out / CHECKPOINT).exists():
             load_checkpoint(out / CHECKPOINT, prep.fingerprint)  # a damaged one: exit 2 now
         elif resume:
             typer.echo(f"aiofl: no checkpoint in {out}; starting from scratch", err=True)
     if check or out is None:
         typer.echo(f"{config}: valid; {check_text(prep)}; nothing run or written")
+        for note in prep.notes:  # what preparing changed (the omega0 ceiling)
+            typer.echo(f"aiofl: note: {note}")
         return
     found = (out.exists(), (out / CHECKPOINT).exists())  # what this run leaves is its own
     with bad_input_exits(run=True):
@@ -134,6 +152,7 @@ def tune_command(
                 seed=seed,
                 generations=generations,
                 population=population,
+                omega0_ceiling=ceiling,
             )
         except KeyboardInterrupt:
             typer.echo(
@@ -151,6 +170,8 @@ def tune_command(
     for warning in summary.get("warnings", []):
         typer.echo(f"aiofl: warning: {warning}", err=True)
     typer.echo(summary_text(result, summary, out))
+    for note in prep.notes:  # the search bounds it ran with (the omega0 ceiling)
+        typer.echo(f"search: {note}")
 
 
 def check_text(prep: Any) -> str:

@@ -11,7 +11,8 @@ noise beyond it (``scenario.noise_variance``).  The config names the plant file
 side (the default name is :data:`CHAIN_PLANT_FILE`).  A Coulomb friction the fit found is
 left out of the plant file (its discontinuity needs a tiny step) and named in a comment.
 
-The bandwidths, each capped by what the log shows:
+The bandwidths, each capped by what the log shows (the rules live in
+:mod:`aiofl.analysis.observer_bandwidth`, which ``aiofl analyze`` and ``aiofl tune`` use too):
 
 - **Sampling**: :math:`\omega_0 T_s \le` :data:`~aiofl.analysis.first_design.MAX_OMEGA0_TS`
   (the discrete ESO's poles :math:`e^{-\omega_0T_s}`, Miklosovic, Radke & Gao, ACC 2006;
@@ -33,7 +34,8 @@ The bandwidths, each capped by what the log shows:
   written as a transfer function (Herbst, "Transfer function analysis and implementation
   of active disturbance rejection control", Control Theory Technol. 19, 2021), which grows
   as :math:`\omega_0^{\rho+1}`; the fraction is this project's choice.  The largest ω0
-  meeting it is found by bisection.
+  meeting it is found by Brent's method
+  (:func:`aiofl.analysis.observer_bandwidth.largest_omega0`).
 - **ω_c** = ω0 / :data:`~aiofl.analysis.first_design.OBSERVER_RATIO` (Gao, "Scaling and
   bandwidth-parameterization based controller tuning", ACC 2003: ω0 = 3–10 ω_c).
 
@@ -49,9 +51,13 @@ from typing import Any
 import numpy as np
 
 from aiofl.analysis.first_design import MAX_OMEGA0_TS, OBSERVER_RATIO
-from aiofl.components.discrete import current_observer_gain, eso_continuous_poles
-from aiofl.components.fastmath import binomial_power
-from aiofl.components.observers import binomial_alphas
+from aiofl.analysis.observer_bandwidth import (
+    DELAY_PRODUCT,
+    delay_cap,
+    largest_omega0,
+    noise_gain,
+    sampling_cap,
+)
 from aiofl.identification.chain import ChainEstimate
 from aiofl.identification.log import Log
 
@@ -67,30 +73,25 @@ __all__ = [
 
 #: the plant file's default name, beside the config
 CHAIN_PLANT_FILE = "identified-chain.toml"
-#: the largest ω0·τ (rad of phase the delay costs the observer at its bandwidth)
-DELAY_PRODUCT = 0.3
-#: the largest command noise, as a fraction of the log's input half-range
+#: the largest command noise, as a fraction of the log's input half-range (|F L| measure)
 NOISE_FRACTION = 0.05
 #: the step of the check scenario, as a fraction of the log's output range
 STEP_FRACTION = 0.1
 
 
-def noise_gain(rho: int, b0: float, omega0: float, ts: float) -> float:
-    """|F L|: the LADRC's command change per unit of measurement at the same sample
-    (module notes), with ω_c = ω0 / OBSERVER_RATIO."""
-    wc = omega0 / OBSERVER_RATIO
-    gain = current_observer_gain(rho, ts, eso_continuous_poles(binomial_alphas(rho), omega0))
-    f = np.array([binomial_power(rho, i, wc) for i in range(rho)] + [1.0]) / b0
-    return abs(float(f @ gain))
-
-
 def omega0_rules(estimate: ChainEstimate, log: Log) -> tuple[float, list[str]]:
-    """The observer bandwidth the three caps allow (module notes) and why, one line each."""
+    """The observer bandwidth the three caps allow (module notes) and why, one line each.
+
+    The sampling and delay caps are :func:`aiofl.analysis.observer_bandwidth.sampling_cap`
+    and :func:`~aiofl.analysis.observer_bandwidth.delay_cap`; the noise cap bounds the
+    per-sample gain :func:`~aiofl.analysis.observer_bandwidth.noise_gain` (``|F L|``)
+    times the log's noise level, its largest ω0 found by
+    :func:`~aiofl.analysis.observer_bandwidth.largest_omega0` (Brent's method)."""
     ts = log.ts
-    caps = {"sampling": MAX_OMEGA0_TS / ts}
+    caps = {"sampling": sampling_cap(ts).omega0}
     notes = [f"sampling: omega0 <= {MAX_OMEGA0_TS:g}/Ts = {caps['sampling']:.4g} rad/s"]
     if estimate.delay > 0:
-        caps["delay"] = DELAY_PRODUCT / estimate.delay
+        caps["delay"] = delay_cap(estimate.delay).omega0
         notes.append(
             f"delay: omega0 <= {DELAY_PRODUCT:g}/tau = {DELAY_PRODUCT:g}/{estimate.delay:.4g} s "
             f"= {caps['delay']:.4g} rad/s"
@@ -98,17 +99,10 @@ def omega0_rules(estimate: ChainEstimate, log: Log) -> tuple[float, list[str]]:
     half = 0.5 * float(np.ptp(log.u))
     budget = NOISE_FRACTION * half
     if estimate.noise_std > 0 and half > 0:
-        lo, hi = 1e-6 / ts, caps["sampling"]
-        if noise_gain(estimate.rho, estimate.b0, hi, ts) * estimate.noise_std <= budget:
-            caps["noise"] = hi
-        else:
-            for _ in range(60):  # bisection in log ω0: the gain grows with ω0
-                mid = math.sqrt(lo * hi)
-                if noise_gain(estimate.rho, estimate.b0, mid, ts) * estimate.noise_std <= budget:
-                    lo = mid
-                else:
-                    hi = mid
-            caps["noise"] = lo
+        rho, b0, std = estimate.rho, estimate.b0, estimate.noise_std
+        caps["noise"], _ = largest_omega0(
+            lambda w: noise_gain(rho, b0, w, ts) * std, budget, 1e-6 / ts, caps["sampling"]
+        )
         notes.append(
             f"noise: |F L| noise_std <= {NOISE_FRACTION:g} x {half:.4g} (input half-range), "
             f"noise_std = {estimate.noise_std:.3g}: omega0 <= {caps['noise']:.4g} rad/s"

@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
+from aiofl.tuning.ceiling import clip_to_ceiling
 from aiofl.tuning.checkpoint import (
     CHECKPOINT,
     CHECKPOINT_FORMAT,
@@ -214,6 +215,7 @@ class _Prepared:
     source: str
     objectives: tuple[Any, ...] = ()  # nsga2: parsed Quantity objects
     constraints: tuple[Any, ...] = ()  # nsga2: parsed Constraint objects
+    notes: tuple[str, ...] = ()  # what preparing changed (tune.omega0_ceiling)
 
 
 def _check_parameters(cfg: RunConfig, settings: TuneSettings) -> None:
@@ -276,6 +278,7 @@ def prepare(
     overrides = {k: v for k, v in overrides.items() if v is not None}
     st = parse_tune_settings({**st.model_dump(exclude_none=True), **overrides})
     st = st.with_horizon(cfg.scenario.t_final, source)  # t_final: the scenario's by default
+    st, notes = clip_to_ceiling(cfg, st, source)  # tune.omega0_ceiling: eso.omega0's hi
     _check_parameters(cfg, st)
     try:  # the tuning horizon's size, before any member is allocated
         check_run_size(
@@ -349,7 +352,7 @@ def prepare(
     }
     fingerprint = hashlib.sha256(json.dumps(fp_data, sort_keys=True).encode()).hexdigest()
     return _Prepared(
-        cfg, st, space, spec, coeffs, initial, fingerprint, source, objectives, constraints
+        cfg, st, space, spec, coeffs, initial, fingerprint, source, objectives, constraints, notes
     )
 
 

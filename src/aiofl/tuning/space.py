@@ -13,6 +13,8 @@ r"""The ``[tune]`` table: settings, search space, objective, and writing a tuned
     robust = { draws = 16, aggregate = "cvar", alpha = 0.9, corners = true }  # optional;
                               # needs [uncertainty]; corners: also the 2^k box corners
     noise_realisations = 1    # K > 1: a noisy measurement scored over K noise realisations
+    omega0_ceiling = false    # true: eso.omega0's hi clipped to the rig's omega0 ceiling
+                              # (aiofl.tuning.ceiling; aiofl tune --omega0-ceiling)
     # nsga2 only: objectives (2 or 3) and constraints, see aiofl.tuning.robust
     # objectives = ["itae", "isu"]          # METRIC or METRIC:AGGREGATE
     # constraints = ["isu <= 15.5", "stable_fraction >= 1"]
@@ -153,6 +155,7 @@ class TuneSettings(_Model):
     objectives: list[str] | None = None
     constraints: list[str] = Field(default_factory=list, max_length=16)
     choose: Literal["best-first-under-constraints", "knee"] = "best-first-under-constraints"
+    omega0_ceiling: bool = False
 
     @field_validator("objectives")
     @classmethod
