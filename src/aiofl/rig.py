@@ -50,10 +50,14 @@ the controller is not told, it still designs for the bare plant):
 
 **Presets** (:data:`RIG_PRESETS`): ``"ideal"`` adds nothing; ``"servo-1khz"`` is a 1 kHz
 servo rig: the ``encoder-12bit`` sensor (Ts = 1 ms, quantum 2π/4096), one sample of
-measurement delay (1 ms), a 1 ms first-order actuator lag and Coulomb friction of 1 % of a
-±10 (V) amplifier's full scale, :math:`F_c` = 0.1 input units, smoothed over
-:math:`\varepsilon` = 1e-3 (rad/s for the SLFJM's hub rate).  Friction needs the name of
-the velocity state, which no preset can know: give ``friction_state``.
+measurement delay (1 ms), a 1 ms first-order actuator lag and Coulomb friction
+:math:`F_c` = 0.01 input units, i.e. 1 % of a unit input (1 V for the SLFJM: 2.1 mN·m at
+the hub, 0.87 % of its gravity torque :math:`m g h` = 0.237 N·m), smoothed over
+:math:`\varepsilon` = 1e-3 (rad/s for the SLFJM's hub rate).  With it the shipped
+assisted S1 design measures nominal ITAE 0.197 @ ISU 18.3, the independent check's 0.195
+@ 18.2 (issue 36); 1 % of a ±10 V full scale (:math:`F_c` = 0.1) would double its ITAE.
+Friction needs the name of the velocity state, which no preset can know: give
+``friction_state``.
 """
 
 from __future__ import annotations
@@ -71,14 +75,14 @@ __all__ = ["LAG_MAX", "RIG_FIELDS", "RIG_PRESETS", "RIG_RANGES", "Rig"]
 LAG_MAX = 1.0
 """Largest actuator time constant [s] (and smallest ω_n = 1/LAG_MAX rad/s)."""
 
-#: the named presets: their fields (ideal: nothing).  servo-1khz's F_c = 1 % of 10 (V).
+#: the named presets: their fields (ideal: nothing).  servo-1khz's F_c: 1 % of one input unit.
 RIG_PRESETS: dict[str, dict[str, Any]] = {
     "ideal": {},
     "servo-1khz": {
         "sensor": "encoder-12bit",
         "measurement_delay": 1e-3,
         "lag": 1e-3,
-        "coulomb": 0.01 * 10.0,
+        "coulomb": 0.01,
         "smoothing": 1e-3,
     },
 }

@@ -21,7 +21,9 @@ actuator output :math:`u_a` and friction :math:`F(v) = F_c\tanh(v/\varepsilon) +
 Every form stays affine in u, as the engine's plant interface requires.  The functions
 are closures over the plant's numba-compiled functions and read the rig's values from the
 parameter vector at run time, so the engine compiles them as any plant and a drawn rig
-parameter changes the run.
+parameter changes the run.  They depend only on the rig's structure (which quantities are
+set), not on its values: rigs of one structure on one plant share the functions and their
+compilations (a config parsed again does not compile the plant again).
 
 **What the controller is told.**  The augmented plant keeps the plant's ``relative_degree``
 and its normal form (evaluated on :math:`x`, the plant's own states): a controller is
@@ -33,6 +35,7 @@ still refuses a controller whose ρ is not the plant's.
 
 from __future__ import annotations
 
+import weakref
 from typing import Any
 
 import numpy as np
@@ -105,8 +108,69 @@ def with_rig(plant: Plant, rig: Rig) -> Plant:
             f"plant {plant.name!r} already has parameter(s) {', '.join(clash)}; the rig's "
             "parameters would shadow them"
         )
+    key = (iv, rig.lag2 is not None, rig.lag > 0.0, rig.has_rate_limit, tuple(extra))
+    shared = _SHARED.setdefault(plant, {})
+    if key not in shared:
+        shared[key] = _functions(plant, rig, iv, tuple(extra))
+    first, (f, g, h, bd, normal_form, alpha_beta) = shared[key]
+    n = plant.n_states
+    kind = 2 if rig.lag2 is not None else (1 if rig.lag > 0.0 else 0)
+    rate = rig.has_rate_limit
+    names: list[str] = []
+    units: list[str] = []
+    u_unit = plant.input_unit
+    if rate:
+        names.append("u_filt")
+        units.append(u_unit)
+    if kind > 0:
+        names.append("u_act")
+        units.append(u_unit)
+    if kind == 2:
+        names.append("u_act_rate")
+        units.append(f"{u_unit}/s" if u_unit else "")
+    taken = sorted(set(names) & set(plant.state_names))
+    if taken:
+        raise PlantError(
+            f"plant {plant.name!r} already has state(s) {', '.join(taken)}; the rig's "
+            "actuator states would shadow them"
+        )
+    out = Plant(
+        name=f"{plant.name}+rig",
+        n_states=n + rig.actuator_order,
+        f=f,
+        g=g,
+        h=h,
+        params={**plant.params, **extra},
+        bd=bd,
+        relative_degree=plant.relative_degree,
+        normal_form=normal_form,
+        alpha_beta_of_xi=alpha_beta,
+        state_of_xi=None,
+        state_names=(*plant.state_names, *names),
+        description=f"{plant.description} on a rig ({rig.preset})"[:200],
+        output_unit=plant.output_unit,
+        input_unit=plant.input_unit,
+        state_units=(*plant.state_units, *units),
+        disturbance_unit=plant.disturbance_unit,
+        state_bounds=dict(plant.state_bounds),
+        output_range=plant.output_range,
+    )
+    if first:  # the compiled functions of the first plant of this structure, shared
+        out.__dict__["compiled"] = first[0].compiled
+    else:
+        first.append(out)
+    return out
+
+
+#: per plant, per rig structure: ([the first augmented plant], its functions)
+_SHARED: weakref.WeakKeyDictionary[Plant, dict[tuple[Any, ...], Any]] = weakref.WeakKeyDictionary()
+
+
+def _functions(plant: Plant, rig: Rig, iv: int, names: tuple[str, ...]) -> tuple[list[Plant], Any]:
+    """The augmented f, g, h, b_d, normal form and (α, β)(ξ) of ``plant`` for the rig's
+    structure (its values are read from p at run time)."""
     n, m = plant.n_states, len(plant.params)
-    idx = {name: m + j for j, name in enumerate(extra)}
+    idx = {name: m + j for j, name in enumerate(names)}
     f0, g0, h0, bd0, nf0, ab0 = plant.compiled
     kind = 2 if rig.lag2 is not None else (1 if rig.lag > 0.0 else 0)
     rate = rig.has_rate_limit
@@ -178,45 +242,8 @@ def with_rig(plant: Plant, rig: Rig) -> Plant:
         def alpha_beta(xi: Any, p: Any) -> Any:
             return ab0(xi[:n], p[:m])
 
-    names: list[str] = []
-    units: list[str] = []
-    u_unit = plant.input_unit
-    if rate:
-        names.append("u_filt")
-        units.append(u_unit)
-    if kind > 0:
-        names.append("u_act")
-        units.append(u_unit)
-    if kind == 2:
-        names.append("u_act_rate")
-        units.append(f"{u_unit}/s" if u_unit else "")
-    taken = sorted(set(names) & set(plant.state_names))
-    if taken:
-        raise PlantError(
-            f"plant {plant.name!r} already has state(s) {', '.join(taken)}; the rig's "
-            "actuator states would shadow them"
-        )
-    return Plant(
-        name=f"{plant.name}+rig",
-        n_states=na,
-        f=f,
-        g=g,
-        h=h,
-        params={**plant.params, **extra},
-        bd=bd if plant.bd is not None else None,
-        relative_degree=plant.relative_degree,
-        normal_form=normal_form,
-        alpha_beta_of_xi=alpha_beta,
-        state_of_xi=None,
-        state_names=(*plant.state_names, *names),
-        description=f"{plant.description} on a rig ({rig.preset})"[:200],
-        output_unit=plant.output_unit,
-        input_unit=plant.input_unit,
-        state_units=(*plant.state_units, *units),
-        disturbance_unit=plant.disturbance_unit,
-        state_bounds=dict(plant.state_bounds),
-        output_range=plant.output_range,
-    )
+    bd_out = bd if plant.bd is not None else None
+    return [], (f, g, h, bd_out, normal_form, alpha_beta)
 
 
 def rig_x0(plant: Plant, augmented: Plant, x0: tuple[float, ...]) -> tuple[float, ...]:
