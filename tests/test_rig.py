@@ -301,3 +301,59 @@ def test_assisted_s1_on_servo_1khz(s1_rig: Any) -> None:
             for eps in (1e-3, 1e-4)
         )
         assert rough == pytest.approx(fine, rel=2e-3)
+
+
+# ------------------------------------------------------------------ continuous controller
+def test_a_continuous_controller_reads_a_measurement_delay_by_the_method_of_steps() -> None:
+    """The continuous loop with an output delay τ = 20 steps equals scipy's DOP853 on the
+    engine's own right-hand side (closed_loop_rhs) fed y(t - τ) from the dense output of
+    the previous interval (the method of steps, Bellen & Zennaro 2003, §3.1); the ESO's
+    reading at every step is the stored output τ earlier.  An input delay stays refused."""
+    from aiofl.engine.simulation import closed_loop_rhs
+
+    plant, c, tau, t_end = get_plant("slfjm"), _ladrc(), 2e-3, 0.04
+    res = simulate(plant, c, Scenario(t_final=t_end, output_delay=tau), dt=1e-4, decimation=1)
+    bare = simulate(plant, c, Scenario(t_final=t_end), dt=1e-4, decimation=1)
+    assert res.status == "ok"
+    np.testing.assert_array_equal(res["y_meas"][20:-1], res["y"][:-21])
+    np.testing.assert_array_equal(res["y_meas"][:20], res["y"][0])
+    base = Scenario(t_final=t_end)
+    n, n_td = plant.n_states, c.rho
+    segments: list[tuple[float, float, Any]] = []
+    y0 = plant.output(np.zeros(n))
+
+    def y_before(t: float) -> float:
+        if t <= tau:
+            return y0
+        _, _, sol = next(seg for seg in segments if seg[0] - 1e-15 <= t - tau <= seg[1] + 1e-15)
+        return plant.output(sol(t - tau)[:n])
+
+    def rhs(t: float, z: Any) -> Any:
+        x = z[:n]
+        out = closed_loop_rhs(
+            plant,
+            c,
+            base,
+            t,
+            x,
+            z[n : n + n_td],
+            z[n + n_td :],
+            noise=y_before(t) - plant.output(x),
+        )
+        return np.concatenate([out["dx"], out["dtd"], out["dxi"]])
+
+    z, a = np.zeros(n + n_td + c.rho + 1), 0.0
+    while a < t_end - 1e-12:
+        b = min(a + tau, t_end)
+        sol = solve_ivp(rhs, (a, b), z, method="DOP853", rtol=1e-10, atol=1e-13, dense_output=True)
+        segments.append((a, b, sol.sol))
+        z, a = sol.y[:, -1], b
+    y_ref = [
+        plant.output(next(s for a, b, s in segments if a - 1e-15 <= t <= b + 1e-15)(t)[:n])
+        for t in res.t
+    ]
+    scale = np.max(np.abs(y_ref))
+    np.testing.assert_allclose(res["y"], y_ref, rtol=0, atol=1e-9 * scale)
+    assert np.max(np.abs(bare["y"] - y_ref)) > 1e-3 * scale  # the delay matters here
+    with pytest.raises(ValueError, match=r"scenario.input_delay = 0.001 s needs a sampled"):
+        simulate(plant, c, Scenario(t_final=t_end, input_delay=1e-3))
