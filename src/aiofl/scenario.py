@@ -138,8 +138,8 @@ class Scenario:
         :math:`u(t - \\tau_{in})` (0 before :math:`t = \\tau_{in}`) and the controller's ADC
         reads :math:`y(t - \\tau_{out})` (:math:`y(0)` before :math:`t = \\tau_{out}`) plus the
         noise at t.  Held exactly by the sampled engine; each must be an integer multiple of
-        the step dt, and the continuous controller refuses them
-        (:func:`aiofl.engine.discrete.delay_steps`).
+        the step dt; the continuous controller reads an output delay at every integrator
+        stage and refuses an input delay (:func:`aiofl.engine.discrete.delay_steps`).
     envelope
         The operating envelope: a run whose :math:`|y - r|` exceeds it is *lost* (stopped
         and reported with the time; ``inf`` switches it off).  None (default):
