@@ -304,56 +304,65 @@ def test_assisted_s1_on_servo_1khz(s1_rig: Any) -> None:
 
 
 # ------------------------------------------------------------------ continuous controller
-def test_a_continuous_controller_reads_a_measurement_delay_by_the_method_of_steps() -> None:
-    """The continuous loop with an output delay τ = 20 steps equals scipy's DOP853 on the
-    engine's own right-hand side (closed_loop_rhs) fed y(t - τ) from the dense output of
-    the previous interval (the method of steps, Bellen & Zennaro 2003, §3.1); the ESO's
-    reading at every step is the stored output τ earlier.  An input delay stays refused."""
+@pytest.mark.parametrize(("tau_out", "tau_in"), [(2e-3, 0.0), (1e-3, 1.5e-3)])
+def test_a_continuous_controller_holds_delays_by_the_method_of_steps(tau_out, tau_in) -> None:
+    """The continuous loop with an output delay (and an input delay) of whole steps equals
+    scipy's DOP853 on the engine's own right-hand side (closed_loop_rhs) fed y(t - τ_out)
+    and, for the plant, the command u(t - τ_in) (0 before), both from the dense output of
+    the earlier intervals (the method of steps, Bellen & Zennaro 2003, §3.1); the ESO's
+    reading at every step is the stored output τ_out earlier."""
     from aiofl.engine.simulation import closed_loop_rhs
 
-    plant, c, tau, t_end = get_plant("slfjm"), _ladrc(), 2e-3, 0.04
-    res = simulate(plant, c, Scenario(t_final=t_end, output_delay=tau), dt=1e-4, decimation=1)
+    plant, c, t_end = get_plant("slfjm"), _ladrc(), 0.04
+    scen = Scenario(t_final=t_end, output_delay=tau_out, input_delay=tau_in)
+    res = simulate(plant, c, scen, dt=1e-4, decimation=1)
     bare = simulate(plant, c, Scenario(t_final=t_end), dt=1e-4, decimation=1)
     assert res.status == "ok"
-    np.testing.assert_array_equal(res["y_meas"][20:-1], res["y"][:-21])
-    np.testing.assert_array_equal(res["y_meas"][:20], res["y"][0])
+    m = round(tau_out / 1e-4)
+    np.testing.assert_array_equal(res["y_meas"][m:-1], res["y"][: -m - 1])
+    np.testing.assert_array_equal(res["y_meas"][:m], res["y"][0])
     base = Scenario(t_final=t_end)
     n, n_td = plant.n_states, c.rho
+    p = plant.param_vector()
+    step = min(t for t in (tau_out, tau_in) if t > 0)
     segments: list[tuple[float, float, Any]] = []
-    y0 = plant.output(np.zeros(n))
 
-    def y_before(t: float) -> float:
-        if t <= tau:
-            return y0
-        _, _, sol = next(seg for seg in segments if seg[0] - 1e-15 <= t - tau <= seg[1] + 1e-15)
-        return plant.output(sol(t - tau)[:n])
+    def z_at(t: float) -> Any:
+        return next(s for a, b, s in segments if a - 1e-15 <= t <= b + 1e-15)(t)
+
+    def signals(t: float, z: Any) -> dict:
+        x = z[:n]
+        y_old = plant.output(z_at(t - tau_out)[:n]) if t > tau_out else plant.output(np.zeros(n))
+        return closed_loop_rhs(
+            plant, c, base, t, x, z[n : n + n_td], z[n + n_td :], noise=y_old - plant.output(x)
+        )
 
     def rhs(t: float, z: Any) -> Any:
-        x = z[:n]
-        out = closed_loop_rhs(
-            plant,
-            c,
-            base,
-            t,
-            x,
-            z[n : n + n_td],
-            z[n + n_td :],
-            noise=y_before(t) - plant.output(x),
-        )
-        return np.concatenate([out["dx"], out["dtd"], out["dxi"]])
+        out = signals(t, z)
+        u_old = out["u"] if tau_in == 0 else 0.0
+        if tau_in and t > tau_in:
+            u_old = signals(t - tau_in, z_at(t - tau_in))["u"]
+        dx = out["dx"] + np.asarray(plant.g(z[:n], p)) * (u_old - out["u"])
+        return np.concatenate([dx, out["dtd"], out["dxi"]])
 
     z, a = np.zeros(n + n_td + c.rho + 1), 0.0
     while a < t_end - 1e-12:
-        b = min(a + tau, t_end)
-        sol = solve_ivp(rhs, (a, b), z, method="DOP853", rtol=1e-10, atol=1e-13, dense_output=True)
+        b = min(a + step, t_end)
+        sol = solve_ivp(
+            rhs,
+            (a, b),
+            z,
+            method="DOP853",
+            rtol=1e-10,
+            atol=1e-13,
+            dense_output=True,
+            first_step=1e-5,
+        )
         segments.append((a, b, sol.sol))
         z, a = sol.y[:, -1], b
-    y_ref = [
-        plant.output(next(s for a, b, s in segments if a - 1e-15 <= t <= b + 1e-15)(t)[:n])
-        for t in res.t
-    ]
+    y_ref = [plant.output(z_at(t)[:n]) for t in res.t]
     scale = np.max(np.abs(y_ref))
     np.testing.assert_allclose(res["y"], y_ref, rtol=0, atol=1e-9 * scale)
     assert np.max(np.abs(bare["y"] - y_ref)) > 1e-3 * scale  # the delay matters here
-    with pytest.raises(ValueError, match=r"scenario.input_delay = 0.001 s needs a sampled"):
-        simulate(plant, c, Scenario(t_final=t_end, input_delay=1e-3))
+    if tau_in:  # the plant's (stored) command is 0 until τ_in
+        assert np.all(res["u"][: round(tau_in / 1e-4)] == 0.0) and np.any(res["u"] != 0.0)

@@ -8,7 +8,7 @@ r"""Model uncertainty as data: the ``[uncertainty]`` table, its draws and their 
     ts = [5e-4, 2e-3]                  # optional, needs [controller.discrete]
     noise_variance = [0.0, 1e-4]       # optional, output-noise variance range
     output_delay = [0.0, 2e-3]         # optional, measurement delay range [s]
-    input_delay = [0.0, 1e-3]          # optional, input delay range [s] (sampled only)
+    input_delay = [0.0, 1e-3]          # optional, input (computation) delay range [s]
     [uncertainty.parameters]           # true-plant parameters, as factors on the nominal
     J_l = { uniform = 0.2 }            # factor ~ U[1 - p, 1 + p], 0 < p < 1
     K_s = { normal = 0.05 }            # factor = 1 + sigma z, z ~ N(0, 1), |z| < 1/sigma
@@ -231,12 +231,6 @@ class UncertaintyModel(_Model):
             _ts_steps(self.ts, dt)
         for key in DELAYS:
             if getattr(self, key) is not None:
-                if not discrete and key == "input_delay":
-                    raise ValueError(
-                        f"uncertainty.{key} is set but the controller is continuous; an "
-                        "input delay needs a sampled controller ([controller.discrete] "
-                        "ts or [sensor] ts)"
-                    )
                 _delay_steps(key, getattr(self, key), dt)
 
 

@@ -32,6 +32,9 @@ from aiofl.engine.loop import (
     S_NOISE,
     S_RFF,
     S_U,
+    S_UC,
+    S_UD,
+    S_UDON,
     S_UREF,
     S_V,
     S_Y,
@@ -165,6 +168,10 @@ def _tpl_deriv(fns, t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cove
         _BLK_ESO_INPUT(q[L.F_B0], u, dz[o_eso + rho - 1])
     _BLK_ESO_LAST(q[Q_BETA + rho], e, dz[o_eso + rho])
 
+    for l in range(_W):  # an input delay: the plant (and ISU) get u(t - τ_in), the ESO u(t)
+        if s[S_UDON, l] != 0.0:
+            s[S_UC, l] = u[l]
+            u[l] = s[S_UD, l]
     dx = _LEADING_ROWS(dz, _N)
     _BLK_PLANT(fns, z, p, u, dx)
     if dany:
@@ -175,10 +182,12 @@ def _tpl_deriv(fns, t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cove
 
 
 def _tpl_delay_stage_in(k, st, n_stages, s, ring, dsteps):  # pragma: no cover - compiled
-    r"""An output delay of m steps, continuous: ``s[S_YD]`` is y at stage ``st`` of step
-    k - m (y(0) while k < m), which the observer reads at stage ``st`` of step k.
+    r"""Transport delays of m steps, continuous: ``s[S_YD]`` is y at stage ``st`` of step
+    k - m_out (y(0) while k < m_out), which the observer reads at stage ``st`` of step k;
+    ``s[S_UD]`` the controller's command at stage ``st`` of step k - m_in (0 while
+    k < m_in), which the plant gets.
 
-    With the delay a multiple of the step, the stage times of step k - m are those of
+    With the delays multiples of the step, the stage times of step k - m are those of
     step k shifted by τ, so the loop is the method of steps (Bellen & Zennaro, *Numerical
     Methods for Delay Differential Equations*, 2003, §3.1) with the integrator applied to
     the delayed copies of the state: the past stage values are exactly what that
@@ -188,12 +197,20 @@ def _tpl_delay_stage_in(k, st, n_stages, s, ring, dsteps):  # pragma: no cover -
         m = dsteps[1, l]
         if m > 0:
             s[S_YD, l] = ring[1, ((k - m) % nb) * n_stages + st, l] if k >= m else ring[1, 0, l]
+        m = dsteps[0, l]
+        s[S_UDON, l] = 1.0 if m > 0 else 0.0
+        if m > 0:
+            s[S_UD, l] = ring[0, ((k - m) % nb) * n_stages + st, l] if k >= m else 0.0
 
 
 def _tpl_delay_stage_out(k, st, n_stages, s, ring, fns, z, p):  # pragma: no cover - compiled
-    """y = h(x) at stage ``st`` of step k (at the state ``z``) into the ring's slot."""
+    """y = h(x) at stage ``st`` of step k (at the state ``z``) and the controller's command
+    there into the ring's slot."""
     nb = ring.shape[1] // n_stages
-    _BLK_PLANT_OUTPUT(fns, z, p, ring[1, (k % nb) * n_stages + st])
+    slot = (k % nb) * n_stages + st
+    _BLK_PLANT_OUTPUT(fns, z, p, ring[1, slot])
+    for l in range(_W):
+        ring[0, slot, l] = s[S_UC, l]
 
 
 def _tpl_setup(lanes, batch, q, qt, iq, ctrl, nper):  # pragma: no cover - compiled
