@@ -34,7 +34,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ),
     ("aiofl.layout",),  # the member vocabulary: component kinds, parameter columns
     # plain descriptions of a design, a test and the model error (uncertainty)
-    ("aiofl.controller", "aiofl.scenario", "aiofl.uncertainty"),
+    ("aiofl.controller", "aiofl.scenario", "aiofl.uncertainty", "aiofl.rig"),
     ("aiofl.plants",),
     ("aiofl.engine", "aiofl.sensor"),  # the engine; the measurement a user has (sensor)
     ("aiofl.config",),  # TOML -> plant + scenario + controller (+ run settings)

@@ -37,10 +37,13 @@ def _refused(*args: str) -> str:
 
 
 def test_a_delay_on_a_continuous_controller_is_refused_naming_the_field(tmp_path: Path) -> None:
-    """Item 5: frontier-s1-ladrc plus input_delay = 0.001 exited 1 with a traceback."""
-    cfg = _config(tmp_path, "frontier-s1-ladrc", lambda d: d["scenario"].update(input_delay=0.001))
+    """Item 5: frontier-s1-ladrc plus input_delay = 0.001 exited 1 with a traceback.  A
+    continuous controller now holds a delay of whole steps (issue 36); one between grid
+    points is refused naming the field, exit 2, nothing written."""
+    edit = lambda d: d["scenario"].update(input_delay=1.5e-4)  # noqa: E731
+    cfg = _config(tmp_path, "frontier-s1-ladrc", edit)
     err = _refused("simulate", str(cfg), "--out", str(tmp_path / "o"))
-    assert "scenario.input_delay = 0.001 s needs a sampled controller" in err
+    assert "scenario.input_delay = 0.00015 s is not an integer multiple of the step" in err
     assert not (tmp_path / "o").exists()
 
 

@@ -137,8 +137,8 @@ class Scenario:
         Transport delays [s], :math:`0 \\le \\tau \\le` :data:`DELAY_MAX`: the plant sees
         :math:`u(t - \\tau_{in})` (0 before :math:`t = \\tau_{in}`) and the controller's ADC
         reads :math:`y(t - \\tau_{out})` (:math:`y(0)` before :math:`t = \\tau_{out}`) plus the
-        noise at t.  Held exactly by the sampled engine; each must be an integer multiple of
-        the step dt, and the continuous controller refuses them
+        noise at t.  Each must be an integer multiple of the step dt: the sampled engine
+        holds them exactly, the continuous controller by the method of steps
         (:func:`aiofl.engine.discrete.delay_steps`).
     envelope
         The operating envelope: a run whose :math:`|y - r|` exceeds it is *lost* (stopped

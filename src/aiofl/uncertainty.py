@@ -7,10 +7,13 @@ r"""Model uncertainty as data: the ``[uncertainty]`` table, its draws and their 
     seed = 0
     ts = [5e-4, 2e-3]                  # optional, needs [controller.discrete]
     noise_variance = [0.0, 1e-4]       # optional, output-noise variance range
+    output_delay = [0.0, 2e-3]         # optional, measurement delay range [s]
+    input_delay = [0.0, 1e-3]          # optional, input (computation) delay range [s]
     [uncertainty.parameters]           # true-plant parameters, as factors on the nominal
     J_l = { uniform = 0.2 }            # factor ~ U[1 - p, 1 + p], 0 < p < 1
     K_s = { normal = 0.05 }            # factor = 1 + sigma z, z ~ N(0, 1), |z| < 1/sigma
     R_m = { log_uniform = [0.5, 2.0] } # ln factor ~ U[ln a, ln b], 0 < a < b
+    rig_lag = { uniform = 0.5 }        # a rig's parameters too (aiofl.plants.actuated)
 
 **Common random numbers.**  The draws depend only on ``(seed, the table, draws)`` (and, for
 ``ts``, the engine step ``dt`` that sample times are rounded to), never on the controller:
@@ -29,7 +32,12 @@ f).  A scenario whose own plant change is at t > 0 is refused for now: the engin
 carries a single parameter change, so a draw cannot both apply from t = 0 and be
 compounded at the change time.  A drawn noise variance replaces the scenario's (the
 sensor's, :mod:`aiofl.sensor`); a drawn sample time replaces ``[controller.discrete] ts``
-(:meth:`Draws.samplings`), the sensor's quantum kept.
+(:meth:`Draws.samplings`), the sensor's quantum kept.  Drawn transport delays replace the
+scenario's ``output_delay`` / ``input_delay`` (a ``[rig]``'s): uniform over the integer
+multiples of the step dt in the range (the sampled engine holds exactly those,
+:func:`aiofl.engine.discrete.delay_steps`), like ``ts``.  A rig's actuator and friction
+are plant parameters (``rig_lag``, ``rig_coulomb``, ...; :mod:`aiofl.plants.actuated`),
+drawn as factors like any other.
 
 **Every draw has its own noise realisation.**  When the measurement is noisy (the
 scenario's or the drawn variance > 0), draw k's noise seed is
@@ -57,10 +65,11 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from aiofl.scenario import Scenario, realisation_seed
+from aiofl.scenario import DELAY_MAX, Scenario, realisation_seed
 from aiofl.text import normal_keys
 
 __all__ = [
+    "ABSOLUTE",
     "AGGREGATES",
     "MAX_DRAWS",
     "MAX_FULL_FACTORIAL",
@@ -80,6 +89,10 @@ __all__ = [
 MAX_DRAWS = 100_000
 #: the names :func:`aggregate` accepts
 AGGREGATES = ("mean", "worst", "cvar")
+#: drawn quantities that are values, not factors on a nominal parameter
+ABSOLUTE = ("ts", "noise_variance", "output_delay", "input_delay")
+#: drawn transport delays (scenario fields), multiples of dt in [0, DELAY_MAX]
+DELAYS = ("output_delay", "input_delay")
 
 
 class _Model(BaseModel):
@@ -167,6 +180,8 @@ class UncertaintyModel(_Model):
     parameters: dict[str, Distribution] = Field(default_factory=dict)
     ts: Pair | None = None
     noise_variance: Pair | None = None
+    output_delay: Pair | None = None
+    input_delay: Pair | None = None
 
     @field_validator("parameters")
     @classmethod
@@ -176,16 +191,24 @@ class UncertaintyModel(_Model):
 
     @model_validator(mode="after")
     def _ranges(self) -> UncertaintyModel:
-        for key in ("ts", "noise_variance"):
+        for key in ("ts", "noise_variance", *DELAYS):
             pair = getattr(self, key)
             if pair is not None and not pair[0] <= pair[1]:
                 raise ValueError(f"uncertainty.{key} = {pair}; allowed: [a, b] with a <= b")
         if self.ts is not None and not (self.ts[0] > 0 and self.ts[1] <= 1.0):
             raise ValueError(f"uncertainty.ts = {self.ts}; allowed: [a, b] with 0 < a <= b <= 1 s")
-        if not self.parameters and self.ts is None and self.noise_variance is None:
+        for key in DELAYS:
+            pair = getattr(self, key)
+            if pair is not None and pair[1] > DELAY_MAX:
+                raise ValueError(
+                    f"uncertainty.{key} = {pair}; allowed: [a, b] with 0 <= a <= b <= "
+                    f"{DELAY_MAX:g} s"
+                )
+        if not self.parameters and all(getattr(self, k) is None for k in ABSOLUTE):
             raise ValueError(
                 "nothing is uncertain; set [uncertainty.parameters] (e.g. "
-                "J_l = { uniform = 0.2 }), ts = [a, b] or noise_variance = [a, b]"
+                "J_l = { uniform = 0.2 }), ts, noise_variance, output_delay or input_delay "
+                "= [a, b]"
             )
         return self
 
@@ -206,6 +229,21 @@ class UncertaintyModel(_Model):
                     "ts = ...) or remove uncertainty.ts"
                 )
             _ts_steps(self.ts, dt)
+        for key in DELAYS:
+            if getattr(self, key) is not None:
+                _delay_steps(key, getattr(self, key), dt)
+
+
+def _delay_steps(key: str, pair: Sequence[float], dt: float) -> tuple[int, int]:
+    """The integer k >= 0 with ``pair[0] <= k dt <= pair[1]`` (within 1e-9), as (lo, hi)."""
+    lo = max(math.ceil(pair[0] / dt - 1e-9), 0)
+    hi = math.floor(pair[1] / dt + 1e-9)
+    if hi < lo:
+        raise ValueError(
+            f"uncertainty.{key} = {list(pair)} holds no integer multiple of simulation.dt = "
+            f"{dt:g} s; allowed: a range containing k*dt for some integer k >= 0"
+        )
+    return lo, hi
 
 
 def _ts_steps(ts: Sequence[float], dt: float) -> tuple[int, int]:
@@ -243,6 +281,8 @@ class Draws:
     noise_seeds
         (K,) integers that seed each draw's noise realisation (module docstring), or None:
         every draw keeps the scenario's noise seed.
+    output_delay, input_delay
+        (K,) transport delays [s] (integer multiples of dt), or None.
     """
 
     seed: int
@@ -250,6 +290,8 @@ class Draws:
     ts: NDArray[np.float64] | None = None
     noise_variance: NDArray[np.float64] | None = None
     noise_seeds: NDArray[np.int64] | None = None
+    output_delay: NDArray[np.float64] | None = None
+    input_delay: NDArray[np.float64] | None = None
 
     def noise_seed(self, base: Scenario, k: int) -> int:
         """The noise seed of draw ``k`` on scenario ``base`` (its own seed without
@@ -270,6 +312,8 @@ class Draws:
             ts=cut(self.ts),
             noise_variance=cut(self.noise_variance),
             noise_seeds=cut(self.noise_seeds),
+            output_delay=cut(self.output_delay),
+            input_delay=cut(self.input_delay),
         )
 
     def concat(self, other: Draws) -> Draws:
@@ -277,7 +321,7 @@ class Draws:
         this one's).  Raises ``ValueError`` when the drawn quantities differ."""
         if set(self.factors) != set(other.factors) or any(
             (getattr(self, a) is None) != (getattr(other, a) is None)
-            for a in ("ts", "noise_variance", "noise_seeds")
+            for a in ("ts", "noise_variance", "noise_seeds", *DELAYS)
         ):
             raise ValueError("Draws.concat: the two sets draw different quantities")
 
@@ -290,22 +334,29 @@ class Draws:
             ts=cat(self.ts, other.ts),
             noise_variance=cat(self.noise_variance, other.noise_variance),
             noise_seeds=cat(self.noise_seeds, other.noise_seeds),
+            output_delay=cat(self.output_delay, other.output_delay),
+            input_delay=cat(self.input_delay, other.input_delay),
         )
 
     def __len__(self) -> int:
-        for arr in (*self.factors.values(), self.ts, self.noise_variance):
+        for arr in (
+            *self.factors.values(),
+            self.ts,
+            self.noise_variance,
+            self.output_delay,
+            self.input_delay,
+        ):
             if arr is not None:
                 return len(arr)
         return 0
 
     def columns(self) -> dict[str, NDArray[np.float64]]:
         """Every drawn quantity by name (parameters as factors, then ``ts``,
-        ``noise_variance``)."""
+        ``noise_variance``, ``output_delay``, ``input_delay``)."""
         cols = dict(self.factors)
-        if self.ts is not None:
-            cols["ts"] = self.ts
-        if self.noise_variance is not None:
-            cols["noise_variance"] = self.noise_variance
+        for key in ABSOLUTE:
+            if getattr(self, key) is not None:
+                cols[key] = getattr(self, key)
         return cols
 
     def scenarios(self, base: Scenario) -> list[Scenario]:
@@ -330,6 +381,9 @@ class Draws:
                 changes.update(plant_scale=scale, parameter_change_time=0.0)
             if self.noise_variance is not None:
                 changes["noise_variance"] = float(self.noise_variance[k])
+            for key in DELAYS:
+                if getattr(self, key) is not None:
+                    changes[key] = float(getattr(self, key)[k])
             if changes.get("noise_variance", base.noise_variance) > 0:
                 changes["noise_seed"] = self.noise_seed(base, k)  # its own realisation
             out.append(replace(base, **changes) if changes else base)
@@ -368,10 +422,16 @@ def sample_draws(
     if spec.noise_variance is not None:
         a, b = spec.noise_variance
         nv = a + (b - a) * _uniforms(s, "noise_variance", n)
+    delays = {}
+    for key in DELAYS:
+        if getattr(spec, key) is not None:
+            lo, hi = _delay_steps(key, getattr(spec, key), dt)
+            k = lo + np.minimum(np.floor(_uniforms(s, key, n) * (hi - lo + 1)), hi - lo)
+            delays[key] = k * dt
     ns = np.random.Generator(
         np.random.PCG64(np.random.SeedSequence(s, spawn_key=(zlib.crc32(b"noise_seed"),)))
     ).integers(0, 2**62, n, dtype=np.int64)
-    return Draws(seed=s, factors=factors, ts=ts, noise_variance=nv, noise_seeds=ns)
+    return Draws(seed=s, factors=factors, ts=ts, noise_variance=nv, noise_seeds=ns, **delays)
 
 
 # ------------------------------------------------------------------ the box and its corners
@@ -389,6 +449,10 @@ def box_bounds(spec: UncertaintyModel, *, dt: float = 1e-4) -> dict[str, tuple[f
         out["ts"] = (lo * dt, hi * dt)
     if spec.noise_variance is not None:
         out["noise_variance"] = (float(spec.noise_variance[0]), float(spec.noise_variance[1]))
+    for key in DELAYS:
+        if getattr(spec, key) is not None:
+            lo, hi = _delay_steps(key, getattr(spec, key), dt)
+            out[key] = (lo * dt, hi * dt)
     return out
 
 
@@ -451,10 +515,11 @@ def _box_values(
     if ts is not None:
         ts = np.round(ts / dt) * dt
     nv = cols.pop("noise_variance", None)
+    delays = {k: np.round(cols.pop(k) / dt) * dt for k in DELAYS if k in cols}
     ns = np.random.Generator(
         np.random.PCG64(np.random.SeedSequence(seed, spawn_key=(zlib.crc32(b"box_noise_seed"),)))
     ).integers(0, 2**62, len(unit), dtype=np.int64)
-    return Draws(seed=seed, factors=cols, ts=ts, noise_variance=nv, noise_seeds=ns)
+    return Draws(seed=seed, factors=cols, ts=ts, noise_variance=nv, noise_seeds=ns, **delays)
 
 
 def corner_draws(spec: UncertaintyModel, *, dt: float = 1e-4) -> tuple[Draws, str]:

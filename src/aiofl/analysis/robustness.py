@@ -43,7 +43,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
-from aiofl.uncertainty import Draws, aggregate, sample_draws
+from aiofl.uncertainty import ABSOLUTE, Draws, aggregate, sample_draws
 
 __all__ = [
     "CALL_TRAJECTORY_BYTES",
@@ -266,7 +266,7 @@ class RobustnessResult(_DrawStatistics):
                 k: float(v[w]) * self.nominal_params[k] for k, v in self.draws.factors.items()
             },
         }
-        for key in ("ts", "noise_variance"):
+        for key in ABSOLUTE:
             if key in cols:
                 worst[key] = float(cols[key][w])
         return {

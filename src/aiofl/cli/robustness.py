@@ -50,9 +50,10 @@ def _fmt(x: float | None) -> str:
 
 
 def _point(p: dict[str, float]) -> str:
+    from aiofl.uncertainty import ABSOLUTE
+
     return ", ".join(
-        f"{k} x {v:.4g}" if k not in ("ts", "noise_variance") else f"{k} = {v:.4g}"
-        for k, v in p.items()
+        f"{k} x {v:.4g}" if k not in ABSOLUTE else f"{k} = {v:.4g}" for k, v in p.items()
     )
 
 

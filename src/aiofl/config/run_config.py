@@ -94,7 +94,10 @@ from pydantic import BaseModel, ValidationError
 from aiofl import layout as L
 from aiofl.components.kalman import measurement_noise_intensity
 from aiofl.components.metrics import OPIWeights
+from aiofl.config.rig_table import apply_rig, merge_rig
 from aiofl.config.schema import REQUIRED_KEYS, ConfigError, ConfigModel, DiscreteModel
+from aiofl.config.sensor_table import check_sensor_ts as _check_sensor_ts
+from aiofl.config.sensor_table import merge_sensor as _merge_sensor
 from aiofl.controller import Controller
 from aiofl.engine.discrete import delay_steps
 from aiofl.limits import (
@@ -105,6 +108,7 @@ from aiofl.limits import (
 )
 from aiofl.plants.base import Plant, PlantError
 from aiofl.plants.operating_point import holding_input
+from aiofl.rig import Rig
 from aiofl.scenario import Scenario
 from aiofl.sensor import Sensor, check_quantum_range
 from aiofl.uncertainty import UncertaintyModel
@@ -144,6 +148,7 @@ class RunConfig:
     sampling: Any = None  # aiofl.engine.discrete.Sampling: [controller.discrete], or None
     uncertainty: UncertaintyModel | None = None  # [uncertainty] (aiofl.uncertainty), or None
     sensor: Sensor = field(default_factory=Sensor)  # the measurement ([sensor] or old keys)
+    rig: Rig | None = None  # [rig] (aiofl.rig): actuator, friction, delays; None: none
     defaults: tuple[str, ...] = ()  # "KEY = default" for documented defaults it relies on
 
     def simulate(self, *, store: bool = True) -> Any:
@@ -239,6 +244,13 @@ class RunConfig:
             **{k: v for k, v in old.items() if k.startswith("noise_")},
         }
         return parse_config(data, source or f"{self.name} with --sensor {preset}")
+
+    def with_rig(self, preset: str, *, source: str = "", **fields: Any) -> RunConfig:
+        """This config on the rig preset ``preset`` (:data:`aiofl.rig.RIG_PRESETS`) with
+        ``fields`` overriding its values (``friction_state="theta_dot"``): its ``[rig]``
+        table replaced and the config validated again.  Raises :class:`ConfigError`."""
+        data = {**copy.deepcopy(self.raw), "rig": {"preset": preset, **fields}}
+        return parse_config(data, source or f"{self.name} with rig {preset}")
 
     def check_sampling(self) -> None:
         """Raise :class:`ConfigError` unless the sampled controller (if any) can run with this
@@ -446,6 +458,13 @@ def parse_config(
         )
     missing = _missing_keys(data)
     note = "\n" + _missing_text(missing) if missing else ""
+    original, rig = data, None
+    if "rig" in data:  # [rig] fills [sensor], the delays and dt (aiofl.config.rig_table)
+        try:
+            rig_table = ConfigModel.model_validate({"rig": data["rig"]}).rig
+        except ValidationError as exc:
+            raise ConfigError(_format_error(exc, source) + note) from None
+        data, rig = merge_rig(data, rig_table, source)
     sensor_table: Any = None
     if "sensor" in data:  # the table alone first: its errors name sensor.KEY
         try:
@@ -472,6 +491,8 @@ def parse_config(
     try:
         plant.param_vector(model.scenario.plant_overrides, model.scenario.plant_scale)
         scenario = model.scenario.build()
+        if rig is not None:  # the actuator and friction in the plant's state
+            plant, scenario = apply_rig(plant, scenario, rig)
         discrete = model.controller.discrete
         sampling = discrete.build() if discrete is not None else None
         for key in ("input_delay", "output_delay"):  # k·dt, bounded, held by sampled runs only
@@ -521,8 +542,9 @@ def parse_config(
         decimation=sim.decimation,
         divergence_threshold=sim.divergence_threshold,
         weights=model.metrics.build(),
-        raw=data,
+        raw=data if rig is None else {**original, "plant": data["plant"]},
         uncertainty=model.uncertainty,
+        rig=rig,
         defaults=tuple(model.defaults_used()),
     )
     if sampling is not None:  # [controller.discrete]: a sampled controller
@@ -531,82 +553,6 @@ def parse_config(
     given = sensor_table is not None and "preset" in data["sensor"]  # else custom, not ideal
     label = sensor_table.preset if given else "custom"
     return replace(cfg, sensor=Sensor.of_run(cfg.scenario, cfg.sampling, label, plant.output_unit))
-
-
-def _check_sensor_ts(ts: float | None, dt: float, source: str) -> None:
-    """Refuse a ``[sensor]`` sample time shorter than the step (e.g. 5e-324), naming
-    ``sensor.ts`` (it also becomes the noise hold, whose own check would name that)."""
-    if ts is not None and ts < dt * (1 - 1e-9):
-        raise ConfigError(
-            f"invalid config {source}:\n  sensor.ts = {ts!r} s is shorter than the step "
-            f"simulation.dt = {dt:g} s; allowed: an integer multiple of dt, dt <= ts <= 1 s"
-        )
-
-
-_SENSOR_NOISE = ("noise_variance", "noise_hold", "noise_seed")
-
-
-def _merge_sensor(data: dict[str, Any], table: Any, source: str) -> dict[str, Any]:
-    """``data`` with the ``[sensor]`` table's quantities filled into ``[scenario]`` (noise)
-    and ``[controller.discrete]`` (ts, y_quantum); raises :class:`ConfigError` for a
-    quantity set in two places (a discrete ts equal to the sensor's is accepted) or a
-    quantum without a sample time."""
-
-    def refuse(msg: str) -> ConfigError:
-        return ConfigError(f"invalid config {source}:\n  {msg}")
-
-    try:
-        sensor = table.build()
-    except ValueError as exc:
-        raise refuse(str(exc)) from None
-    explicit = table.explicit()
-    out = dict(data)
-    scen = dict(out.get("scenario") or {}) if isinstance(out.get("scenario"), dict) else None
-    if scen is not None or any(k in explicit for k in _SENSOR_NOISE):
-        scen = scen if scen is not None else {}
-        for key in _SENSOR_NOISE:
-            if key in explicit:
-                if key in scen:
-                    raise refuse(
-                        f"{key} is set twice: sensor.{key} = {explicit[key]!r} and scenario.{key}"
-                        f" = {scen[key]!r}; set it in [sensor] only"
-                    )
-                scen[key] = explicit[key]
-        if sensor.ts is not None and "noise_hold" not in scen:
-            scen["noise_hold"] = sensor.ts  # a noise sample per measurement
-        out["scenario"] = scen
-    ctrl = out.get("controller")
-    if not isinstance(ctrl, dict):
-        ctrl = {}
-    disc = ctrl.get("discrete")
-    if sensor.ts is None and sensor.quantum == 0:
-        return out
-    if disc is not None and not isinstance(disc, dict):
-        return out  # the schema reports the malformed table
-    disc = dict(disc or {})
-    if sensor.ts is not None:
-        if "ts" in disc and disc["ts"] != sensor.ts:
-            raise refuse(
-                f"sensor.ts = {sensor.ts!r} (preset {sensor.preset!r} or the table) contradicts "
-                f"controller.discrete.ts = {disc['ts']!r}; set the sample time in one place "
-                "(or the same value in both)"
-            )
-        disc["ts"] = sensor.ts
-    elif "ts" not in disc:
-        raise refuse(
-            f"sensor.quantum = {sensor.quantum:g} needs a sample time: set sensor.ts (or "
-            "[controller.discrete] ts); a continuous loop has no ADC"
-        )
-    if sensor.quantum > 0 or "quantum" in explicit:
-        if "y_quantum" in disc:
-            raise refuse(
-                f"the measurement quantum is set twice: sensor.quantum = {sensor.quantum!r} "
-                f"(preset {sensor.preset!r} or the table) and controller.discrete.y_quantum = "
-                f"{disc['y_quantum']!r}; set it in [sensor] only"
-            )
-        disc["y_quantum"] = sensor.quantum
-    out["controller"] = {**ctrl, "discrete": disc}
-    return out
 
 
 def _presets_dir() -> Any:

@@ -23,6 +23,7 @@ from aiofl.limits import (
     MAX_STEPS,
     T_FINAL_MAX,
 )
+from aiofl.rig import LAG_MAX, RIG_PRESETS, Rig
 from aiofl.scenario import DELAY_MAX, Reference, Scenario
 from aiofl.sensor import SENSOR_PRESETS, Sensor
 from aiofl.text import MAX_DESCRIPTION_CHARS, MAX_PATH_CHARS, check_text, normal_keys
@@ -34,6 +35,7 @@ __all__ = [
     "ConfigModel",
     "ControllerModel",
     "DiscreteModel",
+    "RigModel",
     "ScenarioModel",
     "SensorModel",
 ]
@@ -502,6 +504,64 @@ class SensorModel(_Model):
         return Sensor.from_preset(self.preset, **self.explicit())
 
 
+# --------------------------------------------------------------------------- rig
+_Delay = Annotated[float, Field(ge=0, le=DELAY_MAX, allow_inf_nan=False)]
+_Amount = Annotated[float, Field(ge=0, le=1e6, allow_inf_nan=False)]
+
+
+class RigModel(_Model):
+    """``[rig]``: what a real loop adds to the plant (:class:`aiofl.rig.Rig`); a key given
+    here overrides the preset's value (None: not set here)."""
+
+    preset: str = "ideal"
+    sensor: str | None = None
+    measurement_delay: _Delay | None = None
+    computation_delay: _Delay | None = None
+    lag: Annotated[float, Field(ge=0, le=LAG_MAX, allow_inf_nan=False)] | None = None
+    lag2: Annotated[list[float], Field(min_length=2, max_length=2)] | None = None
+    rate_limit: Annotated[float, Field(gt=0)] | None = None  # inf: none
+    rate_filter: Annotated[float, Field(gt=0, le=LAG_MAX, allow_inf_nan=False)] | None = None
+    coulomb: _Amount | None = None
+    viscous: _Amount | None = None
+    friction_state: str | None = None
+    smoothing: Annotated[float, Field(gt=0, le=1e6, allow_inf_nan=False)] | None = None
+
+    @field_validator("preset")
+    @classmethod
+    def _preset(cls, v: str) -> str:
+        if v not in RIG_PRESETS:
+            raise ValueError(f"unknown rig preset {v!r}; allowed: {', '.join(RIG_PRESETS)}")
+        return v
+
+    @field_validator("sensor")
+    @classmethod
+    def _sensor(cls, v: str | None) -> str | None:
+        from aiofl.sensor import SENSOR_PRESETS
+
+        if v is not None and v not in SENSOR_PRESETS:
+            raise ValueError(f"unknown sensor preset {v!r}; allowed: {', '.join(SENSOR_PRESETS)}")
+        return v
+
+    @model_validator(mode="after")
+    def _whole(self) -> RigModel:
+        try:
+            self.build()
+        except ValueError as exc:
+            raise ValueError(str(exc)) from None
+        return self
+
+    def explicit(self) -> dict[str, Any]:
+        """The keys set in the table (besides ``preset``)."""
+        return {k: v for k, v in self.model_dump(exclude={"preset"}).items() if v is not None}
+
+    def build(self) -> Rig:
+        """The :class:`~aiofl.rig.Rig`: the preset with the explicit keys."""
+        given = self.explicit()
+        if "lag2" in given:
+            given["lag2"] = tuple(given["lag2"])
+        return Rig.from_preset(self.preset, **given)
+
+
 # -------------------------------------------------------------------- the rest
 class SimulationModel(_Model):
     dt: Annotated[float, Field(gt=0, le=DT_MAX, allow_inf_nan=False)] = 1e-4
@@ -534,6 +594,8 @@ class ConfigModel(_Model):
     uncertainty: UncertaintyModel | None = None
     # [sensor]: the measurement (aiofl.sensor); merged into [scenario] / [controller.discrete]
     sensor: SensorModel | None = None
+    # [rig]: actuator, friction, delays (aiofl.rig); merged in run_config before [sensor]
+    rig: RigModel | None = None
 
     def defaults_used(self) -> list[str]:
         """``KEY = default`` for every documented default this config relies on: the

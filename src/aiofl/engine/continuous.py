@@ -32,9 +32,14 @@ from aiofl.engine.loop import (
     S_NOISE,
     S_RFF,
     S_U,
+    S_UC,
+    S_UD,
+    S_UDON,
     S_UREF,
     S_V,
     S_Y,
+    S_YD,
+    S_YDON,
     S_YM,
 )
 from aiofl.engine.member import (
@@ -67,6 +72,7 @@ _BLK_FILL = _BLK_OUTPUT = _BLK_ERROR = _BLK_FAL = _BLK_INLSEF = _BLK_LINEAR_TERM
 _BLK_INLSEF_LIMIT = _BLK_LINEAR_SEF = _BLK_LAW = _BLK_IOFL = _BLK_ESO_ERROR = None
 _BLK_INLESO_ERROR = _BLK_ESO_ROW = _BLK_ESO_INPUT = _BLK_ESO_LAST = _BLK_PLANT = None
 _BLK_DISTURBANCE = _BLK_METRICS = _BLK_MODEL = _BLK_MODEL_LAW = _BLK_MODEL_INPUT = None
+_BLK_PLANT_OUTPUT = None
 
 
 def _tpl_deriv(fns, t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - compiled
@@ -109,6 +115,9 @@ def _tpl_deriv(fns, t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cove
         _BLK_COPY(rr[ri, rho], rff)
 
     _BLK_OUTPUT(fns, z, p, s[S_NOISE], s[S_Y], s[S_YM])
+    for l in range(_W):  # a sensor delay: y(t - τ_out) + n(t) (_tpl_delay_stage_in)
+        if s[S_YDON, l] != 0.0:
+            s[S_YM, l] = s[S_YD, l] + s[S_NOISE, l]
 
     # state error feedback and law (kernel._aiofl_command), e_i = r_i - ξ̂_i
     if iq[IQ_LAW] == L.LAW_AIOFL:
@@ -159,6 +168,10 @@ def _tpl_deriv(fns, t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cove
         _BLK_ESO_INPUT(q[L.F_B0], u, dz[o_eso + rho - 1])
     _BLK_ESO_LAST(q[Q_BETA + rho], e, dz[o_eso + rho])
 
+    for l in range(_W):  # an input delay: the plant (and ISU) get u(t - τ_in), the ESO u(t)
+        if s[S_UDON, l] != 0.0:
+            s[S_UC, l] = u[l]
+            u[l] = s[S_UD, l]
     dx = _LEADING_ROWS(dz, _N)
     _BLK_PLANT(fns, z, p, u, dx)
     if dany:
@@ -166,6 +179,38 @@ def _tpl_deriv(fns, t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cove
     m0 = _N
     du = dz[m0 : m0 + L.N_METRIC]
     _BLK_METRICS(t, s[S_Y], r, u, s[S_UREF], du[0], du[1], du[2], du[3], du[4])
+
+
+def _tpl_delay_stage_in(k, st, n_stages, s, ring, dsteps):  # pragma: no cover - compiled
+    r"""Transport delays of m steps, continuous: ``s[S_YD]`` is y at stage ``st`` of step
+    k - m_out (y(0) while k < m_out), which the observer reads at stage ``st`` of step k;
+    ``s[S_UD]`` the controller's command at stage ``st`` of step k - m_in (0 while
+    k < m_in), which the plant gets.
+
+    With the delays multiples of the step, the stage times of step k - m are those of
+    step k shifted by τ, so the loop is the method of steps (Bellen & Zennaro, *Numerical
+    Methods for Delay Differential Equations*, 2003, §3.1) with the integrator applied to
+    the delayed copies of the state: the past stage values are exactly what that
+    integrator computes for them, and its order is kept."""
+    nb = ring.shape[1] // n_stages
+    for l in range(_W):
+        m = dsteps[1, l]
+        if m > 0:
+            s[S_YD, l] = ring[1, ((k - m) % nb) * n_stages + st, l] if k >= m else ring[1, 0, l]
+        m = dsteps[0, l]
+        s[S_UDON, l] = 1.0 if m > 0 else 0.0
+        if m > 0:
+            s[S_UD, l] = ring[0, ((k - m) % nb) * n_stages + st, l] if k >= m else 0.0
+
+
+def _tpl_delay_stage_out(k, st, n_stages, s, ring, fns, z, p):  # pragma: no cover - compiled
+    """y = h(x) at stage ``st`` of step k (at the state ``z``) and the controller's command
+    there into the ring's slot."""
+    nb = ring.shape[1] // n_stages
+    slot = (k % nb) * n_stages + st
+    _BLK_PLANT_OUTPUT(fns, z, p, ring[1, slot])
+    for l in range(_W):
+        ring[0, slot, l] = s[S_UC, l]
 
 
 def _tpl_setup(lanes, batch, q, qt, iq, ctrl, nper):  # pragma: no cover - compiled

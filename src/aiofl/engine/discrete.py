@@ -262,19 +262,16 @@ def delay_steps(key: str, tau: float, dt: float, sampled: bool) -> int:
     The sampled engine holds a delay exactly when it is an integer multiple m of the step:
     the command is piecewise constant with jumps on the step grid, so
     :math:`u(t - m\,dt)` jumps on the grid too, and the sensor reads a stored
-    :math:`y(t_k - m\,dt)`.  A delay between grid points would put a jump inside an RK4
-    step, and the continuous controller's command varies inside a step: both are refused
-    (ValueError naming the field), as is a delay of more than :data:`DELAY_STEPS_MAX` steps.
+    :math:`y(t_k - m\,dt)`.  The continuous controller's observer reads, at every stage
+    of the integrator, the output of the same stage m steps back, and the plant gets the
+    command of that stage (the method of steps,
+    :func:`aiofl.engine.continuous._tpl_delay_stage_in`).  A delay between grid points
+    would put a jump inside an RK4 step: refused (ValueError naming the field), as is a
+    delay of more than :data:`DELAY_STEPS_MAX` steps.  ``sampled`` (the controller's
+    timing) no longer changes what is held; it is kept for the callers.
     """
     if tau == 0.0:
         return 0
-    if not sampled:
-        raise ValueError(
-            f"scenario.{key} = {tau:g} s needs a sampled controller ([controller.discrete]"
-            " ts or [sensor] ts in a config, sampling= in Python): the continuous"
-            " controller's command varies inside a step, so its delayed value is not held"
-            " exactly; allowed: 0"
-        )
     m = round(tau / dt)
     if m < 1 or abs(m * dt - tau) > 1e-9 * tau:
         raise ValueError(

@@ -266,6 +266,9 @@ def recipe(
         tpl("_STEP_INPUTS", loop._tpl_step_inputs, inline),
         tpl("_REFERENCE", loop._tpl_reference, inline),
         tpl("_STORE_ROW", loop._tpl_store_row, opts),
+        tpl("_DELAY_SETUP", sampled._tpl_delay_setup, opts),
+        tpl("_DELAY_STAGE_IN", continuous._tpl_delay_stage_in, opts),
+        tpl("_DELAY_STAGE_OUT", continuous._tpl_delay_stage_out, opts),
     ]
     if sampled_data:
         # the controller's update, compiled as the blocks are, in the members' namespace
@@ -277,7 +280,6 @@ def recipe(
         templates += [
             tpl("_SETUP", sampled._tpl_setup, opts),
             tpl("_SAMPLE", sampled._tpl_sample, opts),
-            tpl("_DELAY_SETUP", sampled._tpl_delay_setup, opts),
             tpl("_DELAY_OUTPUT", sampled._tpl_delay_output, opts),
             tpl("_DELAY_INPUT", sampled._tpl_delay_input, opts),
             tpl("_RHS", sampled._tpl_plant_deriv, inline),

@@ -102,13 +102,15 @@ S_AMP = 10  #: amplitude times ω^k of the reference's k-th derivative
 S_BAD = 11  #: the number of the lane's states out of range (divergence)
 S_AHAT = 12  #: model-assisted observer: the nominal α at x̂ = Φ⁻¹(ξ̂)
 S_BHAT = 13  #: model-assisted observer: the nominal β at x̂
-S_UC = 14  #: sampled, input delay: the controller's held command (S_U is the delayed one)
-S_YD = 15  #: sampled, output delay: y(t_k - τ_out), what the ADC reads (plus noise)
-S_YDON = 16  #: sampled: 1 in a lane with an output delay, else 0
+S_UC = 14  #: input delay: the controller's command (S_U is the delayed one, the plant's)
+S_YD = 15  #: output delay: y(t - τ_out), what the ADC (sampled) or the ESO reads (plus noise)
+S_YDON = 16  #: 1 in a lane with an output delay, else 0
 S_YS = 17  #: sampled: y + noise at this step, what a lane due to sample reads
 S_UREF = 18  #: the command ISU and IAU are measured about (scenario.u_ref)
 S_LOST = 19  #: 1 when the lane's plant left its envelope at this step (_tpl_watch)
-N_S = 20
+S_UD = 20  #: continuous, input delay: the command of this stage m steps back
+S_UDON = 21  #: continuous: 1 in a lane with an input delay, else 0
+N_S = 22
 
 # Placeholders for what an instance binds (see aiofl.engine.instances).
 _W = WIDTH
@@ -119,7 +121,7 @@ _CONTROLLER_SIZE = 1  # row length of the discrete controller's state (sampled i
 _PH = None
 _UNMANAGED = _KEEP_ALIVE = _RHS = _SETUP = _SAMPLE = _CONTROLLER_BAD = None
 _STORE_ROW = _STORE_CONTROLLER = _REFERENCE = _STEP_INPUTS = None
-_DELAY_SETUP = _DELAY_OUTPUT = _DELAY_INPUT = None
+_DELAY_SETUP = _DELAY_OUTPUT = _DELAY_INPUT = _DELAY_STAGE_IN = _DELAY_STAGE_OUT = None
 _ASSIGN_LANES = _LOAD_LANES = _START_MEMBERS = _STOP_LANE = _FINISH_LANES = _WATCH = None
 _BLK_STAGE = _BLK_OUT_OF_RANGE = _BLK_COPY = _BLK_FILL = _BLK_INPUTS = None
 _BLK_SINE = _BLK_SINE_DERIVATIVE = _BLK_STEP = None
@@ -206,13 +208,15 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
         stv[L.ST_T10, l] = np.nan
         stv[L.ST_T90, l] = np.nan
         stv[L.ST_T_OUT, l] = np.nan
-    # transport delays (sampled): ring buffers of the held commands and of y, per lane
+    # transport delays: ring buffers of the held commands and of y per step (sampled), of
+    # the controller's command and y at every stage of a step (continuous), per lane
     dsteps = np.zeros((2, _W), dtype=np.int64)  # input, output delay in steps
-    nbuf = 1
-    if _SAMPLED:
-        nbuf = _DELAY_SETUP(sc, dt, dsteps, s) + 1
+    nbuf = _DELAY_SETUP(sc, dt, dsteps, s) + 1
     delayed = nbuf > 1
-    ring = np.zeros((2, nbuf, _W))  # [0]: held command per step, [1]: y per step
+    n_ring = 1 if _SAMPLED else STAGE_COUNT[batch.method]
+    ring = np.zeros((2, nbuf * n_ring, _W))  # [0]: held command per step, [1]: y
+    if delayed and not _SAMPLED:  # y(0), what the observer reads while t < τ_out
+        _DELAY_STAGE_OUT(0, 0, 1, s, ring, fns, z, p)
     rho = iq[IQ_RHO]
     nza = _N + L.N_METRIC if _SAMPLED else iq[IQ_NZ]
     nd = rho if iq[IQ_TD] == L.TD_EXACT else 0
@@ -273,7 +277,11 @@ def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
         for st in range(n_stages):
             c = STAGE_TIME[method, st]
             ri = int(2.0 * c)  # the reference slot of t_k + c dt: 0, 1 (mid-step), 2 (end)
+            if delayed and not _SAMPLED:  # y and u at this stage of step k - m into s
+                _DELAY_STAGE_IN(k, st, n_stages, s, ring, dsteps)
             _RHS(fns, (k + c) * dt, zt, kd, iq, q, p, pn, rrs, ri, s, dany)
+            if delayed and not _SAMPLED:  # this stage's y and command into the ring
+                _DELAY_STAGE_OUT(k, st, n_stages, s, ring, fns, zt, p)
             if st == 0:
                 stored = store and save_in == 0
                 if stored:
