@@ -266,7 +266,7 @@ def recipe(
         tpl("_STEP_INPUTS", loop._tpl_step_inputs, inline),
         tpl("_REFERENCE", loop._tpl_reference, inline),
         tpl("_STORE_ROW", loop._tpl_store_row, opts),
-        tpl("_DELAY_SETUP", sampled._tpl_delay_setup, opts),
+        tpl("_DELAY_SETUP", loop._tpl_delay_setup, opts),
         tpl("_DELAY_STAGE_IN", continuous._tpl_delay_stage_in, opts),
         tpl("_DELAY_STAGE_OUT", continuous._tpl_delay_stage_out, opts),
     ]
@@ -275,6 +275,9 @@ def recipe(
         ns_ctrl = dict(ns_member)
         ns_ctrl["_PAB"] = plant_fns["_PAB"]
         sampled._bind(ns_ctrl, bindings.private_components(private)["discrete"])
+        ns_ctrl["_DELAY_REFERENCE"] = compile_.instantiate(
+            sampled._tpl_delay_reference, ns_ctrl, tag, **opts
+        )
         ns["_CTRL_INIT"] = compile_.instantiate(sampled._tpl_ctrl_init, ns_ctrl, tag, **opts)
         ns["_CTRL_STEP"] = compile_.instantiate(sampled._tpl_ctrl_step, ns_ctrl, tag, **opts)
         templates += [

@@ -127,6 +127,20 @@ _BLK_STAGE = _BLK_OUT_OF_RANGE = _BLK_COPY = _BLK_FILL = _BLK_INPUTS = None
 _BLK_SINE = _BLK_SINE_DERIVATIVE = _BLK_STEP = None
 
 
+def _tpl_delay_setup(sc, dt, dsteps, s):  # pragma: no cover - compiled
+    r"""The lanes' transport delays in steps, :math:`m = \tau/dt` (``dsteps[0]``: input,
+    ``[1]``: output; checked on the host to be integers, :func:`aiofl.engine.discrete.delay_steps`),
+    the lanes' output-delay flags ``s[S_YDON]``; returns the largest."""
+    most = 0
+    for l in range(_W):
+        for j in range(2):
+            m = int(np.floor(sc[L.S_IN_DELAY + j, l] / dt + 0.5))
+            dsteps[j, l] = m
+            most = max(most, m)
+        s[S_YDON, l] = 1.0 if dsteps[1, l] > 0 else 0.0
+    return most
+
+
 def _tpl_loop(g, groups, batch, out):  # pragma: no cover - compiled
     """Integrate group ``g`` (members ``groups[g]``, -1 = pad) over the horizon: ``batch``
     is a :class:`aiofl.engine.batch.Batch`, ``out`` an :class:`aiofl.engine.batch.Outputs`."""

@@ -38,10 +38,8 @@ import sys
 from typing import Any
 
 import numpy as np
-from numba import njit
 
 from aiofl import layout as L
-from aiofl.components.fastmath import FASTMATH
 from aiofl.engine import bindings, plant_table
 from aiofl.engine import discrete as DS
 from aiofl.engine.discrete import (
@@ -112,7 +110,7 @@ N_CS = C_RFILL + 1
 _W = 32
 _N = 1
 _PNF = _PAB = _MEMBER_SETUP = _LEADING_ROWS = _IOFL_COMMAND = _COLUMN = None
-_CTRL_INIT = _CTRL_STEP = None
+_CTRL_INIT = _CTRL_STEP = _DELAY_REFERENCE = None
 _SATURATE = None
 _BLK_OUTPUT = _BLK_PLANT_OUTPUT = _BLK_PLANT = _BLK_DISTURBANCE = _BLK_METRICS = None
 _INLESO = _HAN_TD = _ITD = _PREFILTER = None
@@ -174,7 +172,7 @@ def _tpl_ctrl_step(fns, iq, q, dsc, cs, scr, y, rr, ri, pn):  # pragma: no cover
     ts = dsc[D_TS]
     known = int(dsc[D_KDELAY])  # the known measurement delay d, in samples
     if known > 0:  # the reference d samples old, aligned with the measurement: rr[ri] <- it
-        _delay_reference(cs, rr, ri, n1, known)
+        _DELAY_REFERENCE(cs, rr, ri, n1, known)
 
     e = _OBS_INNOVATION(cs, C_P, C_Y, y)  # y - p_1
     phi = e
@@ -246,8 +244,7 @@ def _tpl_ctrl_step(fns, iq, q, dsc, cs, scr, y, rr, ri, pn):  # pragma: no cover
     return u
 
 
-@njit(inline="always", fastmath=FASTMATH, error_model="numpy")
-def _delay_reference(cs, rr, ri, n1, d):  # pragma: no cover - compiled
+def _tpl_delay_reference(cs, rr, ri, n1, d):  # pragma: no cover - compiled
     """Replace the reference values ``rr[ri, :n1]`` (r, r', ... at t_k) by those of d
     samples ago, and keep them: the controller then tracks :math:`r(t_k - dT_s)`, aligned
     with a measurement d samples old (its first call holds the first values over the past)."""
@@ -340,20 +337,6 @@ def _tpl_sample(fns, k, z, p, pn, s, rrs, rl, iq, q, ctrl, due):  # pragma: no c
         s[S_U, l] = uq * np.floor(ua / uq + 0.5) if uq > 0.0 else ua
 
 
-def _tpl_delay_setup(sc, dt, dsteps, s):  # pragma: no cover - compiled
-    r"""The lanes' transport delays in steps, :math:`m = \tau/dt` (``dsteps[0]``: input,
-    ``[1]``: output; checked on the host to be integers, :func:`aiofl.engine.discrete.delay_steps`),
-    the lanes' output-delay flags ``s[S_YDON]``; returns the largest."""
-    most = 0
-    for l in range(_W):
-        for j in range(2):
-            m = int(np.floor(sc[L.S_IN_DELAY + j, l] / dt + 0.5))
-            dsteps[j, l] = m
-            most = max(most, m)
-        s[S_YDON, l] = 1.0 if dsteps[1, l] > 0 else 0.0
-    return most
-
-
 def _tpl_delay_output(fns, k, z, p, s, ring, dsteps):  # pragma: no cover - compiled
     r"""Step k's output :math:`y(t_k)` into the ring (slot k mod its length) and the
     delayed :math:`y(t_k - m\,dt)` into ``s[S_YD]`` (:math:`y(0)` while
@@ -434,7 +417,6 @@ def _bind(ns: dict[str, Any], cd: Any = None) -> None:
 
     ns.update({k: v for k, v in vars(DS).items() if k.isupper() and isinstance(v, int)})
     ns.update({k: v for k, v in globals().items() if k.startswith("C_") or k == "N_CS"})
-    ns["_delay_reference"] = _delay_reference
     ns.update(
         _FHAN_TD=cd.fhan_td_step,
         _OBS_INNOVATION=cd.observer_innovation,

@@ -38,6 +38,7 @@ from aiofl.engine.sampled import (
     _tpl_ctrl_run,
     _tpl_ctrl_step,
     _tpl_ctrl_step_each,
+    _tpl_delay_reference,
 )
 
 __all__ = ["DiscreteController", "standalone_recipe"]
@@ -79,6 +80,7 @@ def standalone_recipe(plant: Any = None) -> compile_.Recipe:
         bindings=ns,
         templates=(
             tpl("_SETUP", member._tpl_setup, opts),
+            tpl("_DELAY_REFERENCE", _tpl_delay_reference, opts),
             tpl("_CTRL_INIT", _tpl_ctrl_init, opts),
             tpl("_CTRL_RUN", _tpl_ctrl_run, opts),
             tpl("_CTRL_STEP_EACH", _tpl_ctrl_step_each, opts),
