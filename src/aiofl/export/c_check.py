@@ -213,19 +213,7 @@ def float_holds(cfg: Any, sampling: Any, files: dict[str, dict[str, str]]) -> st
                     st.append(True)
                 return cc.step(r, y)
 
-            t, y, u = loop(
-                step,
-                cfg.plant,
-                sc.reference,
-                c.rho,
-                sampling.ts,
-                sc.t_final,
-                x0=sc.x0,
-                scale=dict(sc.plant_scale),
-                delay=sampling.delay,
-                disturbance=(sc.disturbance_amplitude, sc.disturbance_time),
-                u_start=start_command(c),
-            )
+            t, y, u = config_loop(step, cfg, sampling)
             if len(t) < round(sc.t_final / sampling.ts):
                 return f"the {prec} build diverges at {t[-1]:.3g} s"
             out[prec] = itae_isu(t, y, u, sc.reference, sampling.ts)
@@ -236,6 +224,27 @@ def float_holds(cfg: Any, sampling: Any, files: dict[str, dict[str, str]]) -> st
     return (
         f"in float its ITAE differs from double by {100 * di:.3g} % and its ISU by "
         f"{100 * ds:.3g} % (allowed {100 * FLOAT_ITAE_TOL:g} %, {100 * FLOAT_ISU_TOL:g} %)"
+    )
+
+
+def config_loop(
+    step: Callable[[list[float], float], float], cfg: Any, sampling: Any
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`loop` over a run config's scenario (its plant scale, load step, reference,
+    start state and horizon) at ``sampling``'s Ts and computation delay."""
+    sc = cfg.scenario
+    return loop(
+        step,
+        cfg.plant,
+        sc.reference,
+        cfg.controller.rho,
+        sampling.ts,
+        sc.t_final,
+        x0=sc.x0,
+        scale=dict(sc.plant_scale),
+        delay=sampling.delay,
+        disturbance=(sc.disturbance_amplitude, sc.disturbance_time),
+        u_start=start_command(cfg.controller),
     )
 
 
@@ -276,19 +285,7 @@ def engine_agreement(cfg: Any, sampling: Any, files: dict[str, str]) -> dict[str
             du.append(abs(u_c - u_e))
             return u_c
 
-        _, _, u = loop(
-            step,
-            cfg.plant,
-            sc.reference,
-            c.rho,
-            sampling.ts,
-            sc.t_final,
-            x0=sc.x0,
-            scale=dict(sc.plant_scale),
-            delay=sampling.delay,
-            disturbance=(sc.disturbance_amplitude, sc.disturbance_time),
-            u_start=start_command(c),
-        )
+        _, _, u = config_loop(step, cfg, sampling)
     worst, peak = max(du), float(np.max(np.abs(u)))
     return {
         "samples": float(len(du)),
