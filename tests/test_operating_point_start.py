@@ -54,19 +54,11 @@ def _held_scenario(t_final: float = 1.0) -> Scenario:
 
 @pytest.fixture(scope="module")
 def maglev_runs() -> dict[str, dict[bool, object]]:
-    """The maglev held at 1 cm, its 1-mm step at 0.2 s: started at u = 0 and at u_e."""
+    """The maglev held at 1 cm, its 1-mm step at 0.2 s: started at u = 0
+    (``maglev-ladrc.toml``) and at u_e (``maglev-ladrc-trim.toml``: ``u0 = "trim"``)."""
     runs: dict[str, dict[bool, object]] = {}
-    base = (DATA / "maglev-ladrc.toml").read_text()
-    for name, text in (
-        ("zero", base),
-        ("trim", base.replace('init = "bumpless"', 'init = "bumpless"\nu0 = "trim"')),
-    ):
-        path = DATA / f"_u0_{name}.toml"
-        try:
-            path.write_text(text)
-            cfg = load_run_config(path)
-        finally:
-            path.unlink()
+    for name, file in (("zero", "maglev-ladrc.toml"), ("trim", "maglev-ladrc-trim.toml")):
+        cfg = load_run_config(DATA / file)
         runs[name] = {False: cfg.simulate(), True: cfg.with_sample_time(1e-4).simulate()}
     return runs
 
