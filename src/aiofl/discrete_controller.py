@@ -82,8 +82,9 @@ class DiscreteController(standalone.DiscreteController):
     and the design's coefficients finite.  A measurement ``y`` or a reference value the
     controller reads that is not finite or beyond ±1e30, or an update that would make the
     command or the state non-finite, is a fault: the sample changes nothing, the last
-    command (0 before the first) is returned, and :attr:`fault` stays True, every later
-    sample ignored with the command held, until :meth:`init` or :meth:`reset`.
+    command (before the first: the start's ``eso.u0``, 0 by default) is returned, and
+    :attr:`fault` stays True, every later sample ignored with the command held, until
+    :meth:`init` or :meth:`reset`.
     """
     )
 

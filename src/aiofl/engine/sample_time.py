@@ -13,12 +13,12 @@ and the FMU (:mod:`aiofl.export.fmu`), so the three refuse and hold alike:
   controller reads that is not finite or larger in magnitude than :data:`SIGNAL_MAX`, or an
   update that would make the command or the controller's memory non-finite, is a fault.
   A faulted sample changes nothing: the controller keeps its memory from before it and
-  returns the last command it returned (0 before the first), and raises its fault flag,
-  which stays up, the command held, every later sample ignored, until the controller is
-  started again (``init`` / ``reset``; ``NAME_start`` / ``NAME_init`` / ``NAME_reset`` in C;
-  ``fmi2Reset`` in the FMU), as firmware holds its output on a sensor fault until an
-  operator clears it.  A measurement of the wrong type or shape is a programming error,
-  not a fault: it raises.
+  returns the last command it returned (before the first: the start's ``eso.u0``), and
+  raises its fault flag, which stays up, the command held, every later sample ignored,
+  until the controller is started again (``init`` / ``reset``; ``NAME_start`` /
+  ``NAME_init`` / ``NAME_reset`` in C; ``fmi2Reset`` in the FMU), as firmware holds its
+  output on a sensor fault until an operator clears it.  A measurement of the wrong type
+  or shape is a programming error, not a fault: it raises.
 """
 
 from __future__ import annotations
