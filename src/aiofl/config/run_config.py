@@ -518,6 +518,13 @@ def parse_config(
         if model.controller.eso.u0 == "trim":  # a start at the holding input
             u_e = holding_input(plant, scenario, "controller.eso.u0")
             controller = controller.with_values(**{"eso.u0": u_e})
+        if model.controller.eso.delay == "rig":  # told the rig's measurement delay
+            if rig is None:
+                raise ValueError(
+                    'controller.eso.delay = "rig" needs a [rig] table (its measurement_delay); '
+                    "allowed: a delay in seconds, a whole number of the controller's ts"
+                )
+            controller = controller.with_values(**{"eso.delay": rig.measurement_delay})
         columns = len(L.trajectory_columns(plant.n_states))
         check_run_size(sc.t_final, sim.dt, trajectory_columns=columns, decimation=sim.decimation)
     except (ValueError, PlantError) as exc:
