@@ -29,11 +29,9 @@ import copy
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from aiofl import layout as L
 
-__all__ = ["FRICTION_STATES", "RIG_DRAWS", "RigCheck", "rig_check", "rig_config"]
+__all__ = ["FRICTION_STATES", "RIG_DRAWS", "RigCheck", "rig_check", "rig_checks", "rig_config"]
 
 #: the rig's own quantities drawn with the plant's parameters (factors on the rig's values)
 RIG_DRAWS: dict[str, dict[str, float]] = {
@@ -63,6 +61,7 @@ def rig_config(
     told: bool = False,
     draws: int | None = None,
     seed: int | None = None,
+    box: dict[str, float] | None = None,
 ) -> Any:
     """``cfg`` on the rig preset ``rig``, with an ``[uncertainty]`` table that draws the
     plant's box and the rig's :data:`RIG_DRAWS`.
@@ -82,6 +81,10 @@ def rig_config(
     draws, seed : int, optional
         The ``[uncertainty]`` table's draws and seed (default: the design's own, else 32
         draws and seed 0).
+    box : dict, optional
+        ``{parameter: p}``: draw each as a factor ~ U[1 - p, 1 + p] *instead of* the
+        design's own ``[uncertainty.parameters]`` (so designs judged together meet the
+        same plants).
 
     Returns
     -------
@@ -94,7 +97,8 @@ def rig_config(
 
     data = copy.deepcopy(cfg.raw)
     table: dict[str, Any] = {"preset": rig}
-    state = friction_state or FRICTION_STATES.get(cfg.plant.name)
+    plant_name = data["plant"] if isinstance(data.get("plant"), str) else cfg.plant.name
+    state = friction_state or FRICTION_STATES.get(plant_name)
     has_friction = Rig.from_preset(rig, friction_state="v").has_friction
     if has_friction:
         if state is None:
@@ -120,6 +124,8 @@ def rig_config(
             data["scenario"].pop(key, None)
     unc = copy.deepcopy(data.get("uncertainty") or {})
     params = dict(unc.get("parameters") or {})
+    if box is not None:
+        params = {name: {"uniform": p} for name, p in box.items()}
     if not params:
         params = {name: {"uniform": DEFAULT_BOX} for name in cfg.plant.param_names}
     params.update({k: v for k, v in RIG_DRAWS.items() if k != "rig_coulomb" or state})
@@ -209,13 +215,160 @@ class RigCheck:
         }
 
 
-def _run_record(res: Any) -> dict[str, Any]:
+def _record(metrics: Any, status: str, stopped_at: float) -> dict[str, Any]:
+    ok = status == "ok"
     return {
-        "itae": None if res.failed else float(res.metrics["itae"]),
-        "isu": None if res.failed else float(res.metrics["isu"]),
-        "status": str(res.status),
-        "stopped_at": float(res.stopped_at) if res.failed else None,
+        "itae": float(metrics[L.METRIC_NAMES.index("itae")]) if ok else None,
+        "isu": float(metrics[L.METRIC_NAMES.index("isu")]) if ok else None,
+        "status": status,
+        "stopped_at": None if ok else float(stopped_at),
     }
+
+
+def _share_plants(cfgs: list[Any]) -> list[Any]:
+    """The configs with one plant object per equal plant (same name, states and
+    parameters), so :func:`~aiofl.analysis.robustness.simulate_designs` and the nominal
+    runs batch designs of the same plant into one engine call."""
+    from dataclasses import replace
+
+    seen: dict[tuple[Any, ...], Any] = {}
+    out = []
+    for cfg in cfgs:
+        p = cfg.plant
+        key = (p.name, p.n_states, tuple(sorted(p.params.items())))
+        out.append(replace(cfg, plant=seen.setdefault(key, p)))
+    return out
+
+
+def _nominal_runs(cfgs: list[Any]) -> list[tuple[dict[str, Any], dict[str, float]]]:
+    """Every config's own run (batched by plant, scenario, horizon, step and method):
+    its record and its response figures."""
+    from aiofl.engine.simulation import simulate_batch
+
+    groups: list[list[int]] = []
+    for i, cfg in enumerate(cfgs):
+        for idx in groups:
+            first = cfgs[idx[0]]
+            if (
+                first.plant is cfg.plant
+                and first.scenario == cfg.scenario
+                and (first.dt, first.method, first.divergence_threshold)
+                == (cfg.dt, cfg.method, cfg.divergence_threshold)
+            ):
+                idx.append(i)
+                break
+        else:
+            groups.append([i])
+    out: dict[int, tuple[dict[str, Any], dict[str, float]]] = {}
+    for idx in groups:
+        base = cfgs[idx[0]]
+        samplings = [cfgs[i].sampling for i in idx]
+        res = simulate_batch(
+            base.plant,
+            [cfgs[i].controller for i in idx],
+            [base.scenario] * len(idx),
+            dt=base.dt,
+            method=base.method,
+            divergence_threshold=base.divergence_threshold,
+            sampling=samplings if any(s is not None for s in samplings) else None,
+        )
+        for j, i in enumerate(idx):
+            status = L.STATUS_NAMES[int(res.status[j])]
+            figures = {k: float(v[j]) for k, v in res.response.items()}
+            out[i] = (_record(res.metrics[j], status, res.stopped_at[j]), figures)
+    return [out[i] for i in range(len(cfgs))]
+
+
+def rig_checks(
+    cfgs: list[Any],
+    rig: str = "servo-1khz",
+    *,
+    draws: int = 32,
+    seed: int = 0,
+    told: bool = False,
+    box: dict[str, float] | None = None,
+    own: dict[str, dict[str, Any]] | None = None,
+) -> list[RigCheck]:
+    """Run designs on a rig, nominal and over draws (module docstring), batched: designs
+    of one plant and scenario share each engine call.
+
+    Parameters
+    ----------
+    cfgs : list of RunConfig
+        The designs as shipped (names unique).
+    rig : str
+        A rig preset (:data:`aiofl.rig.RIG_PRESETS`).
+    draws : int
+        Draws of the parameter box and the rig's :data:`RIG_DRAWS` (0: the nominal run
+        only).  Designs with the same box meet the same draws (common random numbers).
+    seed : int
+        The draws' seed.
+    told : bool
+        Tell every controller the rig's measurement delay.
+    box : dict, optional
+        One parameter box for every design (:func:`rig_config`); default each design's own.
+    own : dict, optional
+        The designs' own runs as shipped by name (``itae``, ``isu``, ``status``,
+        ``stopped_at``), when the caller has them; the others are run.
+
+    Returns
+    -------
+    list of RigCheck
+        In the order of ``cfgs``.
+    """
+    from aiofl.analysis.robustness import simulate_designs
+    from aiofl.engine.response import screaming
+    from aiofl.uncertainty import sample_draws
+
+    own = {
+        name: {k: rec.get(k) for k in ("itae", "isu", "status", "stopped_at")}
+        for name, rec in (own or {}).items()
+    }
+    missing = [c for c in cfgs if c.name not in own]
+    for cfg, (rec, _) in zip(missing, _nominal_runs(_share_plants(missing)), strict=True):
+        own[cfg.name] = rec
+    on_rig = _share_plants(
+        [rig_config(c, rig, told=told, draws=max(draws, 1), seed=seed, box=box) for c in cfgs]
+    )
+    nominal = _nominal_runs(on_rig)
+    checks: dict[int, RigCheck] = {}
+    by_box: dict[str, list[int]] = {}
+    for i, (cfg, (rec, figures)) in enumerate(zip(on_rig, nominal, strict=True)):
+        notes = []
+        if cfg.rig is not None and cfg.rig.coulomb == 0.0 and rig != "ideal":
+            notes.append(f"no friction: no velocity state known for plant {cfg.plant.name!r}")
+        rec = {
+            **rec,
+            "u_peak": figures.get("u_peak"),
+            "screaming": bool(figures) and screaming(figures),
+        }
+        checks[i] = RigCheck(cfgs[i].name, rig, rec, own[cfgs[i].name], 0,
+                             {n: 0 for n in L.STATUS_NAMES.values()}, float("nan"), None,
+                             None, None, told, notes)  # fmt: skip
+        if draws > 0 and rec["status"] == "ok":
+            key = cfg.uncertainty.model_dump_json()
+            by_box.setdefault(key, []).append(i)
+    for idx in by_box.values():
+        first = on_rig[idx[0]]
+        d = sample_draws(first.uncertainty, dt=first.dt)
+        for i, res in zip(idx, simulate_designs([on_rig[i] for i in idx], d), strict=True):
+            rec = res.to_dict()
+            base = checks[i]
+            checks[i] = RigCheck(
+                name=base.name,
+                rig=rig,
+                nominal=base.nominal,
+                own=base.own,
+                draws=len(d),
+                status_counts=rec["status_counts"],
+                not_lost=float(rec["stable_fraction"]),
+                itae_q50=rec["itae"]["q50"],
+                itae_q95=rec["itae"]["q95"],
+                isu_q95=rec["isu"]["q95"],
+                told=told,
+                notes=base.notes,
+            )
+    return [checks[i] for i in range(len(cfgs))]
 
 
 def rig_check(
@@ -225,63 +378,7 @@ def rig_check(
     draws: int = 32,
     seed: int = 0,
     told: bool = False,
-    friction_state: str | None = None,
+    box: dict[str, float] | None = None,
 ) -> RigCheck:
-    """Run a design on a rig, nominal and over draws (module docstring).
-
-    Parameters
-    ----------
-    cfg : RunConfig
-        The design as shipped.
-    rig : str
-        A rig preset.
-    draws : int
-        Draws of the parameter box and the rig's :data:`RIG_DRAWS` (0: the nominal run only).
-    seed : int
-        The draws' seed (common random numbers: every design meets the same plants).
-    told : bool
-        Tell the controller the rig's measurement delay.
-    friction_state : str, optional
-        The velocity state friction opposes (default: :data:`FRICTION_STATES`).
-
-    Returns
-    -------
-    RigCheck
-    """
-    from aiofl.analysis.robustness import run_robustness
-    from aiofl.engine.response import screaming
-
-    on_rig = rig_config(
-        cfg, rig, friction_state=friction_state, told=told, draws=max(draws, 1), seed=seed
-    )
-    notes = []
-    if on_rig.rig is not None and on_rig.rig.coulomb == 0.0 and rig != "ideal":
-        notes.append(f"no friction: no velocity state known for plant {cfg.plant.name!r}")
-    res = on_rig.simulate(store=False)
-    figures = res.response or {}
-    nominal = {
-        **_run_record(res),
-        "u_peak": float(figures.get("u_peak", np.nan)) if figures else None,
-        "screaming": bool(figures) and screaming(figures),
-    }
-    own = _run_record(cfg.simulate(store=False))
-    if draws == 0 or res.failed:
-        counts = {name: 0 for name in L.STATUS_NAMES.values()}
-        return RigCheck(cfg.name, rig, nominal, own, 0, counts, float("nan"), None, None,
-                        None, told, notes)  # fmt: skip
-    rob = run_robustness(on_rig, draws=draws, seed=seed)
-    d = rob.to_dict()
-    return RigCheck(
-        name=cfg.name,
-        rig=rig,
-        nominal=nominal,
-        own=own,
-        draws=draws,
-        status_counts=d["status_counts"],
-        not_lost=float(d["stable_fraction"]),
-        itae_q50=d["itae"]["q50"],
-        itae_q95=d["itae"]["q95"],
-        isu_q95=d["isu"]["q95"],
-        told=told,
-        notes=notes,
-    )
+    """One design on a rig (:func:`rig_checks` of one design; the same parameters)."""
+    return rig_checks([cfg], rig, draws=draws, seed=seed, told=told, box=box)[0]

@@ -463,6 +463,8 @@ class Reproduction:
     noise_fronts: Any = None
     # scenario 3's designs on fresh noise seeds (reporting.fresh_seeds.FreshSeeds), or None
     fresh: Any = None
+    # every design on the servo-1khz rig (reporting.rig_rows.RigTable), or None
+    rig: Any = None
 
     def scenario_runs(self, scenario: int) -> list[CaseRun]:
         """The runs of one scenario, in table order."""
