@@ -178,7 +178,24 @@ class RunConfig:
         """This config with ``[scenario] t_final`` and ``[simulation] dt`` / ``method``
         replaced, validated again by :func:`parse_config`: a command-line override passes
         exactly the checks a value in the file does (types, ranges, run size, events within
-        the horizon).  Raises :class:`ConfigError`; ``source`` names the override in it."""
+        the horizon).  Raises :class:`ConfigError`; ``source`` names the override in it.
+
+        Parameters
+        ----------
+        t_final
+            ``[scenario] t_final`` [s]; None keeps the config's.
+        dt
+            ``[simulation] dt`` [s]; None keeps the config's.
+        method
+            ``[simulation] method`` (``"rk4"`` or ``"euler"``); None keeps the config's.
+        source
+            How messages name the overridden config (default: its name and "(overridden)").
+
+        Returns
+        -------
+        RunConfig
+            A new config; this one is unchanged.
+        """
         data = copy.deepcopy(self.raw)
         for table, key, value in (
             ("scenario", "t_final", t_final),
@@ -248,7 +265,22 @@ class RunConfig:
     def with_rig(self, preset: str, *, source: str = "", **fields: Any) -> RunConfig:
         """This config on the rig preset ``preset`` (:data:`aiofl.rig.RIG_PRESETS`) with
         ``fields`` overriding its values (``friction_state="theta_dot"``): its ``[rig]``
-        table replaced and the config validated again.  Raises :class:`ConfigError`."""
+        table replaced and the config validated again.  Raises :class:`ConfigError`.
+
+        Parameters
+        ----------
+        preset
+            A key of :data:`aiofl.rig.RIG_PRESETS` (``"ideal"``, ``"servo-1khz"``, ...).
+        source
+            How messages name the new config (default: its name and the rig).
+        **fields
+            ``[rig]`` keys overriding the preset's values.
+
+        Returns
+        -------
+        RunConfig
+            A new config; this one is unchanged.
+        """
         data = {**copy.deepcopy(self.raw), "rig": {"preset": preset, **fields}}
         return parse_config(data, source or f"{self.name} with rig {preset}")
 
@@ -445,6 +477,25 @@ def parse_config(
     Types are strict (no bool or string coercion into numbers), the :data:`REQUIRED_KEYS`
     must be set (a plant file is refused as such: :class:`PlantFileGiven`), and the run's
     size is bounded before anything is allocated (:func:`check_run_size`).
+
+    Parameters
+    ----------
+    data
+        The config as a dict, as :func:`tomllib.loads` gives a TOML file.
+    source
+        How messages name the config (a file name; default ``"<dict>"``).
+    base_dir
+        The folder a relative plant file is found in (default: the working folder).
+
+    Returns
+    -------
+    RunConfig
+        The plant, controller, scenario and run settings.
+
+    Raises
+    ------
+    ConfigError
+        Naming the field and what is allowed (:class:`PlantFileGiven` for a plant file).
     """
     if not isinstance(data, dict):
         raise ConfigError(f"invalid config {source}: a TOML table expected, got {type(data)}")
