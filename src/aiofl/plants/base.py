@@ -317,7 +317,24 @@ class Plant:
         return arr
 
     def rhs(self, x: ArrayLike, u: float, d: float = 0.0, p: ArrayLike | None = None) -> np.ndarray:
-        r""":math:`\dot x = f(x,p) + g(x,p)u + b_d(x,p)\tau_d`, evaluated in Python."""
+        r""":math:`\dot x = f(x,p) + g(x,p)u + b_d(x,p)\tau_d`, evaluated in Python.
+
+        Parameters
+        ----------
+        x
+            The state, n values.
+        u
+            The input.
+        d
+            The disturbance :math:`\tau_d` (default 0).
+        p
+            The parameter vector (default: the nominal one).
+
+        Returns
+        -------
+        ndarray
+            :math:`\dot x`, shape (n,).
+        """
         pv = self.param_vector() if p is None else np.asarray(p, dtype=np.float64)
         dx = self._vector(self.f, "f", x, pv) + self._vector(self.g, "g", x, pv) * u
         if self.bd is not None and d != 0.0:
