@@ -218,12 +218,8 @@ class UncertaintyModel(_Model):
 
         Parameters
         ----------
-        param_names
-            The plant's parameter names.
-        discrete
-            Whether the config's controller is sampled (``[controller.discrete]``).
-        dt
-            The engine step [s].
+        param_names, discrete, dt
+            The plant's parameter names, whether the controller is sampled, the step [s].
         """
         unknown = sorted(set(self.parameters) - set(param_names))
         if unknown:
@@ -562,12 +558,8 @@ def box_draws(spec: UncertaintyModel, unit: ArrayLike, *, dt: float = 1e-4) -> D
 
     Parameters
     ----------
-    spec
-        The ``[uncertainty]`` model.
-    unit
-        The points in unit coordinates, (N, k).
-    dt
-        The engine step [s].
+    spec, unit, dt
+        The ``[uncertainty]`` model, the points (N, k) and the engine step [s].
 
     Returns
     -------
@@ -591,12 +583,8 @@ def cvar(values: ArrayLike, alpha: float = 0.9, axis: int = -1) -> NDArray[np.fl
 
     Parameters
     ----------
-    values
-        The values (losses), any shape.
-    alpha
-        The level α, 0 ≤ α < 1 (default 0.9: the worst 10 %).
-    axis
-        The axis of the K values.
+    values, alpha, axis
+        The values (losses); the level, 0 ≤ α < 1 (0.9: the worst 10 %); their axis.
 
     Returns
     -------
