@@ -479,9 +479,37 @@ def _modules_with_examples() -> list[str]:
     return [m for m, p in public_modules().items() if ">>> " in p.read_text(encoding="utf-8")]
 
 
+FLAGS = doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE
+
+# the examples that compile a kernel (tens of seconds on a cold cache) are marked
+# ``# doctest: +SKIP`` so that the quick run stays quick; the slow test runs them unskipped
+COMPILING_EXAMPLES = ("aiofl", "aiofl.discrete_controller")
+
+
 @pytest.mark.parametrize("module", _modules_with_examples())
 def test_docstring_examples_run(module: str) -> None:
     mod = importlib.import_module(module)
-    flags = doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE
-    result = doctest.testmod(mod, optionflags=flags, verbose=False, report=True)
+    result = doctest.testmod(mod, optionflags=FLAGS, verbose=False, report=True)
     assert result.failed == 0, f"{result.failed} of {result.attempted} examples failed"
+
+
+def test_the_entry_points_have_examples() -> None:
+    with_examples = set(_modules_with_examples())
+    assert set(COMPILING_EXAMPLES) | {"aiofl.config.run_config", "aiofl.plants.base"} <= (
+        with_examples
+    )
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("module", COMPILING_EXAMPLES)
+def test_compiling_examples_run(module: str) -> None:
+    mod = importlib.import_module(module)
+    runner = doctest.DocTestRunner(optionflags=FLAGS)
+    attempted = 0
+    for test in doctest.DocTestFinder().find(mod, module):
+        for example in test.examples:
+            example.options.pop(doctest.SKIP, None)
+        result = runner.run(test)
+        assert result.failed == 0, f"{test.name}: {result.failed} examples failed"
+        attempted += len(test.examples)
+    assert attempted > 0

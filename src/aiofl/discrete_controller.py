@@ -247,6 +247,15 @@ class DiscreteController(standalone.DiscreteController):
             coefficients, or for a controller the discrete update cannot run (the IOFL law).
         aiofl.config.ConfigError
             For a config that does not load.
+
+        Examples
+        --------
+        The first call compiles the controller's update (seconds; cached on disk after):
+
+        >>> ctrl = DiscreteController.from_config("tank-ladrc", ts=0.01)  # doctest: +SKIP
+        >>> ctrl.reset(0.0)  # bumpless start at the first measurement  # doctest: +SKIP
+        >>> ctrl.step(1.0, 0.0)  # r, y: u at its limit u_max = 10  # doctest: +SKIP
+        10.0
         """
         if ts is not None:
             ts = check_ts(ts, "ts")  # before the config is loaded: the argument named first

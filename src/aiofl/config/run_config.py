@@ -624,7 +624,13 @@ def preset_text(name: str) -> str:
 
 
 def load_config(path_or_preset: str | Path) -> RunConfig:
-    """Load a TOML file, or a shipped preset by name; raises :class:`ConfigError`."""
+    """Load a TOML file, or a shipped preset by name; raises :class:`ConfigError`.
+
+    Examples
+    --------
+    >>> load_config("tank-ladrc").controller.structure
+    'LADRC'
+    """
     p = Path(path_or_preset)
     if p.suffix == ".toml" or p.exists():
         if not p.is_file():

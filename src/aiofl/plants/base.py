@@ -153,6 +153,22 @@ class Plant:
         the floor, a joint past its stop; :mod:`aiofl.engine.loop`).
     output_range
         The output's physical range ``(low, high)``, or None; leaving it makes a run lost.
+
+    Examples
+    --------
+    A first-order lag :math:`\dot x = (u - x)/\tau`, :math:`y = x`; the functions are
+    compiled (numba) on the first simulation, evaluated in Python here:
+
+    >>> import numpy as np
+    >>> def f(x, p):
+    ...     return np.array([-x[0] / p[0]])
+    >>> def g(x, p):
+    ...     return np.array([1.0 / p[0]])
+    >>> def h(x, p):
+    ...     return x[0]
+    >>> lag = Plant("lag", 1, f, g, h, {"tau": 0.5}, relative_degree=1)
+    >>> lag.rhs([1.0], u=2.0)
+    array([2.])
     """
 
     name: str
