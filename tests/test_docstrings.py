@@ -99,34 +99,6 @@ ALLOWED: dict[str, str] = {
     "aiofl.tuning.search:prepare": _CAP
     + "run_config, settings, draws, overrides are described in its prose",
 }
-_NOT_YET = (
-    "aiofl.components.kalman:continuous_kalman_gain",
-    "aiofl.components.kalman:discrete_kalman_gain",
-    "aiofl.components.kalman:discrete_process_noise",
-    "aiofl.components.kalman:eso_kalman_observer",
-    "aiofl.components.kalman:kalman_bandwidth",
-    "aiofl.components.kalman:kalman_gain_parameters",
-    "aiofl.components.kalman:van_loan",
-    "aiofl.components.law:aiofl_law",
-    "aiofl.components.law:iofl_law",
-    "aiofl.components.law:model_assisted_law",
-    "aiofl.components.law:saturate_range",
-    "aiofl.components.metrics:iae",
-    "aiofl.components.metrics:ise",
-    "aiofl.components.metrics:itae",
-    "aiofl.components.metrics:opi",
-    "aiofl.components.model_gains:design_point_jacobian",
-    "aiofl.components.model_gains:discrete_model_gain",
-    "aiofl.components.model_gains:model_gain",
-    "aiofl.components.observers:eso_gain",
-    "aiofl.components.observers:eso_rhs",
-    "aiofl.components.observers:eso_update",
-    "aiofl.components.observers:inleso_injection",
-    "aiofl.components.vecmath:fma",
-)
-ALLOWED |= dict.fromkeys(
-    _NOT_YET, "not yet documented (issue 38: the allow-list shrinks module by module)"
-)
 
 
 # ---------------------------------------------------------------------------------------------
