@@ -85,7 +85,6 @@ ALLOWED: dict[str, str] = {
     + "runs plan()'s groups (plant, groups_by_instance, batch, out, engine)",
     "aiofl.export.fmu:export_fmu_for_config": _CAP
     + "cfg, sampling, precision, prefix as export_fmu's; config: the name shown",
-    "aiofl.plants.normal_form:lie_derivative": _CAP + "it returns L_F λ, a sympy expression",
     "aiofl.plants.symbolic:SymbolicPlant.from_strings": _CAP
     + "its prose documents the keys; they are a plant file's",
     "aiofl.reporting.fronts:checked_rows": _CAP
