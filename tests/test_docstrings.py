@@ -58,8 +58,10 @@ KNOWN_SECTIONS = {
     "Methods",
 }
 
-# "module:qualname" -> why it is not (yet) documented.  The test fails on an entry that has
-# become compliant or no longer exists, so this list only shrinks.
+# "module:qualname" -> why it is not documented.  The test fails on an entry that has become
+# compliant or no longer exists, so this list only shrinks.  Each entry is a function of a
+# module within a few lines of the 650-line cap (tests/test_architecture.py): its sections
+# would push the module over, so it waits for the module's split (a code change).
 _CAP = "its module is at the 650-line cap of tests/test_architecture.py; "
 ALLOWED: dict[str, str] = {
     "aiofl.analysis.closed_loop:ClosedLoop.rhs": _CAP

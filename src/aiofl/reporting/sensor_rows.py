@@ -139,7 +139,8 @@ def compute_sensor_table(
     cases
         The report's cases.
     ideal
-        Runs already made, as said above (None: none).
+        Runs already made, by preset (``itae``, ``isu``, ``diverged``, ``stopped_at``); None:
+        none.
     on_stage
         Called with a description before each call (None: silent).
 
