@@ -18,6 +18,7 @@ import typer
 
 from aiofl.cli.errors import (
     FORCE_OPTION,
+    RIG_OPTION,
     SENSOR_OPTION,
     _check_out,
     _out_or_check,
@@ -72,6 +73,7 @@ def tune_command(
         ),
     ] = None,
     sensor: Annotated[str | None, SENSOR_OPTION] = None,
+    rig: Annotated[str | None, RIG_OPTION] = None,
     omega0_ceiling: Annotated[
         bool,
         typer.Option(
@@ -113,12 +115,16 @@ def tune_command(
         if out is not None:  # --resume continues the run whose checkpoint OUT holds
             _check_out(out, force=force or (resume and (out / CHECKPOINT).is_file()))
         target: Any = config
-        if sensor or ts is not None:  # the sampled controller is tuned (and written)
+        if sensor or rig or ts is not None:  # the sampled controller is tuned (and written)
             from aiofl.config import load_config
 
             target = load_config(config)
             if sensor:
                 target = target.with_sensor(sensor, source=f"{config} with --sensor {sensor}")
+            if rig:
+                from aiofl.analysis.rig_check import rig_config
+
+                target = rig_config(target, rig)
             if ts is not None:
                 target = target.with_sample_time(ts)
         ceiling = True if omega0_ceiling else None  # None: the [tune] table's setting

@@ -116,6 +116,8 @@ def controller_table(c: Controller) -> dict[str, Any]:
     }
     if c.value("eso.u0") != 0.0:  # a start at a held command
         eso["u0"] = c.value("eso.u0")
+    if c.value("eso.delay") != 0.0:  # a known measurement delay
+        eso["delay"] = c.value("eso.delay")
     if c.eso_gains == "kalman":
         eso.update(q=c.value("eso.q"), r=c.value("eso.r"))
     else:

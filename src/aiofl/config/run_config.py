@@ -569,6 +569,13 @@ def parse_config(
         if model.controller.eso.u0 == "trim":  # a start at the holding input
             u_e = holding_input(plant, scenario, "controller.eso.u0")
             controller = controller.with_values(**{"eso.u0": u_e})
+        if model.controller.eso.delay == "rig":  # told the rig's measurement delay
+            if rig is None:
+                raise ValueError(
+                    'controller.eso.delay = "rig" needs a [rig] table (its measurement_delay); '
+                    "allowed: a delay in seconds, a whole number of the controller's ts"
+                )
+            controller = controller.with_values(**{"eso.delay": rig.measurement_delay})
         columns = len(L.trajectory_columns(plant.n_states))
         check_run_size(sc.t_final, sim.dt, trajectory_columns=columns, decimation=sim.decimation)
     except (ValueError, PlantError) as exc:
@@ -610,17 +617,43 @@ def _presets_dir() -> Any:
     return resources.files("aiofl") / "presets"
 
 
+#: the sets of shipped presets: (key, folder under presets/, title).  A preset's set is a
+#: measured fact (benchmarks/rig_verdicts.py, tests/test_preset_sets.py): "designs" hold on
+#: the servo-1khz rig (aiofl.analysis.rig_check), "paper" is the paper's reproduction as
+#: printed (an ideal world: a continuous controller, an exact measurement), "limits" are
+#: designs tuned for an ideal world that a real rig loses or drives beyond its own figures.
+PRESET_SETS: tuple[tuple[str, str, str], ...] = (
+    ("designs", "", "Designs for a rig (hold on the servo-1khz rig)"),
+    ("paper", "paper", "The paper's designs (the reproduction: an ideal world)"),
+    ("limits", "limits", "Ideal-world limits (tuned for an exact model and sensor; fail a rig)"),
+)
+
+
+def preset_sets() -> dict[str, list[str]]:
+    """The shipped presets' names by set (:data:`PRESET_SETS`), each sorted."""
+    out: dict[str, list[str]] = {}
+    for key, folder, _ in PRESET_SETS:
+        base = _presets_dir() / folder if folder else _presets_dir()
+        names = [p.name[:-5] for p in base.iterdir() if p.is_file() and p.name.endswith(".toml")]
+        out[key] = sorted(names)
+    return out
+
+
 def list_presets() -> list[str]:
-    """Names of the presets shipped with the package."""
-    return sorted(p.name[:-5] for p in _presets_dir().iterdir() if p.name.endswith(".toml"))
+    """Names of the presets shipped with the package, every set (:func:`preset_sets`)."""
+    return sorted(n for names in preset_sets().values() for n in names)
 
 
 def preset_text(name: str) -> str:
-    """The TOML text of preset ``name``."""
-    path = _presets_dir() / f"{name}.toml"
-    if not path.is_file():
+    """The TOML text of preset ``name`` (searched in every set)."""
+    if not name or "/" in name or "\\" in name or name.startswith("."):
         raise ConfigError(f"unknown preset {name!r}; available: {', '.join(list_presets())}")
-    return path.read_text(encoding="utf-8")
+    for _, folder, _ in PRESET_SETS:
+        base = _presets_dir() / folder if folder else _presets_dir()
+        path = base / f"{name}.toml"
+        if path.is_file():
+            return path.read_text(encoding="utf-8")
+    raise ConfigError(f"unknown preset {name!r}; available: {', '.join(list_presets())}")
 
 
 def load_config(path_or_preset: str | Path) -> RunConfig:
