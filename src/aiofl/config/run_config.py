@@ -182,19 +182,13 @@ class RunConfig:
 
         Parameters
         ----------
-        t_final
-            ``[scenario] t_final`` [s]; None keeps the config's.
-        dt
-            ``[simulation] dt`` [s]; None keeps the config's.
-        method
-            ``[simulation] method`` (``"rk4"`` or ``"euler"``); None keeps the config's.
-        source
-            How messages name the overridden config (default: its name and "(overridden)").
+        t_final, dt, method, source
+            ``[scenario] t_final`` [s], ``[simulation] dt`` [s] and ``method`` (None: the
+            config's); how messages name the new config (default: "NAME (overridden)").
 
         Returns
         -------
         RunConfig
-            A new config; this one is unchanged.
         """
         data = copy.deepcopy(self.raw)
         for table, key, value in (
@@ -265,22 +259,7 @@ class RunConfig:
     def with_rig(self, preset: str, *, source: str = "", **fields: Any) -> RunConfig:
         """This config on the rig preset ``preset`` (:data:`aiofl.rig.RIG_PRESETS`) with
         ``fields`` overriding its values (``friction_state="theta_dot"``): its ``[rig]``
-        table replaced and the config validated again.  Raises :class:`ConfigError`.
-
-        Parameters
-        ----------
-        preset
-            A key of :data:`aiofl.rig.RIG_PRESETS` (``"ideal"``, ``"servo-1khz"``, ...).
-        source
-            How messages name the new config (default: its name and the rig).
-        **fields
-            ``[rig]`` keys overriding the preset's values.
-
-        Returns
-        -------
-        RunConfig
-            A new config; this one is unchanged.
-        """
+        table replaced and the config validated again.  Raises :class:`ConfigError`."""
         data = {**copy.deepcopy(self.raw), "rig": {"preset": preset, **fields}}
         return parse_config(data, source or f"{self.name} with rig {preset}")
 
@@ -473,29 +452,19 @@ def parse_config(
 ) -> RunConfig:
     """Validate a config dict and build the engine objects; raises :class:`ConfigError`.
 
-    ``base_dir`` resolves a relative ``plant = "file.toml"`` (defaults to the working folder).
     Types are strict (no bool or string coercion into numbers), the :data:`REQUIRED_KEYS`
     must be set (a plant file is refused as such: :class:`PlantFileGiven`), and the run's
     size is bounded before anything is allocated (:func:`check_run_size`).
 
     Parameters
     ----------
-    data
-        The config as a dict, as :func:`tomllib.loads` gives a TOML file.
-    source
-        How messages name the config (a file name; default ``"<dict>"``).
-    base_dir
-        The folder a relative plant file is found in (default: the working folder).
+    data, source, base_dir
+        The config as :func:`tomllib.loads` gives it; how messages name it; the folder that
+        resolves a relative ``plant = "file.toml"`` (default: the working folder).
 
     Returns
     -------
     RunConfig
-        The plant, controller, scenario and run settings.
-
-    Raises
-    ------
-    ConfigError
-        Naming the field and what is allowed (:class:`PlantFileGiven` for a plant file).
     """
     if not isinstance(data, dict):
         raise ConfigError(f"invalid config {source}: a TOML table expected, got {type(data)}")
@@ -657,13 +626,7 @@ def preset_text(name: str) -> str:
 
 
 def load_config(path_or_preset: str | Path) -> RunConfig:
-    """Load a TOML file, or a shipped preset by name; raises :class:`ConfigError`.
-
-    Examples
-    --------
-    >>> load_config("tank-ladrc").controller.structure
-    'LADRC'
-    """
+    """Load a TOML file, or a shipped preset by name; raises :class:`ConfigError`."""
     p = Path(path_or_preset)
     if p.suffix == ".toml" or p.exists():
         if not p.is_file():
