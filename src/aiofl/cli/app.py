@@ -340,6 +340,19 @@ def simulation_record(cfg: Any, result: Any, source_name: str) -> dict[str, Any]
     ``source`` is ``"config"``.  ``config`` is what was run, as given (the preset's name,
     or the file's path: a preset copied to ``my.toml`` and edited is ``"my.toml"``, not the
     preset), ``name`` the config's own ``name``.
+
+    Parameters
+    ----------
+    cfg
+        The run config.
+    result
+        Its simulation result.
+    source_name
+        The config as given (a preset's name or a path).
+
+    Returns
+    -------
+    dict
     """
     from aiofl.config import list_presets
     from aiofl.reporting.cases import computed_record, scenario_number

@@ -216,6 +216,19 @@ def summary_text(result: Any, summary: dict[str, Any], out: Path) -> str:
     The numbers are the progress bar's: its "best" is the best objective (with NSGA-II
     its "lowest <first objective>", printed here next to the chosen design's objectives),
     its eval/s the whole run's :attr:`~aiofl.tuning.search.TuneResult.evals_per_second`.
+
+    Parameters
+    ----------
+    result
+        The run's :class:`~aiofl.tuning.search.TuneResult`.
+    summary
+        What :func:`aiofl.tuning.results.write_outputs` returned.
+    out
+        The output folder.
+
+    Returns
+    -------
+    str
     """
     import math
 

@@ -178,7 +178,18 @@ class RunConfig:
         """This config with ``[scenario] t_final`` and ``[simulation] dt`` / ``method``
         replaced, validated again by :func:`parse_config`: a command-line override passes
         exactly the checks a value in the file does (types, ranges, run size, events within
-        the horizon).  Raises :class:`ConfigError`; ``source`` names the override in it."""
+        the horizon).  Raises :class:`ConfigError`; ``source`` names the override in it.
+
+        Parameters
+        ----------
+        t_final, dt, method, source
+            ``[scenario] t_final`` [s], ``[simulation] dt`` [s] and ``method`` (None: the
+            config's); how messages name the new config (default: "NAME (overridden)").
+
+        Returns
+        -------
+        RunConfig
+        """
         data = copy.deepcopy(self.raw)
         for table, key, value in (
             ("scenario", "t_final", t_final),
@@ -441,10 +452,19 @@ def parse_config(
 ) -> RunConfig:
     """Validate a config dict and build the engine objects; raises :class:`ConfigError`.
 
-    ``base_dir`` resolves a relative ``plant = "file.toml"`` (defaults to the working folder).
     Types are strict (no bool or string coercion into numbers), the :data:`REQUIRED_KEYS`
     must be set (a plant file is refused as such: :class:`PlantFileGiven`), and the run's
     size is bounded before anything is allocated (:func:`check_run_size`).
+
+    Parameters
+    ----------
+    data, source, base_dir
+        The config as :func:`tomllib.loads` gives it; how messages name it; the folder that
+        resolves a relative ``plant = "file.toml"`` (default: the working folder).
+
+    Returns
+    -------
+    RunConfig
     """
     if not isinstance(data, dict):
         raise ConfigError(f"invalid config {source}: a TOML table expected, got {type(data)}")

@@ -111,6 +111,24 @@ def front_of_run(prep: Any, gens: list[dict[str, Any]], values: NDArray[np.float
     ``prep`` is the run's prepared settings (:func:`aiofl.tuning.search.prepare`), ``gens``
     its generations (dicts with ``F``, ``G``, ``raw`` per candidate), ``values`` (N, d) the
     parameter values of all N evaluated candidates.
+
+    Parameters
+    ----------
+    prep
+        The run's prepared settings (:func:`aiofl.tuning.search.prepare`).
+    gens
+        Its generations (dicts with ``F``, ``G``, ``raw`` per candidate).
+    values
+        The parameter values of all N evaluated candidates, (N, d).
+
+    Returns
+    -------
+    Front
+
+    Raises
+    ------
+    NoFeasibleDesign
+        When no evaluated design is feasible.
     """
     F = np.concatenate([g["F"] for g in gens])
     G = np.concatenate([g["G"] for g in gens])
@@ -184,6 +202,23 @@ def front_figure(
     (the y ≡ 0 controller's ISU) is symmetric-log starting at 0, so no negative decades
     are drawn to place it.  Title, notes and axis labels are plain text, never mathtext: a
     ``$`` in a config's path or an error message cannot break the figure.
+
+    Parameters
+    ----------
+    front
+        The front.
+    title
+        The figure's title (plain text).
+    markers
+        ``(label, objective 2, objective 1)`` reference points.
+    isu_floor
+        The exact-tracking ISU floor, drawn as a line (None: not drawn).
+    notes
+        Lines printed under the title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     from matplotlib.figure import Figure
 
@@ -246,7 +281,17 @@ def front_png(
     isu_floor: float | None = None,
     notes: Sequence[str] = (),
 ) -> bytes:
-    """``front.png``: :func:`front_figure` rendered to PNG bytes (Agg, no pyplot state)."""
+    """``front.png``: :func:`front_figure` rendered to PNG bytes (Agg, no pyplot state).
+
+    Parameters
+    ----------
+    front, title, markers, isu_floor, notes
+        As for :func:`front_figure`.
+
+    Returns
+    -------
+    bytes
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     fig = front_figure(front, title, markers, isu_floor, notes)

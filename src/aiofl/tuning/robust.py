@@ -64,6 +64,20 @@ def aggregate(values: NDArray[np.float64], kind: str, alpha: float = 0.9) -> NDA
 
     ``mean``, ``worst`` and ``cvar`` are :func:`aiofl.uncertainty.aggregate` (non-finite
     entries, i.e. diverged members, count as :math:`+\infty`); ``nominal`` is column 0.
+
+    Parameters
+    ----------
+    values
+        Shape (..., K+1).
+    kind
+        ``"mean"``, ``"worst"``, ``"cvar"`` or ``"nominal"`` (:data:`AGGREGATES`).
+    alpha
+        The CVaR level.
+
+    Returns
+    -------
+    ndarray
+        Shape (...).
     """
     from aiofl.uncertainty import aggregate as over_draws
 
@@ -198,7 +212,25 @@ def quantity_values(
     margins: Mapping[str, NDArray[np.float64]] | None = None,
 ) -> NDArray[np.float64]:
     """Per candidate value (B,) of quantity ``q`` (``default``: the run's aggregate;
-    ``margins``: :func:`aiofl.tuning.margins.candidate_margins`, needed for a margin)."""
+    ``margins``: :func:`aiofl.tuning.margins.candidate_margins`, needed for a margin).
+
+    Parameters
+    ----------
+    q
+        The quantity.
+    metrics, failed
+        The engine's metrics (B, K+1, metrics) and divergence flags (B, K+1) of the B
+        candidates over the K+1 members.
+    default, alpha
+        The run's aggregate and CVaR level.
+    margins
+        :func:`aiofl.tuning.margins.candidate_margins` (None: a margin is refused).
+
+    Returns
+    -------
+    ndarray
+        Shape (B,).
+    """
     m, d = _as_draws(metrics, failed)
     if q.is_margin:
         if margins is None:
@@ -231,6 +263,26 @@ def robust_objective(
     the K+1 members of :math:`t_{d,k}/t_f` (1 for a stable member): finite, worse than
     any feasible :math:`J < P`, and better the more draws stay stable and the later the
     others diverge.  With K = 0 this is :func:`aiofl.tuning.space.objective_values`.
+
+    Parameters
+    ----------
+    metrics, failed
+        As for :func:`quantity_values`.
+    stopped_at
+        When each member diverged [s], shape (B, K+1).
+    coefficients
+        c, the weights of the metrics.
+    penalty
+        P.
+    t_final
+        The horizon :math:`t_f` [s].
+    kind, alpha
+        The aggregate and its CVaR level (:func:`aggregate`).
+
+    Returns
+    -------
+    ndarray
+        Shape (B,).
     """
     m, d = _as_draws(metrics, failed)
     t = np.asarray(stopped_at, dtype=np.float64).reshape(d.shape)
@@ -265,6 +317,19 @@ def objective_matrix(
     to ``cap``) so that pymoo's sorting stays well defined: a diverged candidate (+inf) is
     infeasible through ``G[:, 0]``, an infinite margin (no crossover, −inf in minimisation
     form) stays the best.
+
+    Parameters
+    ----------
+    objectives, constraints
+        The run's objectives and constraints.
+    metrics, failed, default, alpha, margins
+        As for :func:`quantity_values`.
+    cap
+        The clipping value.
+
+    Returns
+    -------
+    F, G, raw : ndarray
     """
     _, d = _as_draws(metrics, failed)
     f = np.column_stack(
@@ -296,6 +361,21 @@ def draw_fields(
     nominal scenario (``plant_scale``, ``noise_variance`` ...), plus ``"ts"`` when the
     sample time is drawn, so it travels to Dask workers in the picklable evaluation spec.
     Raises :class:`aiofl.config.ConfigError` when the config has no ``[uncertainty]`` table.
+
+    Parameters
+    ----------
+    config
+        The run config.
+    draws
+        K, the number of draws (0: none).
+    dt
+        The config's step [s] (a drawn sample time is a multiple of it).
+    corners
+        Append the box corners.
+
+    Returns
+    -------
+    tuple of dict
     """
     from dataclasses import fields
 

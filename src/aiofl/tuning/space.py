@@ -334,6 +334,23 @@ def objective_values(
     r"""Objective of each member: :math:`c^T m`, or :math:`P(2 - t_d/t_f)` if it diverged.
 
     A non-finite :math:`c^T m` also scores :math:`2P`.  Every value is finite.
+
+    Parameters
+    ----------
+    metrics
+        The engine's metrics, (..., metrics).
+    failed, stopped_at
+        Whether each member diverged, and when [s].
+    coefficients
+        c, the weights of the metrics.
+    penalty
+        P.
+    t_final
+        The horizon :math:`t_f` [s].
+
+    Returns
+    -------
+    ndarray
     """
     with np.errstate(all="ignore"):
         j = metrics[..., : L.N_METRIC] @ coefficients  # the integrals (SCORE_NAMES' first)
@@ -426,6 +443,19 @@ def config_with_values(
 
     Vector entries (``sef.k2``, ``eso.alpha3``) are written into their lists, which are
     filled from ``controller``'s current values where the config left them out.
+
+    Parameters
+    ----------
+    raw
+        The config dict.
+    controller
+        Its controller.
+    values
+        The parameter values by engine name (``eso.omega0``, ``sef.k2``, ...).
+
+    Returns
+    -------
+    dict
     """
     out = copy.deepcopy(dict(raw))
     ctrl = out.setdefault("controller", {})
@@ -516,6 +546,21 @@ def update_toml(
     ``config`` (the tuned config dict, see :func:`config_with_values`); a missing table is
     added.  ``header`` lines are prepended as comments.  Parsing the result gives ``config``
     wherever ``source`` and ``config`` agree outside those entries.
+
+    Parameters
+    ----------
+    source
+        The config's TOML text.
+    config
+        The tuned config dict.
+    names
+        The tuned engine columns (``eso.omega0``, ``sef.k2``, ...).
+    header
+        Comment lines to prepend.
+
+    Returns
+    -------
+    str
     """
     import tomlkit
     from tomlkit.items import Array
