@@ -380,5 +380,25 @@ def rig_check(
     told: bool = False,
     box: dict[str, float] | None = None,
 ) -> RigCheck:
-    """One design on a rig (:func:`rig_checks` of one design; the same parameters)."""
+    """One design on a rig (:func:`rig_checks` of one design).
+
+    Parameters
+    ----------
+    cfg : RunConfig
+        The design as shipped.
+    rig : str
+        A rig preset (:data:`aiofl.rig.RIG_PRESETS`).
+    draws : int
+        Draws of the parameter box and the rig's :data:`RIG_DRAWS` (0: nominal only).
+    seed : int
+        The draws' seed.
+    told : bool
+        Tell the controller the rig's measurement delay.
+    box : dict, optional
+        ``{parameter: p}``, drawn × U[1 - p, 1 + p] instead of the design's own box.
+
+    Returns
+    -------
+    RigCheck
+    """
     return rig_checks([cfg], rig, draws=draws, seed=seed, told=told, box=box)[0]
