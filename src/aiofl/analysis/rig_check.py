@@ -16,7 +16,9 @@ A continuous design runs sampled at the rig sensor's Ts.
 
 **The verdict says what the plant did** (:meth:`RigCheck.verdict`): ``"holds"`` (the
 nominal run and every draw neither lost nor diverged, the command not screaming),
-``"screams"`` (the plant is held, but at steady state the command is mostly the encoder's quantum,
+``"does not track"`` (held, but its ITAE is at least :data:`NO_TRACKING` of the ITAE of no
+control at all, :math:`y \equiv 0`: :math:`\int_0^{t_f} t\,|r|\,dt`), ``"screams"`` (the
+plant is held, but at steady state the command is mostly the encoder's quantum,
 :func:`aiofl.engine.response.screaming`), ``"command ×N"`` (held, but its ISU is more
 than :data:`ISU_FACTOR` times the design's own run's: the rig's quantum, delay or lag drive
 the actuator far beyond what the design was judged with), ``"lost in k of N draws"`` (joined by
@@ -29,9 +31,19 @@ import copy
 from dataclasses import dataclass, field
 from typing import Any
 
+import numpy as np
+
 from aiofl import layout as L
 
-__all__ = ["FRICTION_STATES", "RIG_DRAWS", "RigCheck", "rig_check", "rig_checks", "rig_config"]
+__all__ = [
+    "FRICTION_STATES",
+    "RIG_DRAWS",
+    "RigCheck",
+    "no_control_itae",
+    "rig_check",
+    "rig_checks",
+    "rig_config",
+]
 
 #: the rig's own quantities drawn with the plant's parameters (factors on the rig's values)
 RIG_DRAWS: dict[str, dict[str, float]] = {
@@ -45,6 +57,9 @@ FRICTION_STATES: dict[str, str] = {
     "dcmotor_arm": "omega",
     "flexjoint_hub": "w_m",
 }
+
+#: a held design whose ITAE is at least this share of no control's (y = 0) does not track
+NO_TRACKING = 0.5
 
 #: a held design whose command energy (ISU) on the rig exceeds this multiple of its own run's
 ISU_FACTOR = 2.0
@@ -139,7 +154,7 @@ def rig_config(
 
 @dataclass(frozen=True)
 class RigCheck:
-    """A design on a rig (:func:`rig_check`).
+    r"""A design on a rig (:func:`rig_check`).
 
     Attributes
     ----------
@@ -151,12 +166,17 @@ class RigCheck:
     own
         The design's own run as shipped (its own sensor, no rig): ``itae``, ``isu``,
         ``status``.
-    draws
-        Number of draws; ``status_counts`` how many were ok / lost / diverged.
-    itae_q95, isu_q95
-        Over the draws (None where a lost or diverged draw falls).
+    draws, status_counts
+        Number of draws (0 when the nominal run already failed) and how many were ok /
+        lost / diverged.
+    not_lost
+        Share of the draws neither lost nor diverged (None without draws).
+    itae_q50, itae_q95, isu_q95
+        Over the draws (None where a lost or diverged draw falls, or without draws).
     told
         Whether the controller knows the rig's measurement delay.
+    no_control_itae
+        The ITAE of no control at all, :math:`\int_0^{t_f} t\,|r|\,dt` (y ≡ 0).
     notes
         What was assumed (no friction state known, ...).
     """
@@ -167,11 +187,12 @@ class RigCheck:
     own: dict[str, Any]
     draws: int
     status_counts: dict[str, int]
-    not_lost: float
+    not_lost: float | None
     itae_q50: float | None
     itae_q95: float | None
     isu_q95: float | None
     told: bool
+    no_control_itae: float = float("inf")
     notes: list[str] = field(default_factory=list)
 
     @property
@@ -182,6 +203,9 @@ class RigCheck:
             return f"{nom['status']} at t = {nom['stopped_at']:.3g} s"
         said = []
         own = self.own.get("isu")
+        share = nom["itae"] / self.no_control_itae
+        if share >= NO_TRACKING:
+            said.append(f"does not track (ITAE {100 * share:.0f} % of no control's)")
         if nom["screaming"]:
             said.append("screams")
         elif own is not None and own > 0 and nom["isu"] > ISU_FACTOR * own:
@@ -211,8 +235,19 @@ class RigCheck:
             "itae_q50": self.itae_q50,
             "itae_q95": self.itae_q95,
             "isu_q95": self.isu_q95,
+            "no_control_itae": self.no_control_itae,
             "notes": self.notes,
         }
+
+
+def no_control_itae(cfg: Any) -> float:
+    r"""The ITAE of no control at all (:math:`y \equiv 0`), :math:`\int_0^{t_f} t\,|r|\,dt`,
+    by the trapezoid rule on the run's step from the scenario's reference."""
+    from aiofl.components.metrics import itae
+
+    t_f = cfg.scenario.t_final
+    t = np.linspace(0.0, t_f, round(t_f / cfg.dt) + 1)
+    return float(itae(t, np.zeros_like(t), cfg.scenario.reference.evaluate(t)))
 
 
 def _record(metrics: Any, status: str, stopped_at: float) -> dict[str, Any]:
@@ -342,9 +377,21 @@ def rig_checks(
             "u_peak": figures.get("u_peak"),
             "screaming": bool(figures) and screaming(figures),
         }
-        checks[i] = RigCheck(cfgs[i].name, rig, rec, own[cfgs[i].name], 0,
-                             {n: 0 for n in L.STATUS_NAMES.values()}, float("nan"), None,
-                             None, None, told, notes)  # fmt: skip
+        checks[i] = RigCheck(
+            name=cfgs[i].name,
+            rig=rig,
+            nominal=rec,
+            own=own[cfgs[i].name],
+            draws=0,
+            status_counts={n: 0 for n in L.STATUS_NAMES.values()},
+            not_lost=None,
+            itae_q50=None,
+            itae_q95=None,
+            isu_q95=None,
+            told=told,
+            no_control_itae=no_control_itae(cfg),
+            notes=notes,
+        )
         if draws > 0 and rec["status"] == "ok":
             key = cfg.uncertainty.model_dump_json()
             by_box.setdefault(key, []).append(i)
@@ -366,6 +413,7 @@ def rig_checks(
                 itae_q95=rec["itae"]["q95"],
                 isu_q95=rec["isu"]["q95"],
                 told=told,
+                no_control_itae=base.no_control_itae,
                 notes=base.notes,
             )
     return [checks[i] for i in range(len(cfgs))]
