@@ -603,7 +603,8 @@ def preset_sets() -> dict[str, list[str]]:
     out: dict[str, list[str]] = {}
     for key, folder, _ in PRESET_SETS:
         base = _presets_dir() / folder if folder else _presets_dir()
-        names = [p.name[:-5] for p in base.iterdir() if p.is_file() and p.name.endswith(".toml")]
+        files = base.iterdir() if base.is_dir() else ()
+        names = [p.name[:-5] for p in files if p.is_file() and p.name.endswith(".toml")]
         out[key] = sorted(names)
     return out
 
