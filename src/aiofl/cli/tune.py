@@ -2,7 +2,7 @@
 
 A thin command over :mod:`aiofl.tuning`: it validates the input (exit status 2 and one
 message on bad input, :mod:`aiofl.cli.errors`), prepares the run once
-(:func:`aiofl.tuning.prepare.prepare`) and runs it with :func:`aiofl.tuning.search.tune` with
+(:func:`aiofl.tuning.prepared.prepare`) and runs it with :func:`aiofl.tuning.search.tune` with
 a progress bar, a checkpoint in ``DIR`` and optional Dask evaluation, then writes the
 outputs (:func:`aiofl.tuning.results.write_outputs`: the results first, then the figures;
 what was left out is printed as a note) and prints a summary.  numpy, pymoo
@@ -102,7 +102,7 @@ def tune_command(
     """
     from aiofl.tuning.checkpoint import CHECKPOINT, discard_new_checkpoint, load_checkpoint
     from aiofl.tuning.front import NoFeasibleDesign
-    from aiofl.tuning.prepare import prepare
+    from aiofl.tuning.prepared import prepare
     from aiofl.tuning.results import write_outputs
     from aiofl.tuning.search import tune
 

@@ -111,7 +111,7 @@ def front_of_run(prep: Any, gens: Sequence[Any], values: NDArray[np.float64]) ->
     Parameters
     ----------
     prep
-        The run (:func:`aiofl.tuning.prepare.prepare`).
+        The run (:func:`aiofl.tuning.prepared.prepare`).
     gens
         Its generations (:class:`aiofl.tuning.problem.Generation`: ``scores.F``,
         ``scores.G``, ``scores.raw`` per candidate).

@@ -1,6 +1,6 @@
 r"""The tuning problem as pymoo sees it: a named ``Problem`` and the run's ``Callback``.
 
-:class:`TuningProblem` is a prepared run (:func:`aiofl.tuning.prepare.prepare`) as a pymoo
+:class:`TuningProblem` is a prepared run (:func:`aiofl.tuning.prepared.prepare`) as a pymoo
 ``Problem`` in the unit cube: its ``_evaluate`` scores a whole population in **one** call
 of the evaluator (local or Dask; or replays the generation a checkpoint holds,
 :mod:`aiofl.tuning.checkpoint`) with the run's objective
@@ -32,7 +32,7 @@ from aiofl.tuning.objective import Scores
 
 if TYPE_CHECKING:  # pragma: no cover
     from aiofl.tuning.evaluate import EvalSpec, PopulationResult
-    from aiofl.tuning.prepare import Prepared
+    from aiofl.tuning.prepared import Prepared
     from aiofl.tuning.progress import TuneProgress
 
 __all__ = ["Generation", "RunLog", "TuningProblem"]
@@ -82,7 +82,7 @@ class TuningProblem(Problem):  # type: ignore[misc]
     Parameters
     ----------
     prepared
-        The run (:func:`prepare`).
+        The run (:func:`aiofl.tuning.prepared.prepare`).
     evaluator
         ``callable(spec, values) -> PopulationResult``: one batched engine call
         (:class:`~aiofl.tuning.evaluate.LocalEvaluator`) or chunks on Dask.
@@ -196,7 +196,7 @@ class RunLog(Callback):  # type: ignore[misc]
     Parameters
     ----------
     prepared
-        The run (:func:`aiofl.tuning.prepare.prepare`).
+        The run (:func:`aiofl.tuning.prepared.prepare`).
     checkpoint
         The checkpoint file (None: none is written).
     bar

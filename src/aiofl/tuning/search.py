@@ -3,7 +3,7 @@ r"""Tuning controllers with a genetic algorithm (pymoo) on the paper's OPI, loca
 The paper tuned each controller with a GA on its objective performance index (22) over
 :math:`t_f = 6` s.  :func:`tune` does the same for any config: the ``[tune]`` table
 (:mod:`aiofl.tuning.space`) names the parameters, their bounds and the objective
-(:mod:`aiofl.tuning.objective`); :func:`aiofl.tuning.prepare.prepare` validates it before
+(:mod:`aiofl.tuning.objective`); :func:`aiofl.tuning.prepared.prepare` validates it before
 anything is run or written; the search is pymoo's: its algorithm (GA, DE, CMA-ES or
 NSGA-II) asks the named :class:`aiofl.tuning.problem.TuningProblem` to score each
 generation in **one** batched engine call (:mod:`aiofl.tuning.evaluate`), or in chunks on a
@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 
 from aiofl import layout as L
 from aiofl.tuning.checkpoint import CHECKPOINT, load_checkpoint
-from aiofl.tuning.prepare import Prepared, prepare
+from aiofl.tuning.prepared import Prepared, prepare
 from aiofl.tuning.progress import TuneProgress
 from aiofl.tuning.space import TuneSettings, config_with_values, parse_tune_settings, to_toml
 
@@ -232,7 +232,7 @@ def tune(
     Parameters
     ----------
     run_config
-        A prepared run (:func:`aiofl.tuning.prepare.prepare`, as ``aiofl tune`` passes
+        A prepared run (:func:`aiofl.tuning.prepared.prepare`, as ``aiofl tune`` passes
         it), or the config to prepare (:class:`~aiofl.config.RunConfig`, TOML path or
         preset name): plant, scenario (its horizon is replaced by ``t_final``), controller
         (untuned parameters keep its values), integrator and OPI weights.
@@ -256,7 +256,7 @@ def tune(
         :class:`~aiofl.tuning.evaluate.DaskEvaluator`; overrides ``scheduler``/``n_workers``.
     **overrides
         Settings fields to replace (``seed``, ``generations``, ``population`` ...), and
-        ``draws`` (:func:`aiofl.tuning.prepare.prepare`).  Not with a prepared run.
+        ``draws`` (:func:`aiofl.tuning.prepared.prepare`).  Not with a prepared run.
 
     Returns
     -------
