@@ -13,7 +13,7 @@ later it diverges, which steers the search towards stability (:func:`objective_v
 **Over model draws.**  With ``[tune] robust = { draws = K, aggregate = ..., alpha = 0.9 }``
 every candidate is simulated on the nominal plant and on the same K perturbed plants
 (common random numbers: the draws depend on the config's ``[uncertainty]`` table and seed
-only, never on the candidate; :func:`aiofl.tuning.problem.draw_fields`), all
+only, never on the candidate; :func:`aiofl.tuning.prepared.draw_fields`), all
 :math:`P\times(K+1)` members of a generation in one batched engine call.  A metric
 :math:`m` of a candidate is then aggregated over its :math:`K+1` values :math:`m_0`
 (nominal), :math:`m_1..m_K` (draws) by :func:`aggregate`:
@@ -42,7 +42,7 @@ quantities, ``METRIC`` or ``METRIC:AGGREGATE`` (:func:`parse_quantity`,
 with a real constraint ``G = (diverged members) > 0``.
 
 :class:`Objective` gathers all of it for one run (built once by
-:func:`aiofl.tuning.problem.prepare`); :meth:`Objective.score` scores a population
+:func:`aiofl.tuning.prepared.prepare`); :meth:`Objective.score` scores a population
 (:class:`Scores`).
 """
 

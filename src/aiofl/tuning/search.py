@@ -297,7 +297,7 @@ def tune(
         with bar:
             while algo.has_next() and len(problem.generations) < st.generations:
                 algo.next()  # one population: asked, scored by the problem, told, logged
-            log.record(problem.generations)  # (each one is logged already by pymoo's call)
+            log.record(problem.generations)  # a no-op unless pymoo skipped its callback
     finally:
         if own:
             ev.close()
