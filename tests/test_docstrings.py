@@ -99,8 +99,6 @@ ALLOWED: dict[str, str] = {
     + "reads a shipped front.csv (text, name, scenario, structure)",
     "aiofl.reporting.fronts:parse_robust": _CAP
     + "attaches a robust companion file (text, front, name)",
-    "aiofl.tuning.search:prepare": _CAP
-    + "run_config, settings, draws, overrides are described in its prose",
 }
 
 

@@ -1,7 +1,8 @@
 """``aiofl tune CONFIG --out DIR``: tune a controller from the config's ``[tune]`` table.
 
 A thin command over :mod:`aiofl.tuning`: it validates the input (exit status 2 and one
-message on bad input, :mod:`aiofl.cli.errors`), runs :func:`aiofl.tuning.search.tune` with
+message on bad input, :mod:`aiofl.cli.errors`), prepares the run once
+(:func:`aiofl.tuning.prepared.prepare`) and runs it with :func:`aiofl.tuning.search.tune` with
 a progress bar, a checkpoint in ``DIR`` and optional Dask evaluation, then writes the
 outputs (:func:`aiofl.tuning.results.write_outputs`: the results first, then the figures;
 what was left out is printed as a note) and prints a summary.  numpy, pymoo
@@ -101,8 +102,9 @@ def tune_command(
     """
     from aiofl.tuning.checkpoint import CHECKPOINT, discard_new_checkpoint, load_checkpoint
     from aiofl.tuning.front import NoFeasibleDesign
+    from aiofl.tuning.prepared import prepare
     from aiofl.tuning.results import write_outputs
-    from aiofl.tuning.search import prepare, tune
+    from aiofl.tuning.search import tune
 
     with bad_input_exits():
         if scheduler is not None and dask_workers is not None:
@@ -148,17 +150,13 @@ def tune_command(
     found = (out.exists(), (out / CHECKPOINT).exists())  # what this run leaves is its own
     with bad_input_exits(run=True):
         try:
-            result = tune(
-                target,
+            result = tune(  # the run prepared (and checked) above
+                prep,
                 progress=not quiet,
                 checkpoint_dir=out,
                 resume=resume,
                 scheduler=scheduler,
                 n_workers=dask_workers,
-                seed=seed,
-                generations=generations,
-                population=population,
-                omega0_ceiling=ceiling,
             )
         except KeyboardInterrupt:
             typer.echo(

@@ -1,11 +1,22 @@
-r"""Robust and multi-objective scoring: a candidate over the nominal plant and K model draws.
+r"""What a tuning run minimises: the objective, the multi-objective quantities and
+constraints, their aggregates over model draws, and the scores of a population.
 
-With ``[tune] robust = { draws = K, aggregate = ..., alpha = 0.9 }`` every candidate is
-simulated on the nominal plant and on the same K perturbed plants (common random numbers:
-the draws depend on the config's ``[uncertainty]`` table and seed only, never on the
-candidate), all :math:`P\times(K+1)` members of a generation in one batched engine call.
-A metric :math:`m` of a candidate is then aggregated over its :math:`K+1` values
-:math:`m_0` (nominal), :math:`m_1..m_K` (draws):
+**One objective** (``algorithm = "ga" | "de" | "cmaes"``).  It is linear in the engine's
+metrics, :math:`J = c^T m` with
+:math:`m = (\mathrm{ITAE}, \mathrm{IAE}, \mathrm{ISE}, \mathrm{ISU}, \mathrm{IAU})` over
+the tuning horizon (:func:`objective_coefficients`); the OPI of eq. (22) is
+:math:`c = (w_1/N_1, 0, 0, w_2/N_2, w_3/N_3)` with the config's ``[metrics]`` weights.  A
+member that diverges at :math:`t_d` scores :math:`P\,(2 - t_d/t_f)` (P =
+``divergence_penalty``): finite, worse than any stable member with J < P, and better the
+later it diverges, which steers the search towards stability (:func:`objective_values`).
+
+**Over model draws.**  With ``[tune] robust = { draws = K, aggregate = ..., alpha = 0.9 }``
+every candidate is simulated on the nominal plant and on the same K perturbed plants
+(common random numbers: the draws depend on the config's ``[uncertainty]`` table and seed
+only, never on the candidate; :func:`aiofl.tuning.prepared.draw_fields`), all
+:math:`P\times(K+1)` members of a generation in one batched engine call.  A metric
+:math:`m` of a candidate is then aggregated over its :math:`K+1` values :math:`m_0`
+(nominal), :math:`m_1..m_K` (draws) by :func:`aggregate`:
 
 ``mean``
     :math:`\frac{1}{K+1}\sum_k m_k`;
@@ -20,11 +31,19 @@ A metric :math:`m` of a candidate is then aggregated over its :math:`K+1` values
 
 A diverged member has :math:`m_k = +\infty`, so any aggregate but ``nominal`` of a
 candidate with a diverged draw is :math:`+\infty`: **infeasible**.  The single-objective
-algorithms (GA, DE, CMA-ES) see the existing finite penalty instead of :math:`+\infty`
-(:func:`robust_objective`): CMA-ES has no constraint handling in pymoo, the penalty is
-ordered by how many draws stayed stable and how long the unstable ones lasted, and the
-non-robust objective and checkpoints stay unchanged.  NSGA-II gets a real pymoo
-constraint, ``G = (diverged members) > 0`` (:func:`objective_matrix`).
+algorithms (GA, DE, CMA-ES) see the finite penalty instead of :math:`+\infty`
+(:func:`objective_values` with ``kind``): CMA-ES has no constraint handling in pymoo, the
+penalty is ordered by how many draws stayed stable and how long the unstable ones lasted,
+and the non-robust objective and checkpoints stay unchanged.
+
+**Several objectives** (``algorithm = "nsga2"``): ``objectives`` and ``constraints`` name
+quantities, ``METRIC`` or ``METRIC:AGGREGATE`` (:func:`parse_quantity`,
+:func:`parse_constraint`); NSGA-II gets pymoo's ``F`` and ``G`` (:func:`objective_matrix`),
+with a real constraint ``G = (diverged members) > 0``.
+
+:class:`Objective` gathers all of it for one run (built once by
+:func:`aiofl.tuning.prepared.prepare`); :meth:`Objective.score` scores a population
+(:class:`Scores`).
 """
 
 from __future__ import annotations
@@ -33,22 +52,29 @@ import math
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
 
+if TYPE_CHECKING:  # pragma: no cover
+    from aiofl.config import RunConfig
+
 __all__ = [
     "AGGREGATES",
     "Constraint",
+    "Objective",
     "Quantity",
+    "Scores",
     "aggregate",
+    "objective_coefficients",
     "objective_matrix",
+    "objective_values",
     "parse_constraint",
     "parse_quantity",
-    "robust_objective",
+    "quantity_values",
 ]
 
 AGGREGATES = ("mean", "worst", "cvar", "nominal")
@@ -246,56 +272,6 @@ def quantity_values(
     return aggregate(col, q.aggregate or default, alpha)
 
 
-def robust_objective(
-    metrics: NDArray[np.float64],
-    failed: NDArray[np.bool_],
-    stopped_at: NDArray[np.float64],
-    coefficients: NDArray[np.float64],
-    penalty: float,
-    t_final: float,
-    kind: str,
-    alpha: float,
-) -> NDArray[np.float64]:
-    r"""Scalar objective of each candidate over its K+1 members.
-
-    :math:`J = \mathrm{agg}_k(c^T m_k)` when every member is stable and
-    :math:`J` finite; otherwise :math:`P\,(2 - \bar f)` with :math:`\bar f` the mean over
-    the K+1 members of :math:`t_{d,k}/t_f` (1 for a stable member): finite, worse than
-    any feasible :math:`J < P`, and better the more draws stay stable and the later the
-    others diverge.  With K = 0 this is :func:`aiofl.tuning.space.objective_values`.
-
-    Parameters
-    ----------
-    metrics, failed
-        As for :func:`quantity_values`.
-    stopped_at
-        When each member diverged [s], shape (B, K+1).
-    coefficients
-        c, the weights of the metrics.
-    penalty
-        P.
-    t_final
-        The horizon :math:`t_f` [s].
-    kind, alpha
-        The aggregate and its CVaR level (:func:`aggregate`).
-
-    Returns
-    -------
-    ndarray
-        Shape (B,).
-    """
-    m, d = _as_draws(metrics, failed)
-    t = np.asarray(stopped_at, dtype=np.float64).reshape(d.shape)
-    with np.errstate(all="ignore"):
-        per = m[..., : L.N_METRIC] @ coefficients  # (B, K+1)
-    per = np.where(d, np.inf, per)
-    j = aggregate(per, kind, alpha)
-    frac = np.where(d, np.clip(np.nan_to_num(t / t_final, nan=0.0), 0.0, 1.0), 1.0)
-    pen = penalty * (2.0 - frac.mean(axis=1))
-    j = np.where(d.any(axis=1), pen, j)
-    return np.where(np.isfinite(j), j, 2.0 * penalty)
-
-
 def objective_matrix(
     objectives: Sequence[Quantity],
     constraints: Sequence[Constraint],
@@ -348,65 +324,218 @@ def objective_matrix(
     return f, g, raw
 
 
-def draw_fields(
-    config: Any, draws: int, dt: float, *, corners: bool = False
-) -> tuple[dict[str, Any], ...]:
-    """The K per-draw changes of ``config``'s ``[uncertainty]`` table, as plain data.
+# -------------------------------------------------------------- one objective
+def objective_coefficients(settings: Any, config: RunConfig) -> NDArray[np.float64]:
+    """Coefficients c over :data:`aiofl.layout.METRIC_NAMES` with objective :math:`J = c^T m`.
 
-    Drawn by :func:`aiofl.uncertainty.sample_draws` with the table's seed and ``draws`` =
-    K (common random numbers: the same for every candidate and every run with that seed);
-    ``corners`` appends the box corners (:func:`aiofl.uncertainty.corner_draws`), so
-    ``draws == 0`` with ``corners`` gives the corners alone.
-    Each draw is a dict of :class:`aiofl.scenario.Scenario` fields that differ from the
-    nominal scenario (``plant_scale``, ``noise_variance`` ...), plus ``"ts"`` when the
-    sample time is drawn, so it travels to Dask workers in the picklable evaluation spec.
-    Raises :class:`aiofl.config.ConfigError` when the config has no ``[uncertainty]`` table.
+    ``settings`` is the run's :class:`aiofl.tuning.space.TuneSettings` (its ``objective``:
+    ``"opi"`` with ``config``'s ``[metrics]`` weights, one metric, or a table of weights).
+    """
+    c = np.zeros(L.N_METRIC)
+    obj = settings.objective
+    if obj == "opi":
+        w = config.weights
+        c[L.M_ITAE] = w.w_itae / w.n_itae
+        c[L.M_ISU] = w.w_isu / w.n_isu
+        c[L.M_IAU] = w.w_iau / w.n_iau
+    elif isinstance(obj, str):
+        c[L.METRIC_NAMES.index(obj)] = 1.0
+    else:
+        for name, weight in obj.items():
+            c[L.METRIC_NAMES.index(name)] = weight
+    return c
+
+
+def objective_values(
+    metrics: NDArray[np.float64],
+    failed: NDArray[np.bool_],
+    stopped_at: NDArray[np.float64],
+    coefficients: NDArray[np.float64],
+    penalty: float,
+    t_final: float,
+    kind: str | None = None,
+    alpha: float = 0.9,
+) -> NDArray[np.float64]:
+    r"""Objective of each candidate: :math:`c^T m`, or a finite penalty if it diverged.
+
+    ``kind`` None (one plant per candidate): :math:`J = c^T m`, or :math:`P(2 - t_d/t_f)`
+    if the member diverged at :math:`t_d`.  ``kind`` an aggregate (robust runs, metrics
+    over the K+1 members): :math:`J = \mathrm{agg}_k(c^T m_k)` when every member is
+    stable; otherwise :math:`P\,(2 - \bar f)` with :math:`\bar f` the mean over the K+1
+    members of :math:`t_{d,k}/t_f` (1 for a stable member): worse than any feasible
+    :math:`J < P`, and better the more draws stay stable and the later the others
+    diverge (with K = 0 the two agree).  A non-finite :math:`J` scores :math:`2P`: every
+    value is finite.
 
     Parameters
     ----------
-    config
-        The run config.
-    draws
-        K, the number of draws (0: none).
-    dt
-        The config's step [s] (a drawn sample time is a multiple of it).
-    corners
-        Append the box corners.
+    metrics
+        The engine's metrics, (..., metrics); with ``kind``, (B, K+1, metrics).
+    failed, stopped_at
+        Whether each member diverged, and when [s]; with ``kind``, (B, K+1).
+    coefficients
+        c, the weights of the metrics.
+    penalty
+        P.
+    t_final
+        The horizon :math:`t_f` [s].
+    kind, alpha
+        The aggregate over the members and its CVaR level (:func:`aggregate`); None: a
+        single plant.
 
     Returns
     -------
-    tuple of dict
+    ndarray
+        One value per candidate.
     """
-    from dataclasses import fields
+    if kind is not None:
+        m, d = _as_draws(metrics, failed)
+        t = np.asarray(stopped_at, dtype=np.float64).reshape(d.shape)
+        with np.errstate(all="ignore"):
+            per = m[..., : L.N_METRIC] @ coefficients  # (B, K+1)
+        per = np.where(d, np.inf, per)
+        j = aggregate(per, kind, alpha)
+        frac = np.where(d, np.clip(np.nan_to_num(t / t_final, nan=0.0), 0.0, 1.0), 1.0)
+        pen = penalty * (2.0 - frac.mean(axis=1))
+        j = np.where(d.any(axis=1), pen, j)
+        return np.where(np.isfinite(j), j, 2.0 * penalty)
+    with np.errstate(all="ignore"):
+        j = metrics[..., : L.N_METRIC] @ coefficients  # the integrals (SCORE_NAMES' first)
+    frac = np.clip(np.nan_to_num(stopped_at / t_final, nan=0.0), 0.0, 1.0)
+    pen = penalty * (2.0 - frac)
+    j = np.where(failed, pen, j)
+    return np.where(np.isfinite(j), j, 2.0 * penalty)
 
-    from aiofl.config import ConfigError
-    from aiofl.uncertainty import corner_draws, sample_draws
 
-    unc = getattr(config, "uncertainty", None)
-    if unc is None:
-        raise ConfigError(
-            "tune.robust: needs the config's [uncertainty] table (the model error to be "
-            "robust against), e.g. [uncertainty] parameters = { J_l = { uniform = 0.2 } }"
+# ---------------------------------------------------------------- the run's
+@dataclass(frozen=True)
+class Scores:
+    """A population's scores (B candidates).
+
+    Attributes
+    ----------
+    objective
+        (B,): the single objective; with several objectives the first one of a feasible
+        candidate and ``2 P`` otherwise (``history.csv``'s).
+    diverged
+        (B,): lost or diverged on any member.
+    F, G
+        pymoo's objectives (B, n_obj) and inequality constraints (B, n_ieq), in
+        minimisation form (one objective: ``F`` is ``objective`` as a column, ``G`` empty).
+    raw
+        (B, n_con): the constraints' quantities as themselves (empty with one objective).
+    """
+
+    objective: NDArray[np.float64]
+    diverged: NDArray[np.bool_]
+    F: NDArray[np.float64]
+    G: NDArray[np.float64]
+    raw: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Objective:
+    """What a run minimises (:meth:`from_settings`), and its scores of a population.
+
+    Attributes
+    ----------
+    coefficients
+        c of the single objective :math:`J = c^T m` (:func:`objective_coefficients`).
+    penalty, t_final
+        ``divergence_penalty`` P and the tuning horizon [s].
+    kind, alpha
+        The robust aggregate over the draws and its CVaR level (None: not robust).
+    objectives, constraints
+        NSGA-II's quantities (empty: one objective).
+    """
+
+    coefficients: NDArray[np.float64]
+    penalty: float
+    t_final: float
+    kind: str | None = None
+    alpha: float = 0.9
+    objectives: tuple[Quantity, ...] = ()
+    constraints: tuple[Constraint, ...] = ()
+
+    @classmethod
+    def from_settings(cls, settings: Any, config: RunConfig) -> Objective:
+        """The objective of validated ``[tune]`` settings (a
+        :class:`aiofl.tuning.space.TuneSettings` with its horizon resolved) on ``config``."""
+        r = settings.robust
+        return cls(
+            coefficients=objective_coefficients(settings, config),
+            penalty=settings.divergence_penalty,
+            t_final=settings.t_final,
+            kind=r.aggregate if r is not None else None,
+            alpha=r.alpha if r is not None else 0.9,
+            objectives=tuple(parse_quantity(q) for q in settings.objectives or ()),
+            constraints=tuple(parse_constraint(c) for c in settings.constraints),
         )
-    try:
-        if corners:
-            c = corner_draws(unc, dt=dt)[0]
-            d = c if draws == 0 else sample_draws(unc, draws=draws, dt=dt).concat(c)
-        else:
-            d = sample_draws(unc, draws=draws, dt=dt)
-        scenarios = d.scenarios(config.scenario)
-    except ValueError as exc:
-        raise ConfigError(f"tune.robust: {exc}") from None
-    nominal = config.scenario
-    out = []
-    for k, s in enumerate(scenarios):
-        diff: dict[str, Any] = {}
-        for f in fields(s):
-            v, v0 = getattr(s, f.name), getattr(nominal, f.name)
-            if f.name == "t_final" or v == v0:
-                continue
-            diff[f.name] = dict(v) if f.name in ("plant_scale", "plant_overrides") else v
-        if d.ts is not None:
-            diff["ts"] = float(d.ts[k])
-        out.append(diff)
-    return tuple(out)
+
+    @property
+    def n_obj(self) -> int:
+        """pymoo's number of objectives."""
+        return max(1, len(self.objectives))
+
+    @property
+    def n_ieq_constr(self) -> int:
+        """pymoo's number of inequality constraints (the divergence one first)."""
+        return 1 + len(self.constraints) if self.objectives else 0
+
+    @property
+    def needs_margins(self) -> bool:
+        """Whether an objective or constraint names a stability margin."""
+        named = [*self.objectives, *(c.quantity for c in self.constraints)]
+        return any(q.is_margin for q in named)
+
+    def score(
+        self,
+        metrics: NDArray[np.float64],
+        failed: NDArray[np.bool_],
+        stopped_at: NDArray[np.float64],
+        margins: Mapping[str, NDArray[np.float64]] | None = None,
+    ) -> Scores:
+        """Score B candidates from their members' metrics.
+
+        Parameters
+        ----------
+        metrics, failed, stopped_at
+            The evaluation's metrics (B, [K+1,] metrics), lost-or-diverged flags and times
+            (B, [K+1]).
+        margins
+            The candidates' margins (:func:`aiofl.tuning.margins.candidate_margins`),
+            needed when :attr:`needs_margins`.
+
+        Returns
+        -------
+        Scores
+        """
+        diverged = failed.any(axis=1) if failed.ndim == 2 else failed
+        if self.objectives:
+            cap = 2.0 * self.penalty
+            default = self.kind or "nominal"
+            F, G, raw = objective_matrix(
+                self.objectives,
+                self.constraints,
+                metrics,
+                failed,
+                default,
+                self.alpha,
+                cap,
+                margins,
+            )
+            feasible = (G <= 0).all(axis=1)
+            obj = np.where(feasible, F[:, 0], cap)  # history: the first objective when feasible
+            return Scores(obj, diverged, F, G, raw)
+        obj = objective_values(
+            metrics,
+            failed,
+            stopped_at,
+            self.coefficients,
+            self.penalty,
+            self.t_final,
+            self.kind,
+            self.alpha,
+        )
+        empty = np.zeros((obj.shape[0], 0))
+        return Scores(obj, diverged, obj[:, None], empty, empty)
