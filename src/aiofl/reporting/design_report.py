@@ -207,8 +207,14 @@ def _sensor_rows(cfg: Any) -> list[list[str]]:
 
     runs: list[tuple[str, Any]] = [(f"its own: {cfg.sensor.describe()}", cfg)]
     if not cfg.sensor.is_ideal or cfg.sampling is not None:
-        ideal = replace(cfg, sampling=None)
-        ideal = replace(ideal, scenario=replace(ideal.scenario, noise_variance=0.0))
+        # no sampling, quantum, noise or transport delay: nothing left to tell the ESO
+        ideal = replace(
+            cfg, sampling=None, controller=cfg.controller.with_values(**{"eso.delay": 0.0})
+        )
+        ideal = replace(
+            ideal,
+            scenario=replace(ideal.scenario, noise_variance=0.0, output_delay=0.0, input_delay=0.0),
+        )
         runs.append(("ideal sensor, continuous controller (a limit)", ideal))
     if cfg.plant.output_unit == "rad":
         for preset in ENCODERS:
