@@ -5,7 +5,7 @@ BIN    := $(VENV)/bin
 OUT    ?= results
 STAMP  := $(VENV)/.installed
 
-.PHONY: run test lint bench clean
+.PHONY: run test docs lint bench clean
 
 # pyproject.toml gives compatible ranges; constraints.txt the exact tested versions.
 CONSTRAINTS := constraints.txt
@@ -13,7 +13,7 @@ CONSTRAINTS := constraints.txt
 $(STAMP): pyproject.toml $(CONSTRAINTS)
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -c $(CONSTRAINTS) -e '.[test]'
+	$(BIN)/pip install -q -c $(CONSTRAINTS) -e '.[test,docs]'
 	touch $(STAMP)
 
 # --force: `make run` regenerates $(OUT) (every aiofl command refuses an existing non-empty
@@ -27,6 +27,11 @@ test: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
 	$(BIN)/python -m pytest -n auto --dist loadfile
 
+# the manual (docs/): strict, warnings are errors, the gallery's examples executed;
+# open docs/_build/html/index.html
+docs: $(STAMP)
+	$(BIN)/python -m sphinx -W --keep-going -b html docs docs/_build/html
+
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
 	$(BIN)/ruff format --check src tests benchmarks
@@ -35,4 +40,5 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_engine.py
 
 clean:
-	rm -rf $(VENV) $(OUT) .pytest_cache build src/*.egg-info
+	rm -rf $(VENV) $(OUT) .pytest_cache build src/*.egg-info \
+		docs/_build docs/auto_examples docs/reference/api docs/sg_execution_times.rst
