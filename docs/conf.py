@@ -24,7 +24,7 @@ import aiofl  # noqa: E402
 
 project = "aiofl"
 author = "aiofl developers"
-copyright = "aiofl developers"  # noqa: A001
+copyright = "aiofl developers"
 release = version = aiofl.__version__
 
 extensions = [
@@ -102,7 +102,7 @@ def _write_api_pages() -> None:
         members = "" if "docstring" in how else "   :members:\n"
         for opt in how:
             if opt.startswith("exclude="):
-                members += f"   :exclude-members: {opt[len('exclude='):].replace(',', ', ')}\n"
+                members += f"   :exclude-members: {opt[len('exclude=') :].replace(',', ', ')}\n"
         text = f"{name}\n{'=' * len(name)}\n\n.. automodule:: {name}\n{members}"
         if not page.is_file() or page.read_text() != text:
             page.write_text(text)

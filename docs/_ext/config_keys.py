@@ -25,7 +25,7 @@ TABLE_MEANINGS: dict[str, str] = {
     "one is refused naming it.",
     "controller.eso": "The extended state observer of order ρ+1 (eqs. 5, 16, 19).",
     "controller.td": "The tracking differentiator: Han's TD (eq. 18), the improved TD "
-    "(eq. 21) or the linear prefilter; ``td_kind = \"exact\"`` uses the reference's exact "
+    '(eq. 21) or the linear prefilter; ``td_kind = "exact"`` uses the reference\'s exact '
     "derivatives and reads nothing here.",
     "controller.sef": "The state error feedback: NLSEF with fal (eq. 17), INLSEF (eq. 20) or "
     "linear full-state feedback with every pole at −ω_c.  A vector needs one entry per "
@@ -39,7 +39,7 @@ TABLE_MEANINGS: dict[str, str] = {
     "tune": "The search of ``aiofl tune`` (:class:`aiofl.tuning.space.TuneSettings`); "
     "validated by every command that reads the config, exactly as ``aiofl tune`` does.",
     "tune.parameters.NAME": "One searched parameter, keyed by its engine column name "
-    "(``\"eso.omega0\"``, ``\"sef.omega_c\"``, ``\"td.omega\"``, ``\"law.b0\"``, ...; "
+    '(``"eso.omega0"``, ``"sef.omega_c"``, ``"td.omega"``, ``"law.b0"``, ...; '
     ":data:`aiofl.layout.FLOAT_COLUMNS`).  A parameter the structure does not use, bounds "
     "outside the schema's range for that field or reversed bounds are refused.",
     "tune.robust": "Robust tuning: every candidate is scored on the nominal plant and the "
@@ -109,7 +109,7 @@ KEY_MEANINGS: dict[str, str] = {
     "scenario.envelope": "The operating envelope: a run whose |y − r| exceeds it is *lost* "
     "(stopped, reported with its time).  Not set: ten times the scenario's output scale, the "
     "largest of |r(t)| and |y(0)| (none when that is 0); ``inf`` switches it off.",
-    "scenario.u_ref": "ISU and IAU measure u − u_ref; ``\"trim\"``: the holding input at the "
+    "scenario.u_ref": 'ISU and IAU measure u − u_ref; ``"trim"``: the holding input at the '
     "reference's first value (``aiofl trim``), so holding the plant costs nothing.",
     "scenario.steady_from": "Start of the steady-state window [s] (steady error, u's noise); "
     "not set: the last 20 % of the horizon.",
@@ -122,8 +122,7 @@ KEY_MEANINGS: dict[str, str] = {
     "scenario.reference.offset": "r0, added to every kind.",
     "scenario.reference.t_step": "When the step happens [s]; at most ``t_final``.",
     "scenario.reference.samples": "The values of a ``samples`` reference (at least 2).",
-    "scenario.reference.sample_dt": "Spacing of ``samples`` [s]; > 0 for a ``samples`` "
-    "reference.",
+    "scenario.reference.sample_dt": "Spacing of ``samples`` [s]; > 0 for a ``samples`` reference.",
     # ------------------------------------------------------------------ controller
     "controller.structure": "LESO (linear ESO + NLSEF + Han's TD), INLESO (improved ESO + "
     "INLSEF + ITD), LADRC (linear ESO + linear prefilter + linear full-state feedback) or "
@@ -153,29 +152,29 @@ KEY_MEANINGS: dict[str, str] = {
     # ------------------------------------------------------------------ eso
     "controller.eso.omega0": "Observer bandwidth ω0 [rad/s]: gains β_i = α_i ω0^i.  "
     "Required by the linear and the improved ESO with bandwidth gains.",
-    "controller.eso.alpha": "The ratios α_1..α_{ρ+1} (ρ+1 entries); ``\"binomial\"``: Gao's "
+    "controller.eso.alpha": 'The ratios α_1..α_{ρ+1} (ρ+1 entries); ``"binomial"``: Gao\'s '
     "α_i = C(ρ+1, i), every observer pole at −ω0.",
     "controller.eso.k_alpha": "INLESO injection gain k_α of φ(e) = k_α|e|^a sign(e) + "
     "k_β|e|^b e (eq. 19).",
     "controller.eso.k_beta": "INLESO injection gain k_β (eq. 19).",
     "controller.eso.g_alpha": "INLESO exponent a of eq. (19).",
     "controller.eso.g_beta": "INLESO exponent b of eq. (19).",
-    "controller.eso.init": "How the observer starts: ``\"zero\"`` ξ̂(0) = 0; "
-    "``\"output\"`` ξ̂_1(0) = the first measurement y_meas(0); ``\"bumpless\"`` that, and "
+    "controller.eso.init": 'How the observer starts: ``"zero"`` ξ̂(0) = 0; '
+    '``"output"`` ξ̂_1(0) = the first measurement y_meas(0); ``"bumpless"`` that, and '
     "the differentiator / prefilter at rest at y_meas(0), so a plant at rest at y0 = r gets "
     "u = 0 (or ``u0``) at the first sample instead of a command step.  The exported C "
     "starts bumpless by default.",
-    "controller.eso.u0": "The command held at the start (with ``init = \"output\"`` or "
-    "``\"bumpless\"``): the extended state starts at ξ̂_{ρ+1} = −b0·u0, so u(t0) = u0 "
-    "(bumpless transfer); ``\"trim\"``: the holding input at the initial output.",
-    "controller.eso.model": "``\"none\"``: model-free (eq. 5); ``\"nominal\"``: "
+    "controller.eso.u0": 'The command held at the start (with ``init = "output"`` or '
+    '``"bumpless"``): the extended state starts at ξ̂_{ρ+1} = −b0·u0, so u(t0) = u0 '
+    '(bumpless transfer); ``"trim"``: the holding input at the initial output.',
+    "controller.eso.model": '``"none"``: model-free (eq. 5); ``"nominal"``: '
     "model-assisted, the observer's ρ-th equation carries the plant's nominal α0(x̂) + "
     "β0(x̂)u at x̂ = Φ⁻¹(ξ̂), so ξ̂_{ρ+1} estimates only what the model misses.",
-    "controller.eso.gains": "``\"bandwidth\"``: β_i = α_i ω0^i; ``\"kalman\"``: the "
+    "controller.eso.gains": '``"bandwidth"``: β_i = α_i ω0^i; ``"kalman"``: the '
     "steady-state Kalman gains from ``q`` and ``r`` (:mod:`aiofl.components.kalman`); "
     "``omega0`` and ``alpha`` are then derived and may not be given.",
     "controller.eso.q": "Kalman gains: process-noise intensity on the extended state's "
-    "derivative (required with ``gains = \"kalman\"``; tunable as ``\"eso.q\"``).",
+    'derivative (required with ``gains = "kalman"``; tunable as ``"eso.q"``).',
     "controller.eso.r": "Kalman gains: measurement-noise intensity; not set: from the run's "
     "sensor, noise_variance·noise_hold (continuous) or noise_variance·max(noise_hold, ts) + "
     "y_quantum²/12·ts (sampled).",
@@ -208,13 +207,12 @@ KEY_MEANINGS: dict[str, str] = {
     "samples over the horizon.",
     "controller.discrete.delay": "1: the command computed at t_k is applied at t_{k+1} "
     "(the integer 0 or 1; ``true`` is refused).",
-    "controller.discrete.y_quantum": "ADC quantum of y (0: none); prefer ``[sensor] "
-    "quantum``.",
+    "controller.discrete.y_quantum": "ADC quantum of y (0: none); prefer ``[sensor] quantum``.",
     "controller.discrete.u_quantum": "DAC quantum of u (0: none).",
-    "controller.discrete.eso": "Linear ESO discretisation: ``\"zoh\"`` (exact ZOH, current "
-    "observer; the default) or ``\"euler\"``; the INLESO is always forward Euler.",
+    "controller.discrete.eso": 'Linear ESO discretisation: ``"zoh"`` (exact ZOH, current '
+    'observer; the default) or ``"euler"``; the INLESO is always forward Euler.',
     "controller.discrete.td": "Han's TD discretisation: ``\"fhan\"`` (Han's discrete TD) or "
-    "``\"euler\"`` (forward Euler on eq. 18).",
+    '``"euler"`` (forward Euler on eq. 18).',
     "controller.discrete.h0": "fhan's filter factor; not set: ts; 1e-3·ts ≤ h0 ≤ 100·ts.",
     # ------------------------------------------------------------------ simulation
     "simulation.dt": "Integration step [s]; required in every config.",
@@ -230,7 +228,7 @@ KEY_MEANINGS: dict[str, str] = {
     "metrics.normalisers": "OPI normalisers (N1, N2, N3) of ITAE, ISU, IAU.",
     # ------------------------------------------------------------------ tune
     "tune.algorithm": "pymoo's GA, DE, CMA-ES, or NSGA-II (multi-objective).",
-    "tune.objective": "Single-objective: ``\"opi\"`` (the config's ``[metrics]``), a metric "
+    "tune.objective": 'Single-objective: ``"opi"`` (the config\'s ``[metrics]``), a metric '
     "(``itae iae ise isu iau``) or a weighted sum such as ``{ itae = 1.0, isu = 0.1 }``.",
     "tune.t_final": "Tuning horizon [s], at most the scenario's; not set: the scenario's.",
     "tune.population": "Members per generation (one batched engine call).",
@@ -248,10 +246,10 @@ KEY_MEANINGS: dict[str, str] = {
     "tune.objectives": "NSGA-II: 2 or 3 quantities, minimised (``METRIC`` or "
     "``METRIC:AGGREGATE``; margins ``pm gm dm`` are maximised, ``ms`` minimised).",
     "tune.constraints": "NSGA-II: ``QUANTITY <= NUMBER`` or ``QUANTITY >= NUMBER`` "
-    "(e.g. ``\"isu <= 15.5\"``, ``\"stable_fraction >= 1\"``, ``\"pm >= 45\"``).",
+    '(e.g. ``"isu <= 15.5"``, ``"stable_fraction >= 1"``, ``"pm >= 45"``).',
     "tune.choose": "Which front design becomes best.toml: the lowest first objective, or "
     "the knee (nearest the ideal point).",
-    "tune.omega0_ceiling": "Clip ``\"eso.omega0\"``'s ``hi`` to ``aiofl analyze "
+    "tune.omega0_ceiling": 'Clip ``"eso.omega0"``\'s ``hi`` to ``aiofl analyze '
     "--ceiling``'s ceiling.",
     "tune.parameters.NAME.lo": "Lower bound.",
     "tune.parameters.NAME.hi": "Upper bound (> lo).",
@@ -282,8 +280,7 @@ KEY_MEANINGS: dict[str, str] = {
     # ------------------------------------------------------------------ sensor
     "sensor.preset": "The sensor preset: ``ideal`` (continuous, unquantised, noise-free), "
     "``encoder-12bit`` / ``-14bit`` / ``-16bit`` (Ts = 1 ms, quantum 2π/2^N rad).",
-    "sensor.ts": "Sample time [s]: the controller runs sampled at ts (dt ≤ ts, a multiple "
-    "of dt).",
+    "sensor.ts": "Sample time [s]: the controller runs sampled at ts (dt ≤ ts, a multiple of dt).",
     "sensor.quantum": "Measurement quantum (an encoder of N counts per revolution: 2π/N "
     "rad); needs a sample time.",
     "sensor.noise_variance": "Gaussian output-noise variance.",
@@ -312,7 +309,7 @@ KEY_MEANINGS: dict[str, str] = {
 PLANT_FILE_KEYS: dict[str, str] = {
     "name": "The plant's name (required).",
     "description": "Free text (optional).",
-    "states": "The state names, a list, or a ``[states]`` table ``theta = \"angle [rad]\"``.",
+    "states": 'The state names, a list, or a ``[states]`` table ``theta = "angle [rad]"``.',
     "params": "The ``[params]`` table: every parameter's nominal value.",
     "f": "The drift, one expression per state.",
     "g": "The input vector field, one expression per state.",

@@ -19,11 +19,9 @@ from dataclasses import dataclass
 from typing import Annotated, Any, Literal, get_args, get_origin
 
 import annotated_types as at
+from config_keys import KEY_MEANINGS, PLANT_FILE_KEYS, TABLE_MEANINGS
 from pydantic import BaseModel
 from pydantic.fields import FieldInfo
-from pydantic_core import PydanticUndefined
-
-from config_keys import KEY_MEANINGS, PLANT_FILE_KEYS, TABLE_MEANINGS
 
 
 class ReferenceDrift(RuntimeError):
@@ -159,10 +157,8 @@ def _default(field: FieldInfo) -> tuple[str, bool]:
     """(default text, required)."""
     if field.is_required():
         return "required", True
-    if field.default_factory is not None:
-        value = field.default_factory()  # type: ignore[call-arg]
-    else:
-        value = field.default
+    factory = field.default_factory
+    value = factory() if factory is not None else field.default  # type: ignore[call-arg]
     if value is None:
         return "not set", False
     if isinstance(value, BaseModel):
@@ -182,10 +178,15 @@ def _default(field: FieldInfo) -> tuple[str, bool]:
 def _sub_model(tp: Any) -> tuple[type[BaseModel] | None, bool]:
     """(model, keyed) when the annotation is a table: a model, or a table of models keyed
     by a user's name (``[tune.parameters]``: ``"eso.omega0" = {lo, hi}``)."""
-    args = [a for a in get_args(tp) if a is not type(None)] if get_origin(tp) in (
-        typing.Union,
-        types.UnionType,
-    ) else [tp]
+    args = (
+        [a for a in get_args(tp) if a is not type(None)]
+        if get_origin(tp)
+        in (
+            typing.Union,
+            types.UnionType,
+        )
+        else [tp]
+    )
     for a in args:
         if isinstance(a, type) and issubclass(a, BaseModel):
             return a, False
@@ -297,7 +298,7 @@ def reference_rst() -> str:
             lines += ["   " + _escape_bars(KEY_MEANINGS[key.path]), ""]
     lines += [".. _config-plant-file:", "", "Plant file", "----------", ""]
     lines += [
-        "A plant file (``plant = \"my_plant.toml\"`` in a run config) is a TOML file of its "
+        'A plant file (``plant = "my_plant.toml"`` in a run config) is a TOML file of its '
         "own, read by :meth:`aiofl.plants.symbolic.SymbolicPlant.from_dict`; its keys:",
         "",
     ]
