@@ -35,6 +35,7 @@ extensions = [
     "myst_parser",
     "sphinx_gallery.gen_gallery",
     "config_reference",
+    "cli_reference",
 ]
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
