@@ -28,19 +28,21 @@ from aiofl.config import load_config, resolve_plant
 from aiofl.identification.log import Log, write_log
 from aiofl.identification.synthetic import measure, simulate_log
 
+WORK = Path(tempfile.mkdtemp())  # the bench folder: the commands run in it
+
 
 def aiofl(*args: str) -> None:
-    """Run one ``aiofl`` command in this process, as typing it in a shell would."""
-    result = CliRunner().invoke(app, list(args))
+    """Run one ``aiofl`` command in this process in WORK, as typing it in a shell would."""
+    here = Path.cwd()
+    os.chdir(WORK)
+    try:
+        result = CliRunner().invoke(app, list(args))
+    finally:
+        os.chdir(here)
     print("$ aiofl " + " ".join(args))
     print(result.output)
     assert result.exit_code == 0, result.output
 
-
-# sphinx_gallery_start_ignore
-START = Path.cwd()
-# sphinx_gallery_end_ignore
-os.chdir(tempfile.mkdtemp())
 
 # %%
 # The excitation
@@ -61,14 +63,14 @@ aiofl(
     "-o",
     "u.csv",
 )
-t, u = np.loadtxt("u.csv", delimiter=",", comments="#", skiprows=1, unpack=True)
+t, u = np.loadtxt(WORK / "u.csv", delimiter=",", comments="#", skiprows=1, unpack=True)
 
 # %%
 # The rig (simulated)
 # -------------------
 # The truth the identification does not see: J θ'' = K u(t − 1 ms) − b θ', so ρ = 2 and
 # β = K/J = 50 rad/(V·s²); the encoder quantises to 2π/4096 rad and adds a little noise.
-Path("motor.toml").write_text(
+(WORK / "motor.toml").write_text(
     """
 name = "bench_motor"
 states = ["theta", "omega"]
@@ -84,10 +86,10 @@ K = 0.5
 """,
     encoding="utf-8",
 )
-motor = resolve_plant("motor.toml")
+motor = resolve_plant(str(WORK / "motor.toml"))
 clean = simulate_log(motor, t, u, delay=1e-3)
 y = measure(clean.y, noise_std=2e-4, quantum=2 * np.pi / 4096, seed=0)
-write_log(Log(clean.t, clean.u, y, source="bench"), "log.csv")
+write_log(Log(clean.t, clean.u, y, source="bench"), WORK / "log.csv")
 
 # %%
 # Identify
@@ -100,11 +102,11 @@ aiofl("identify", "log.csv", "-o", "id")
 # The first design, and the C
 # ---------------------------
 # Simulated on the identified chain, then exported at the rig's 1 ms.
-first = load_config("id/first.toml")
+first = load_config(str(WORK / "id" / "first.toml"))
 res = first.simulate()
 print(f"first design on the identified chain: {res.status}, ITAE {res.metrics['itae']:.3g}")
 aiofl("export", "id/first.toml", "--out", "c")
-header = Path("c/aiofl_controller.h").read_text()
+header = (WORK / "c" / "aiofl_controller.h").read_text()
 keys = ("_RHO ", "_TS ", "_U_MIN ", "_U_MAX ", "_LAYOUT ")
 print("\n".join(line for line in header.splitlines() if any(k in line for k in keys)))
 
@@ -120,6 +122,3 @@ ax_run.set_xlabel("t [s]")
 ax_run.legend(fontsize=8)
 ax_run.set_title("the first design on the identified chain")
 fig.tight_layout()
-# sphinx_gallery_start_ignore
-os.chdir(START)
-# sphinx_gallery_end_ignore
