@@ -28,9 +28,11 @@ test: $(STAMP)
 	$(BIN)/python -m pytest -n auto --dist loadfile
 
 # the manual (docs/): strict, warnings are errors, the gallery's examples executed;
-# open docs/_build/html/index.html
+# open docs/_build/html/index.html.  The examples use the tests' kernel cache (tests/conftest.py)
+# unless AIOFL_CACHE_DIR is set, so after `make test` they compile nothing.
 docs: $(STAMP)
-	$(BIN)/python -m sphinx -W --keep-going -b html docs docs/_build/html
+	AIOFL_CACHE_DIR="$${AIOFL_CACHE_DIR:-$(CURDIR)/.aiofl-cache}" \
+		$(BIN)/python -m sphinx -W --keep-going -b html docs docs/_build/html
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
