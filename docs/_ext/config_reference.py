@@ -253,6 +253,22 @@ def check_meanings(tables: dict[str, list[Key]]) -> None:
         raise ReferenceDrift("; ".join(problems))
 
 
+def _required_by_kind() -> dict[str, str]:
+    """``controller.PART.KEY`` -> the component kinds that need it given (no default is
+    used for them), from :data:`aiofl.config.schema.REQUIRED_BY_KIND`."""
+    from aiofl.config.schema import REQUIRED_BY_KIND
+
+    words = {"eso": "observer", "td": "differentiator", "sef": "feedback", "law": "law"}
+    kinds: dict[str, list[str]] = {}
+    for (part, kind), keys in REQUIRED_BY_KIND.items():
+        for key in keys:
+            kinds.setdefault(f"controller.{part}.{key}", []).append(kind)
+    return {
+        path: f"{words[path.split('.')[1]]} is {' or '.join(f'``{k}``' for k in ks)}"
+        for path, ks in kinds.items()
+    }
+
+
 def _escape_bars(text: str) -> str:
     """``|x|`` outside literals, escaped: reST would read it as a substitution."""
     parts = re.split(r"(``.*?``)", text)
@@ -273,6 +289,7 @@ def reference_rst() -> str:
 
     tables = schema_keys()
     check_meanings(tables)
+    required_by = _required_by_kind()
     lines: list[str] = []
     for table, keys in tables.items():
         title = _heading(table)
@@ -290,10 +307,16 @@ def reference_rst() -> str:
                     ]
                     continue
             must = " **(required in every config)**" if key.path in REQUIRED_KEYS else ""
-            facts = [f"*{key.type}*"]
+            facts = [f"type: {key.type}"]
             if key.allowed:
                 facts.append(f"allowed: {key.allowed}")
-            facts.append("default: none, must be set" if must else f"default: {key.default}")
+            kinds = required_by.get(key.path)
+            if must:
+                facts.append("default: none, must be set")
+            elif kinds:
+                facts.append(f"default: none, must be given when the {kinds}")
+            else:
+                facts.append(f"default: {key.default}")
             lines += [f"``{key.path}``{must}", "   " + "; ".join(facts) + ".", ""]
             lines += ["   " + _escape_bars(KEY_MEANINGS[key.path]), ""]
     lines += [".. _config-plant-file:", "", "Plant file", "----------", ""]
