@@ -24,7 +24,7 @@ run: $(STAMP)
 # the tests run on every core (pytest-xdist; a test file stays on one worker, so its
 # fixtures are built once); they share one kernel cache (tests/conftest.py)
 test: $(STAMP)
-	$(BIN)/ruff check src tests benchmarks examples docs
+	$(BIN)/ruff check src tests benchmarks examples docs/conf.py docs/_ext
 	$(BIN)/python -m pytest -n auto --dist loadfile
 
 # the manual (docs/): strict, warnings are errors, the gallery's examples executed;
@@ -35,8 +35,8 @@ docs: $(STAMP)
 		$(BIN)/python -m sphinx -W --keep-going -b html docs docs/_build/html
 
 lint: $(STAMP)
-	$(BIN)/ruff check src tests benchmarks examples docs
-	$(BIN)/ruff format --check src tests benchmarks examples docs
+	$(BIN)/ruff check src tests benchmarks examples docs/conf.py docs/_ext
+	$(BIN)/ruff format --check src tests benchmarks examples docs/conf.py docs/_ext
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_engine.py
