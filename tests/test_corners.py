@@ -219,7 +219,7 @@ def test_cli_prints_and_writes_the_corners(tmp_path: Path) -> None:
 
 
 def test_robust_tuning_draws_can_include_the_corners() -> None:
-    from aiofl.tuning.robust import draw_fields
+    from aiofl.tuning.prepared import draw_fields
     from aiofl.tuning.space import parse_tune_settings
 
     cfg = load_config("frontier-s1-leso")

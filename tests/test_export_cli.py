@@ -9,6 +9,7 @@ from typer.testing import CliRunner
 
 from aiofl.cli.app import app
 from aiofl.cli.export import FORMATS
+from aiofl.config import preset_text
 from aiofl.export.c_check import CC
 from aiofl.export.c_text import c_prefix
 
@@ -148,9 +149,8 @@ def test_a_hostile_config_name_gives_a_plain_instance_name(tmp_path):
     and _: a name holding a comment closer, a directive and U+FB01 gives a plain identifier,
     and the code outside comments holds nothing of the rest."""
     import re
-    from importlib.resources import files
 
-    text = (files("aiofl") / "presets" / "retuned-s1-ladrc.toml").read_text(encoding="utf-8")
+    text = preset_text("retuned-s1-ladrc")
     hostile = 'name = "9 x */ #define aiofl_step EVIL /* \\ufb01"'
     cfg = tmp_path / "h.toml"
     cfg.write_text(re.sub(r'^name = ".*"$', lambda _: hostile, text, count=1, flags=re.M))

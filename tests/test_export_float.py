@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from aiofl.config import load_config
+from aiofl.config import list_presets, load_config
 from aiofl.engine.discrete import Sampling
 from aiofl.engine.standalone import DiscreteController
 from aiofl.export import export_c
@@ -29,12 +29,11 @@ from aiofl.export.c_check import (
     loop,
 )
 
-PRESETS = Path(__file__).resolve().parents[1] / "src" / "aiofl" / "presets"
 SHIPPED = sorted(
-    p.stem
-    for p in PRESETS.glob("*.toml")
-    if p.stem.split("-")[0] in ("paper", "retuned", "frontier", "assisted")
-    and ("-s1-" in p.stem or "-s2-" in p.stem)
+    name
+    for name in list_presets()
+    if name.split("-")[0] in ("paper", "retuned", "frontier", "assisted")
+    and ("-s1-" in name or "-s2-" in name)
 )
 TS = 1e-3
 T_MAX = 12.0  # past S2's load step at 10 s

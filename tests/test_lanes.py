@@ -6,23 +6,21 @@ rounded check of the lane instances."""
 from __future__ import annotations
 
 from dataclasses import replace
-from pathlib import Path
 
 import numpy as np
 import pytest
 from numba import njit
 
-import aiofl
 from aiofl.components import vecmath_tables as T
 from aiofl.components.vecmath import vcos, vexp, vlog, vsin
-from aiofl.config import load_config
+from aiofl.config import list_presets, load_config
 from aiofl.controller import Controller
 from aiofl.engine.discrete import Sampling
 from aiofl.engine.loop import WIDTH
 from aiofl.engine.simulation import simulate_batch
 from aiofl.scenario import Reference, Scenario
 
-PRESETS = sorted(p.stem for p in (Path(aiofl.__file__).parent / "presets").glob("*.toml"))
+PRESETS = list_presets()
 """Every shipped preset."""
 
 

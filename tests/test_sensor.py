@@ -236,8 +236,8 @@ FAST: dict[str, Any] = {
 
 def test_noise_realisations_score_the_mean_over_common_noise_sequences() -> None:
     from aiofl.controller import controller_batch
+    from aiofl.tuning.objective import objective_coefficients
     from aiofl.tuning.search import tune
-    from aiofl.tuning.space import objective_coefficients
 
     cfg = parse_config({**FAST, "tune": {**FAST["tune"], "noise_realisations": 3}}, "fast")
     res = tune(cfg, progress=False)

@@ -116,7 +116,7 @@ def _param(name: str, bounds: dict[str, Any]) -> Any:
 
 
 #: invalid [tune] tables on frontier-s1-ladrc (NSGA-II over eso.omega0, sef.omega_c, law.b0,
-#: robust over 4 draws): one per check of the tune schema and of tuning.search.prepare
+#: robust over 4 draws): one per check of the tune schema and of tuning.prepared.prepare
 TUNE_CASES: dict[str, Any] = {
     "algorithm": _tune(algorithm="bogus"),
     "choose": _tune(choose="bogus"),

@@ -15,13 +15,12 @@ from aiofl import layout as L
 from aiofl.analysis.exact_tracking import exact_tracking, exact_tracking_cost, exact_tracking_input
 from aiofl.config import ConfigError, load_config, parse_config
 from aiofl.tuning.evaluate import EvalSpec, LocalEvaluator, PopulationResult, evaluate_chunk
+from aiofl.tuning.objective import objective_coefficients, objective_values
 from aiofl.tuning.results import write_outputs
 from aiofl.tuning.search import prepare, tune
 from aiofl.tuning.space import (
     SearchSpace,
     TuneSettings,
-    objective_coefficients,
-    objective_values,
     parse_tune_settings,
     to_toml,
     used_parameters,

@@ -1,4 +1,4 @@
-"""Stability margins as tuning quantities (aiofl.tuning.margins, aiofl.tuning.robust): a
+"""Stability margins as tuning quantities (aiofl.tuning.margins, aiofl.tuning.objective): a
 first-order loop whose loop transfer function is known in closed form, the grammar, the
 NSGA-II evaluation and the warnings on a chosen design."""
 
@@ -15,7 +15,7 @@ from scipy.optimize import brentq
 
 from aiofl.config import load_config
 from aiofl.tuning.margins import candidate_margins, design_warnings
-from aiofl.tuning.robust import objective_matrix, parse_constraint, parse_quantity
+from aiofl.tuning.objective import objective_matrix, parse_constraint, parse_quantity
 from test_sampling_criteria import PLANT
 
 BETA, W0 = 3.0, 40.0

@@ -20,15 +20,16 @@ from aiofl.config import ConfigError, parse_config
 from aiofl.controller import controller_batch
 from aiofl.engine.simulation import simulate_batch
 from aiofl.tuning.front import NoFeasibleDesign, choose, pareto_front
-from aiofl.tuning.robust import (
+from aiofl.tuning.objective import (
     aggregate,
+    objective_coefficients,
     objective_matrix,
+    objective_values,
     parse_constraint,
     parse_quantity,
-    robust_objective,
 )
 from aiofl.tuning.search import prepare, tune
-from aiofl.tuning.space import objective_coefficients, parse_tune_settings, to_toml
+from aiofl.tuning.space import parse_tune_settings, to_toml
 
 # The short, coarse LADRC problem of tests/test_tuning.py: 0.6 s at dt = 1e-3.
 FAST: dict[str, Any] = {
@@ -158,7 +159,7 @@ def test_robust_objective_penalty_and_aggregates_by_definition() -> None:
     d = np.array([[False, False, False], [False, True, False]])
     t = np.array([[np.nan] * 3, [np.nan, 0.3, np.nan]])
     c = np.eye(5)[L.M_ITAE]
-    j = robust_objective(m, d, t, c, 10.0, 0.6, "mean", 0.9)
+    j = objective_values(m, d, t, c, 10.0, 0.6, "mean", 0.9)
     assert j[0] == pytest.approx(7 / 3)
     assert j[1] == pytest.approx(10.0 * (2 - (1 + 0.5 + 1) / 3))
     f, g, raw = objective_matrix(

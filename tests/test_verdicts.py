@@ -202,8 +202,12 @@ def test_a_quantised_command_that_screams_is_ok_and_flagged_not_diverged():
 
 def test_response_figures_are_tuning_quantities():
     from aiofl import layout as L
-    from aiofl.tuning.robust import parse_constraint, parse_quantity, quantity_values
-    from aiofl.tuning.space import objective_values
+    from aiofl.tuning.objective import (
+        objective_values,
+        parse_constraint,
+        parse_quantity,
+        quantity_values,
+    )
 
     q = parse_quantity("overshoot:worst")
     c = parse_constraint("settling_time <= 0.3")

@@ -35,7 +35,21 @@ def allowed_text(
     finite: bool = True,
     kind: str = "number",
 ) -> str:
-    """``"a finite number, > 0, <= 0.1"``: the allowed range as the config errors word it."""
+    """``"a finite number, > 0, <= 0.1"``: the allowed range as the config errors word it.
+
+    Parameters
+    ----------
+    gt, ge, lt, le
+        The bounds (None: none).
+    finite
+        Whether ±inf is refused.
+    kind
+        ``"number"`` or ``"integer"``.
+
+    Returns
+    -------
+    str
+    """
     words = [f"a finite {kind}" if finite else f"a {kind} (±inf allowed)"]
     for sym, bound in ((">", gt), (">=", ge), ("<", lt), ("<=", le)):
         if bound is not None:
@@ -56,7 +70,23 @@ def check_number(
 ) -> float:
     """``value`` as a float if it is a number within the bounds; else ``ValueError`` naming
     ``field``, the value and the allowed range.  NaN is always refused; ±inf unless
-    ``finite`` is False."""
+    ``finite`` is False.
+
+    Parameters
+    ----------
+    field
+        The field, for the message.
+    value
+        The value (a bool is refused).
+    gt, ge, lt, le
+        The bounds (None: none).
+    finite
+        Refuse ±inf (default True).
+
+    Returns
+    -------
+    float
+    """
     allowed = allowed_text(gt=gt, ge=ge, lt=lt, le=le, finite=finite)
     if not is_number(value):
         raise ValueError(f"{field} = {value!r}; allowed: {allowed}")
@@ -78,7 +108,21 @@ def check_integer(
     le: int | None = None,
 ) -> int:
     """``value`` as an int if it is an integer (Python or numpy, not a bool, not a float)
-    within the bounds; else ``ValueError`` naming ``field``."""
+    within the bounds; else ``ValueError`` naming ``field``.
+
+    Parameters
+    ----------
+    field
+        The field, for the message.
+    value
+        The value.
+    ge, lt, le
+        The bounds (None: none).
+
+    Returns
+    -------
+    int
+    """
     allowed = allowed_text(ge=ge, lt=lt, le=le, kind="integer")
     if not isinstance(value, numbers.Integral) or isinstance(value, bool):
         raise ValueError(f"{field} = {value!r}; allowed: {allowed}")

@@ -346,6 +346,19 @@ class Controller:
 
         The other fields (``n_feedback``, ``values``, ...) are passed on; their defaults are
         the class's (binomial ESO α, ``n_feedback`` from :func:`default_n_feedback`).
+
+        Parameters
+        ----------
+        structure
+            A key of :data:`STRUCTURES` (its ``eso``, ``td``, ``sef``, ``law``); else ValueError.
+        rho
+            The chain order ρ of the observer and feedback (default 4, the paper's plant).
+        **kwargs
+            Any other :class:`Controller` field (``n_feedback``, ``values``, ...).
+
+        Returns
+        -------
+        Controller
         """
         if structure not in STRUCTURES:
             raise ValueError(f"structure {structure!r}; allowed: {', '.join(STRUCTURES)}")

@@ -290,7 +290,27 @@ class Design:
         (built with the C compiler, ``$CC`` or ``cc``).  Raises ``ValueError`` for what the
         C code cannot express, a bad prefix or format, or no compiler for an FMU
         (:class:`aiofl.export.ExportError`); nothing is written then.  Unlike ``aiofl
-        export`` it runs no simulation first."""
+        export`` it runs no simulation first.
+
+        Parameters
+        ----------
+        out
+            The folder to write into (created if missing).
+        ts
+            Sample time [s], a number in [1e-9, 1]; default (None) the design's sampling, which
+            an FMU needs.
+        precision
+            ``"double"`` (default) or ``"float"``: the C type of every number.
+        prefix
+            The C identifier every exported name starts with (default ``"aiofl"``).
+        format
+            ``"c"`` (default): the C99 sources; ``"fmu"``: one FMI 2.0 co-simulation FMU.
+
+        Returns
+        -------
+        dict of str to Path
+            The written files by file name.
+        """
         from aiofl.engine.discrete import Sampling
         from aiofl.export import ExportError, export_c
         from aiofl.export.fmu import export_fmu_for_config

@@ -95,6 +95,22 @@ class DiscreteController(standalone.DiscreteController):
         plant: Any = None,
         x0: Sequence[float] = (),
     ) -> None:
+        """The controller of ``controller`` sampled as ``sampling``, refused as the class notes say.
+
+        Parameters
+        ----------
+        controller
+            An AIOFL controller (LESO, INLESO, LADRC, ...); the IOFL law is refused.
+        sampling
+            Sample time and discretisation (:class:`aiofl.engine.discrete.Sampling`); ``ts`` must
+            be a number in [1e-9, 1] s at which the design can be discretised.
+        plant
+            The plant whose nominal model a model-assisted observer (``eso.model = "nominal"``)
+            carries; not needed otherwise (default None).
+        x0
+            The plant state the model-assisted observer's gains are placed at (default: the
+            origin); not used otherwise.
+        """
         check_ts(sampling.ts, "ts")
         super().__init__(controller, sampling, plant=plant, x0=x0)
         derived = self._q[L.N_FLOAT :]
@@ -184,7 +200,22 @@ class DiscreteController(standalone.DiscreteController):
     def run(self, n: int, r: float | Sequence[float] | NDArray[np.float64], y: float) -> float:
         """``n`` samples (n ≥ 1) with the same reference ``r`` and measurement ``y`` in one
         compiled call (:meth:`step` n times); returns the last u.  A fault (:attr:`fault`)
-        in any of them leaves the state as before the call."""
+        in any of them leaves the state as before the call.
+
+        Parameters
+        ----------
+        n
+            The number of samples, an integer in [1, 1e9].
+        r
+            The reference, as for :meth:`step`: r, or (r, r', ..., r^(ρ)).
+        y
+            The measurement, the same for every sample.
+
+        Returns
+        -------
+        float
+            The command u of the last sample (the held command after a fault).
+        """
         if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= 10**9:
             raise ValueError(f"n = {n!r}; allowed: an integer, 1 <= n <= 1e9")
         return self._sample(r, y, int(n))
@@ -216,6 +247,15 @@ class DiscreteController(standalone.DiscreteController):
             coefficients, or for a controller the discrete update cannot run (the IOFL law).
         aiofl.config.ConfigError
             For a config that does not load.
+
+        Examples
+        --------
+        The first call compiles the controller's update (seconds; cached on disk after):
+
+        >>> ctrl = DiscreteController.from_config("tank-ladrc", ts=0.01)  # doctest: +SKIP
+        >>> ctrl.reset(0.0)  # bumpless start at the first measurement  # doctest: +SKIP
+        >>> ctrl.step(1.0, 0.0)  # r, y: u at its limit u_max = 10  # doctest: +SKIP
+        10.0
         """
         if ts is not None:
             ts = check_ts(ts, "ts")  # before the config is loaded: the argument named first

@@ -92,6 +92,22 @@ def check_run_size(
     * a stored trajectory, :math:`(\lfloor N/d\rfloor + 1)\,C\,8` bytes for decimation
       d and C columns, :math:`\le` :data:`MAX_TRAJECTORY_BYTES`.
 
+    Parameters
+    ----------
+    t_final, dt
+        The horizon :math:`t_f` and the step :math:`\Delta t` [s].
+    noise_hold
+        The noise's hold time :math:`t_{hold}` [s] (None: no noise table).
+    trajectory_columns, decimation
+        C and d of a stored trajectory (None: nothing stored).
+    what
+        What is run, for the message.
+
+    Returns
+    -------
+    int
+        N, the number of steps.
+
     Raises
     ------
     ValueError

@@ -76,7 +76,26 @@ def patch_source(
     """Replace method ``name`` of numba's class ``owner`` by its own source (from
     ``module``) with the text ``old`` (present exactly once) replaced by ``new``, compiled
     in the module's globals plus ``extra``; False (nothing changed) when the source is not
-    available or not the expected one."""
+    available or not the expected one.
+
+    Parameters
+    ----------
+    owner
+        The numba class.
+    name
+        The method.
+    module
+        The module it is defined in (its globals).
+    old, new
+        The text replaced, and its replacement.
+    extra
+        More globals (None: none).
+
+    Returns
+    -------
+    bool
+        Whether the method was replaced.
+    """
     import inspect
     import textwrap
 

@@ -152,6 +152,15 @@ def check_file_replaceable(path: str | Path, *, force: bool, option: str = "--ou
     docstring): a directory, a folder that does not exist or is not writable, or an
     existing file without ``force``.  ``option`` names the path in the message.
 
+    Parameters
+    ----------
+    path
+        The file.
+    force
+        Whether an existing file may be replaced.
+    option
+        The option named in the message (default ``"--out"``).
+
     Raises
     ------
     OutputDirError
@@ -175,7 +184,17 @@ def check_file_replaceable(path: str | Path, *, force: bool, option: str = "--ou
 def check_addable(out: str | Path, names: Iterable[str], *, force: bool) -> None:
     """Refuse an ``out`` that :func:`add_files` cannot add the files ``names`` to: a file, a
     non-empty folder aiofl did not write, or (without ``force``) one that already holds a
-    file of one of these names."""
+    file of one of these names.
+
+    Parameters
+    ----------
+    out
+        The folder.
+    names
+        The files' names.
+    force
+        Whether files of those names may be replaced.
+    """
     out = Path(out)
     check_replaceable(out, force=True)
     present = sorted(name for name in names if (out / name).exists())
@@ -194,6 +213,15 @@ def add_files(out: str | Path, files: dict[str, str | bytes], *, force: bool) ->
     an existing ``out`` must be empty or written by aiofl (:func:`check_replaceable`).  A
     file of the same name already there is replaced only with ``force``; every name is
     checked before anything is written, and each file is written atomically.
+
+    Parameters
+    ----------
+    out
+        The folder.
+    files
+        ``{name: text or bytes}``.
+    force
+        Replace files of the same name.
 
     Raises
     ------

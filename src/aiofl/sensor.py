@@ -97,6 +97,17 @@ def check_quantum_range(key: str, quantum: float, scenario: Any, plant: Any = No
     output stays at 0 (regulation at 0 from rest) has no range to compare with: only
     :data:`QUANTUM_MAX` applies.
 
+    Parameters
+    ----------
+    key
+        The config field, for the message.
+    quantum
+        The quantum.
+    scenario
+        The scenario whose output range is compared with.
+    plant
+        Its plant (None: the range of the reference alone, no unit in the message).
+
     Raises
     ------
     ValueError
@@ -293,7 +304,23 @@ class Sensor:
     ) -> Sensor:
         """The sensor a scenario and sampling setting amount to (their noise, ts and
         y_quantum); ``preset`` labels it (``"ideal"`` when it is the ideal measurement),
-        ``unit`` is the measured output's."""
+        ``unit`` is the measured output's.
+
+        Parameters
+        ----------
+        scenario
+            The scenario (its noise).
+        sampling
+            The sampling setting (ts, y_quantum); None: continuous, no quantum.
+        preset
+            The label (default ``"custom"``).
+        unit
+            The measured output's unit.
+
+        Returns
+        -------
+        Sensor
+        """
         sensor = cls(
             preset=preset,
             unit=unit,

@@ -127,7 +127,21 @@ def check_text(field: str, value: Any, *, max_chars: int = MAX_LABEL_CHARS) -> s
     """``value`` if it is a string of allowed characters (:func:`refused_character`) and at
     most ``max_chars`` characters; else ``ValueError`` naming ``field``, the first refused
     character and its position.  The text is returned unchanged (free text is not
-    normalised: a unit ``"m/s²"`` keeps its ``²``)."""
+    normalised: a unit ``"m/s²"`` keeps its ``²``).
+
+    Parameters
+    ----------
+    field
+        The field, for the message.
+    value
+        The text.
+    max_chars
+        The most characters allowed (default :data:`MAX_LABEL_CHARS`).
+
+    Returns
+    -------
+    str
+    """
     allowed = f"{_ALLOWED}, at most {max_chars} characters"
     if not isinstance(value, str):
         raise ValueError(f"{field} = {value!r:.80}; allowed: a string ({allowed})")
@@ -155,7 +169,20 @@ def check_name(
     """A state or parameter name, checked by :func:`check_text` and returned in NFKC
     (:func:`normal_name`); not empty, at most ``max_chars`` characters once normalised.
     With ``identifier`` it must also be a Python identifier not starting with ``_`` (the
-    names a plant file's expressions are written in)."""
+    names a plant file's expressions are written in).
+
+    Parameters
+    ----------
+    field, value, max_chars
+        As for :func:`check_text` (default :data:`MAX_NAME_CHARS`).
+    identifier
+        Require a Python identifier not starting with ``_``.
+
+    Returns
+    -------
+    str
+        The name in NFKC.
+    """
     text = normal_name(check_text(field, value, max_chars=max_chars))
     if identifier:
         if (
@@ -226,7 +253,21 @@ def terminal_text(text: str, *, markup: bool = False, lines: bool = False) -> st
     line separator, bidirectional control and surrogate shown as a ``\\x1b`` /
     ``\\u202e`` escape; with ``lines`` the newlines of a multi-line text are kept; with
     ``markup`` (text printed through rich with markup on) ``[`` escaped as rich requires,
-    so ``[/]`` or ``[red]`` print as written."""
+    so ``[/]`` or ``[red]`` print as written.
+
+    Parameters
+    ----------
+    text
+        The text.
+    markup
+        Escape ``[`` for rich's markup.
+    lines
+        Keep the newlines.
+
+    Returns
+    -------
+    str
+    """
     if lines:
         return "\n".join(terminal_text(line, markup=markup) for line in str(text).split("\n"))
     out = _TERMINAL_ESCAPED.sub(_escape, str(text))

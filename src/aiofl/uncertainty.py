@@ -214,7 +214,13 @@ class UncertaintyModel(_Model):
 
     def check(self, param_names: Sequence[str], *, discrete: bool, dt: float) -> None:
         """Refuse parameters the plant does not have, and ``ts`` without a sampled
-        controller or without a multiple of ``dt`` in range; raises ``ValueError``."""
+        controller or without a multiple of ``dt`` in range; raises ``ValueError``.
+
+        Parameters
+        ----------
+        param_names, discrete, dt
+            The plant's parameter names, whether the controller is sampled, the step [s].
+        """
         unknown = sorted(set(self.parameters) - set(param_names))
         if unknown:
             raise ValueError(
@@ -402,7 +408,21 @@ def sample_draws(
 ) -> Draws:
     """Draw the table's uncertain quantities (common random numbers, see the module
     docstring).  ``draws`` / ``seed`` override the table's; ``dt`` is the engine step the
-    sample times are multiples of."""
+    sample times are multiples of.
+
+    Parameters
+    ----------
+    spec
+        The ``[uncertainty]`` model.
+    draws, seed
+        The number of draws (1..:data:`MAX_DRAWS`) and the seed (None: the table's).
+    dt
+        The engine step [s] the drawn sample times are multiples of.
+
+    Returns
+    -------
+    Draws
+    """
     n = spec.draws if draws is None else int(draws)
     s = spec.seed if seed is None else int(seed)
     if not 1 <= n <= MAX_DRAWS:
@@ -534,7 +554,17 @@ def corner_draws(spec: UncertaintyModel, *, dt: float = 1e-4) -> tuple[Draws, st
 
 def box_draws(spec: UncertaintyModel, unit: ArrayLike, *, dt: float = 1e-4) -> Draws:
     """Draws at points of the box of ``spec`` given in unit coordinates: ``unit`` (N, k),
-    column j in [0, 1] from the low to the high edge of :func:`box_bounds`'s j-th entry."""
+    column j in [0, 1] from the low to the high edge of :func:`box_bounds`'s j-th entry.
+
+    Parameters
+    ----------
+    spec, unit, dt
+        The ``[uncertainty]`` model, the points (N, k) and the engine step [s].
+
+    Returns
+    -------
+    Draws
+    """
     u = np.atleast_2d(np.asarray(unit, dtype=np.float64))
     box = box_bounds(spec, dt=dt)
     if u.shape[1] != len(box):
@@ -550,6 +580,15 @@ def cvar(values: ArrayLike, alpha: float = 0.9, axis: int = -1) -> NDArray[np.fl
     ``(1 - α) K`` is rounded up after removing a 1e-9 floating-point excess, so
     :math:`\alpha = 0.7, K = 10` gives m = 3, not 4.  A +inf value (a diverged draw) among
     the worst m makes the result +inf.
+
+    Parameters
+    ----------
+    values, alpha, axis
+        The values (losses); the level, 0 ≤ α < 1 (0.9: the worst 10 %); their axis.
+
+    Returns
+    -------
+    ndarray
     """
     if not 0.0 <= alpha < 1.0:
         raise ValueError(f"cvar alpha = {alpha}; allowed: 0 <= alpha < 1")
@@ -574,6 +613,23 @@ def aggregate(
     :func:`cvar` at level ``alpha``.  ``diverged`` (same shape, bool) marks draws whose
     value is replaced by +inf; a NaN value is treated as diverged too.  A +inf result means
     the design is infeasible.
+
+    Parameters
+    ----------
+    values
+        The metric's values.
+    how
+        ``"mean"``, ``"worst"`` or ``"cvar"``.
+    alpha
+        The CVaR level.
+    failed
+        Diverged draws, bool, the shape of ``values`` (the ``diverged`` above); None: none.
+    axis
+        The axis of the draws.
+
+    Returns
+    -------
+    ndarray
     """
     x = np.array(values, dtype=np.float64)
     if failed is not None:

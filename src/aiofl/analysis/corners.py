@@ -191,6 +191,23 @@ def worst_case_search(
     runs the noise realisation ``noise_seed`` (:attr:`aiofl.uncertainty.Draws.noise_seeds`;
     give the start's, so the search compares plants on the start's noise, common random
     numbers); None: the box points' own seeds.
+
+    Parameters
+    ----------
+    cfg, spec
+        The run config (:class:`aiofl.config.RunConfig`) and the model whose box is searched.
+    start
+        The start point in unit box coordinates, shape (k,), k the box's dimensions.
+    start_label
+        How the result names the start (``"corner 3"``, ``"draw 17"``, ...).
+    evaluations
+        The most engine calls the search makes (default :data:`SEARCH_EVALUATIONS`).
+    noise_seed
+        The noise realisation every point runs (above); None: the points' own seeds.
+
+    Returns
+    -------
+    WorstCase
     """
     from scipy.optimize import minimize
 
@@ -434,7 +451,25 @@ def beta_ranges(
     """The β/b0 stability range of every design (module docstring); returns the ranges
     (in the order of ``cfgs``) and the number of engine calls made.  A design whose plant
     has no :func:`beta_scaling`, or whose scenario changes the plant at t > 0, gets a range
-    with ``reason`` set and no numbers."""
+    with ``reason`` set and no numbers.
+
+    Parameters
+    ----------
+    cfgs
+        The designs (run configs).
+    cap
+        The widest β/b0 range searched, (low, high) (default :data:`BETA_CAP`).
+    grid, steps
+        Grid points, then bisection steps, per side of s = 1 (defaults :data:`BETA_GRID`,
+        :data:`BETA_STEPS`).
+
+    Returns
+    -------
+    ranges : list of BetaRange
+        One per design, in the order of ``cfgs``.
+    calls : int
+        The engine calls made.
+    """
     out: list[BetaRange | None] = [None] * len(cfgs)
     live: list[int] = []
     scal: dict[int, dict[str, float]] = {}
@@ -534,7 +569,24 @@ def run_box_robustness(
     """``aiofl robustness``: the draws and the box corners in one batched run
     (:func:`~aiofl.analysis.robustness.run_robustness`), then the worst-case search from
     the worst corner or draw and the β/b0 range; their records go into the result's
-    ``extra`` (``corners``, ``worst_case``, ``beta_range``)."""
+    ``extra`` (``corners``, ``worst_case``, ``beta_range``).
+
+    Parameters
+    ----------
+    cfg
+        The run config; without ``[uncertainty]`` only :func:`run_robustness` runs.
+    draws, seed, client, chunks
+        As for :func:`~aiofl.analysis.robustness.run_robustness`: the number of draws and
+        their seed (None: the config's), a ``distributed.Client`` (None: this process) and
+        its number of tasks (default: one per worker).
+    search, beta
+        Run the worst-case search; measure the β/b0 stability range (both by default).
+
+    Returns
+    -------
+    RobustnessResult
+        The robustness run, the corners, worst case and β range in its ``extra``.
+    """
     from aiofl.analysis.robustness import run_robustness
     from aiofl.uncertainty import corner_draws
 

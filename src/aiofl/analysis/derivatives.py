@@ -225,7 +225,22 @@ class PlantDerivatives:
 
     def evaluate(self, name: str, x: NDArray[Any], p: NDArray[np.float64]) -> NDArray[Any]:
         """Value of plant function ``name`` at x (real or complex-step), as a 1-D array; for
-        x of shape (n, K) the K columns' values, shape (n_out, K) (:meth:`evaluate_columns`)."""
+        x of shape (n, K) the K columns' values, shape (n_out, K) (:meth:`evaluate_columns`).
+
+        Parameters
+        ----------
+        name
+            The plant function (``"f"``, ``"g"``, ``"h"``, ...).
+        x
+            The state, shape (n,) or a batch of columns (n, K); real or complex.
+        p
+            The parameter vector.
+
+        Returns
+        -------
+        ndarray
+            Shape (n_out,), or (n_out, K) for a batch.
+        """
         if x.ndim > 1:
             return self.evaluate_columns((name,), x, p)[0]
         if not np.iscomplexobj(x):
@@ -245,7 +260,22 @@ class PlantDerivatives:
         self, name: str, x: NDArray[np.float64], p: NDArray[np.float64]
     ) -> NDArray[np.float64]:
         """Jacobian of function ``name`` at real x by :func:`scipy.differentiate.jacobian`
-        (adaptive central differences with Richardson extrapolation)."""
+        (adaptive central differences with Richardson extrapolation).
+
+        Parameters
+        ----------
+        name
+            The plant function.
+        x
+            The real state, shape (n,).
+        p
+            The parameter vector.
+
+        Returns
+        -------
+        ndarray
+            The Jacobian, shape (n_out, n) (cached by x and p).
+        """
         key = (name, x.tobytes(), p.tobytes())
         cache = self._fd_cache
         if key in cache:
@@ -285,7 +315,22 @@ class PlantDerivatives:
     def complex_jacobian(
         self, name: str, x: NDArray[np.float64], p: NDArray[np.float64]
     ) -> NDArray[np.float64]:
-        """Jacobian of function ``name`` at real x by the complex step of the re-bound function."""
+        """Jacobian of function ``name`` at real x by the complex step of the re-bound function.
+
+        Parameters
+        ----------
+        name
+            The plant function.
+        x
+            The real state, shape (n,).
+        p
+            The parameter vector.
+
+        Returns
+        -------
+        ndarray
+            The Jacobian, shape (n_out, n).
+        """
         return self._call_steps(name, _step_inputs(x, range(x.size)), p).imag / COMPLEX_STEP
 
     def _call_steps(
@@ -320,6 +365,20 @@ class PlantDerivatives:
         column by column (to the last bit, where the real part does not move with the step),
         in fewer calls.  Other batches (real, or columns at different real points, or a
         Jacobian that is not finite) are evaluated column by column.
+
+        Parameters
+        ----------
+        names
+            The plant functions to evaluate.
+        x
+            The states, shape (n, K), real or complex.
+        p
+            The parameter vector.
+
+        Returns
+        -------
+        list of ndarray
+            One per name, each of shape (n_out, K).
         """
         xr = x.real
         x0 = np.ascontiguousarray(xr[:, 0])

@@ -93,6 +93,20 @@ def reference_derivatives(reference: Reference, t: ArrayLike, order: int) -> NDA
     \sin(\omega t + \varphi + k\pi/2)` (plus the offset for k = 0).  A step or sampled
     reference has no ``order`` derivatives and cannot be tracked exactly by a plant of
     relative degree ``order``; that raises :class:`ValueError`.
+
+    Parameters
+    ----------
+    reference
+        The reference; only ``kind = "sine"`` is accepted.
+    t
+        The times [s], any shape T.
+    order
+        The highest derivative, ≥ 0 (the plant's relative degree).
+
+    Returns
+    -------
+    ndarray
+        Shape (order + 1, T).
     """
     if reference.kind != "sine":
         raise ValueError(
@@ -263,6 +277,19 @@ def exact_tracking(
     scenario 2: :math:`J_l \\times 1.4` from t = 0) and the step disturbance is cancelled
     through u (it is matched for the SLFJM).  Measurement noise does not change the true
     output, so it plays no part.  ``t`` defaults to a grid of step ``dt`` over the horizon.
+
+    Parameters
+    ----------
+    plant, scenario
+        The plant and the scenario whose reference, disturbance and parameter change apply.
+    t
+        The times [s] (default: step ``dt`` from 0 to ``t_final``).
+    dt
+        The grid step [s] when ``t`` is not given.
+
+    Returns
+    -------
+    ExactTracking
     """
     if t is None:
         n = round(scenario.t_final / dt)

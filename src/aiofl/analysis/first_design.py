@@ -141,6 +141,15 @@ def first_design(
         The frequency of a sine reference to track [rad/s] (0: a step).
     u_max
         The actuator's limit (None: none).
+
+    base_dir
+        The folder a relative plant file in ``plant_ref`` is found from (None: the working
+        folder).
+
+    Returns
+    -------
+    Proposal
+        The proposed design, its checked closed-loop step and the notes.
     """
     from aiofl.config import parse_config
 

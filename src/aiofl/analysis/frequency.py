@@ -78,7 +78,19 @@ def loop_transfer(
 ) -> Any:
     r"""The loop transfer function :math:`L(s) = -(C(sI-A)^{-1}B + D)` as a
     ``control.StateSpace``, from the loop broken at the plant input (input :math:`u_p`,
-    output the controller's u; module docstring)."""
+    output the controller's u; module docstring).
+
+    Parameters
+    ----------
+    a, b, c, d
+        The state-space matrices of the loop broken at the plant input.
+    name
+        The system's name (default ``"L"``).
+
+    Returns
+    -------
+    control.StateSpace
+    """
     import control
 
     return control.ss(
@@ -364,6 +376,21 @@ def loop_figure(
     ω > 0 (solid) and its mirror ω < 0 (dashed) within a window around −1, with the circle
     of radius :math:`1/M_s` about −1 that the curve touches.  ``title`` (it holds a
     config's name) is drawn as plain text: a ``$`` in it is no mathtext.
+
+    Parameters
+    ----------
+    loop
+        L(s), a ``control`` system (:func:`loop_transfer`).
+    margins
+        The margins to mark.
+    title
+        The figure's title, plain text.
+    omega
+        The frequencies [rad/s] (default: a grid from the open- and closed-loop poles).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     import control
     from matplotlib.figure import Figure
@@ -436,7 +463,20 @@ FIGURE_FORMATS = ("png", "pdf", "svg")
 
 def loop_figure_bytes(loop: Any, margins: LoopMargins, title: str, fmt: str = "png") -> bytes:
     """:func:`loop_figure` rendered to bytes in ``fmt`` (one of :data:`FIGURE_FORMATS`;
-    Agg canvas, no pyplot state)."""
+    Agg canvas, no pyplot state).
+
+    Parameters
+    ----------
+    loop, margins, title
+        As for :func:`loop_figure`.
+    fmt
+        An image format of :data:`FIGURE_FORMATS` (default ``"png"``).
+
+    Returns
+    -------
+    bytes
+        The image file's content.
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     if fmt not in FIGURE_FORMATS:

@@ -98,6 +98,17 @@ def group_eigenvalues(
     are two groups, ω_c = 10.01 merges into one of multiplicity 5 (the computed eigenvalues
     of the two blocks are ~1e-2 apart from their true values there).  An earlier level of
     1000 merged ω_c = 10.1 too.
+
+    Parameters
+    ----------
+    a
+        The square matrix A.
+    trials, level, seed
+        The perturbations made, their size in units of ε‖A‖₂ and their random seed.
+
+    Returns
+    -------
+    tuple of (complex, int)
     """
     from scipy.linalg import eigvals, matrix_balance
     from scipy.optimize import linear_sum_assignment
@@ -367,6 +378,8 @@ def linearize_closed_loop(
     config
         A :class:`aiofl.config.RunConfig`, a preset name or a config path (or None with
         ``plant``, ``controller``, ``scenario``).
+    plant, controller, scenario
+        The loop's parts when ``config`` is None (all three needed).
     amplitude
         Error amplitude ε for the secant gains of fal / g(e) / INLSEF (module docstring of
         :mod:`aiofl.analysis.closed_loop`).
@@ -438,9 +451,13 @@ def closed_loop_verdict(
 ) -> dict[str, Any]:
     """Stability verdict, damping and margins of a run config's linearised closed loop.
 
-    ``run_config`` is a :class:`~aiofl.config.RunConfig` or a config path / preset name;
-    ``linearization`` reuses a :func:`linearize_closed_loop` result at ``amplitude``
-    (the default operating point) instead of computing it again.
+    Parameters
+    ----------
+    run_config
+        A :class:`~aiofl.config.RunConfig` or a config path / preset name.
+    amplitude, linearization
+        ε of :func:`linearize_closed_loop`; a result of it at ``amplitude`` (the default
+        operating point) to reuse instead of computing it again.
 
     Returns
     -------
@@ -481,6 +498,15 @@ def linear_eso_statespace(rho: int, omega0: float, alphas: Sequence[float], b0: 
 
     Outputs are the ρ+1 estimates; the eigenvalues of A − LC are the roots of
     :math:`s^{\rho+1} + \beta_1 s^\rho + \dots + \beta_{\rho+1}`.
+
+    Parameters
+    ----------
+    rho, omega0, alphas, b0
+        ρ, ω₀ [rad/s], the ρ + 1 coefficients α and the input gain b₀.
+
+    Returns
+    -------
+    control.StateSpace
     """
     import control
 

@@ -71,7 +71,17 @@ MEASUREMENT_DELAY_MAX = 1000
 
 def check_loop_options(lag: float, delay_samples: int, noise_std: float | None = None) -> None:
     """Raise ValueError naming the option unless ``lag``, ``delay_samples`` and
-    ``noise_std`` are in range (for a CLI that checks before any work)."""
+    ``noise_std`` are in range (for a CLI that checks before any work).
+
+    Parameters
+    ----------
+    lag
+        The actuator lag [s], finite and ≥ 0.
+    delay_samples
+        The measurement delay in samples, an integer ≥ 0.
+    noise_std
+        The measurement noise's standard deviation, finite and ≥ 0 (None: not given).
+    """
     _check_options(lag, delay_samples)
     if noise_std is not None and not (math.isfinite(noise_std) and noise_std >= 0.0):
         raise ValueError(f"noise_std = {noise_std!r}; allowed: a finite number >= 0")
@@ -135,6 +145,21 @@ def rig_loop(loop: SampledLoop, ts: float, lag: float = 0.0, delay_samples: int 
 
     With ``lag = 0`` and ``delay_samples = 0`` its broken loop is
     :meth:`SampledLoop.broken_loop` and its closed loop :meth:`SampledLoop.matrix`.
+
+    Parameters
+    ----------
+    loop
+        The linearised sampled loop (:class:`SampledLoop`); refused when it has none.
+    ts
+        The sample time [s].
+    lag
+        The actuator's first-order lag τ [s] (0, the default: none).
+    delay_samples
+        Samples of measurement delay (0, the default: none).
+
+    Returns
+    -------
+    RigLoop
     """
     _check_options(lag, delay_samples)
     if not loop.available:
@@ -190,7 +215,21 @@ def disk_margin(
     r"""``(α, gain margin [dB], phase margin [°], ω)`` of the disk margin of a SISO loop
     (:func:`control.disk_margins` on ``omega``, its minimum refined on 401 points between
     the grid's neighbours); ω where the worst case is.  The loop's closed loop must be
-    stable (not checked here)."""
+    stable (not checked here).
+
+    Parameters
+    ----------
+    loop
+        The loop transfer function, a ``control`` system.
+    omega
+        The frequency grid [rad/s].
+    skew
+        The disk's skew σ of :func:`control.disk_margins` (0: the symmetric disk).
+
+    Returns
+    -------
+    alpha, gain_margin_db, phase_margin_deg, omega : float
+    """
     import control
 
     w = np.asarray(omega, dtype=np.float64)
@@ -458,7 +497,19 @@ def _g(v: Any, unit: str = "", none: str = "∞") -> str:
 
 
 def format_loop_view_text(view: dict[str, Any], unit: str = "", u_unit: str = "") -> list[str]:
-    """Text lines of :func:`loop_view` (``aiofl analyze --closed-loop``)."""
+    """Text lines of :func:`loop_view` (``aiofl analyze --closed-loop``).
+
+    Parameters
+    ----------
+    view
+        A :func:`loop_view` result.
+    unit, u_unit
+        The output's and the input's units, for the noise lines (``""``: undeclared).
+
+    Returns
+    -------
+    list of str
+    """
     out = ["Margins of the loop broken at the plant input, each with what it includes:"]
     for row in view["rows"]:
         out.append(f"  {row['label']}:")

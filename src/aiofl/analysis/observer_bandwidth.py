@@ -263,7 +263,20 @@ def noise_gain(
     (its high-frequency gain), L the exact-ZOH current observer's gain
     (:func:`aiofl.components.discrete.current_observer_gain`), F the law's gains on
     :math:`\hat\xi` with :math:`\omega_c = \omega_0/` ``ratio`` (or ``omega_c`` held
-    fixed when given, as in every function here)."""
+    fixed when given, as in every function here).
+
+    Parameters
+    ----------
+    rho, b0, omega0, ts
+        ρ (1..8) and b₀ ≠ 0 of the chain, ω₀ [rad/s] and the sample time Ts [s].
+    ratio, omega_c, alphas, n_feedback
+        ω₀/ω_c (default :data:`OBSERVER_RATIO`), or ω_c [rad/s] held when given; the ρ + 1
+        observer coefficients α (None: binomial); the estimates fed back (None: ρ).
+
+    Returns
+    -------
+    float
+    """
     _check_design(rho, b0, omega0, ts, ratio)
     gain = _observer_gain(rho, omega0, ts, alphas)
     wc = omega0 / ratio if omega_c is None else _positive("omega_c", omega_c)
@@ -359,7 +372,17 @@ def largest_omega0(
     noise that grows with ω0: :func:`scipy.optimize.brentq` on
     :math:`\log(\text{noise}/\text{budget})` in :math:`\log\omega_0`.  Returns (ω0, how):
     ``hi`` with how ``"not binding"`` when even hi meets it, ``lo`` with how
-    ``"exceeded"`` when even lo does not, else how ``"solved"``."""
+    ``"exceeded"`` when even lo does not, else how ``"solved"``.
+
+    Parameters
+    ----------
+    noise_of, budget, lo, hi
+        ω₀ -> the noise (growing with ω₀), its budget, and the range of ω₀ searched [rad/s].
+
+    Returns
+    -------
+    tuple of (float, str)
+    """
     from scipy.optimize import brentq
 
     def excess(log_w: float) -> float:
@@ -392,7 +415,20 @@ def noise_cap(
     :data:`NOISE_FRACTION` · ``u_scale`` (module notes), searched over
     :math:`[\max(10^{-4}/T_s, \omega_c),` ``upper`` :math:`]` (default :math:`\pi/T_s`;
     :math:`\omega_c` only when held).  ``inf`` for a
-    noise-free measurement."""
+    noise-free measurement.
+
+    Parameters
+    ----------
+    rho, b0, ts, ratio, omega_c, alphas, n_feedback
+        As for :func:`noise_gain`.
+    noise_variance, u_scale, scale_label, upper
+        :math:`R_d` per sample (≥ 0), the input's scale (> 0), how the cap names it, and
+        the top of the search [rad/s].
+
+    Returns
+    -------
+    Cap
+    """
     _positive("ts", ts)
     if not (math.isfinite(noise_variance) and noise_variance >= 0):
         raise ValueError(f"noise variance = {noise_variance!r}; allowed: finite and >= 0")
@@ -440,7 +476,19 @@ def omega0_ceiling(
     notes: Sequence[str] = (),
 ) -> Ceiling:
     """The three caps (module notes) and the binding one.  The noise cap needs a sampled
-    controller (``ts``) and ``u_scale``; without them it is reported as not computed."""
+    controller (``ts``) and ``u_scale``; without them it is reported as not computed.
+
+    Parameters
+    ----------
+    rho, b0, ts, ratio, omega_c, alphas, n_feedback, noise_variance, u_scale, scale_label
+        As for :func:`noise_cap`; ``ts`` None: a continuous controller.
+    delay, told, notes
+        The loop's delay [s], whether the observer is told it, sentences to report.
+
+    Returns
+    -------
+    Ceiling
+    """
     caps = [sampling_cap(ts), delay_cap(delay, told=told)]
     extra = list(notes)
     if noise_variance > 0 and ts is not None and u_scale:
@@ -510,7 +558,17 @@ def config_ceiling(
     or the trim.  The noise cap needs a linear ESO and a linear SEF (it is reported as not
     computed otherwise); it scans ω0 at the design's ratio ω0/ω_c, or with ``hold_omega_c``
     at the design's ω_c (a search that tunes ω0 alone); a model-assisted observer
-    (``eso.model = "nominal"``) is taken as the model-free one of the same ω0 (noted)."""
+    (``eso.model = "nominal"``) is taken as the model-free one of the same ω0 (noted).
+
+    Parameters
+    ----------
+    cfg, u_scale, hold_omega_c
+        The run config, the input's scale (None: as above) and whether ω_c is held.
+
+    Returns
+    -------
+    Ceiling
+    """
     from aiofl.components.kalman import measurement_noise_intensity
 
     ctl = cfg.controller

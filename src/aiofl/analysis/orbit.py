@@ -110,6 +110,17 @@ def equilibrium_limit_cycle(
         the amplitude changed by at most 2 % over the last chunk of 10 cycles).  Started
         at ``start_amplitude`` of y along the unstable mode (the describing-function
         estimate, which saves the slow growth from a tiny start) or at :data:`START`.
+
+    Parameters
+    ----------
+    loop
+        The closed loop (:class:`~aiofl.analysis.orbit_loop.OrbitLoop`).
+    z_op, a_lin
+        The equilibrium and the linearisation's matrix there (its unstable mode is used).
+    max_chunks
+        The most chunks simulated (default :data:`MAX_CHUNKS`).
+    start_amplitude
+        The start's amplitude of y (None: :data:`START`).
     """
     lam, vec = np.linalg.eig(a_lin)
     i = int(np.argmax(lam.real))
@@ -167,7 +178,19 @@ def limit_cycle_describing(
     r"""The describing-function (harmonic-balance) estimate of the limit cycle: amplitude of
     y and frequency (module docstring, step 2); None without non-smooth elements or
     without a stable balance.  Each :math:`N_i(A)` is tabulated on a log grid of A by
-    :func:`aiofl.analysis.variational.describing_gain` and interpolated (log-log)."""
+    :func:`aiofl.analysis.variational.describing_gain` and interpolated (log-log).
+
+    Parameters
+    ----------
+    loop, z_op, a_lin
+        As for :func:`equilibrium_limit_cycle`.
+    points
+        Grid points of each tabulated gain, A from 1e-14 to 1e3.
+
+    Returns
+    -------
+    dict or None
+    """
     nls = loop.nonlinearities()
     if not nls:
         return None
@@ -217,7 +240,21 @@ def tracking_floquet(
     """Floquet multipliers of the tracking orbit of a sine reference (module docstring,
     step 3): ``{"multipliers": [[re, im], ...], "largest", "period", "closing", "range",
     "passes"}`` (multipliers of the last of ``passes`` periods after ``settle``; "range" the
-    largest abs(μ) over the passes, "closing" how well the last one closed)."""
+    largest abs(μ) over the passes, "closing" how well the last one closed).
+
+    Parameters
+    ----------
+    loop
+        The closed loop; its scenario's reference must be a sine.
+    passes, settle
+        Periods measured, after ``settle`` periods to settle.
+    rtol
+        The integration's relative tolerance.
+
+    Returns
+    -------
+    dict
+    """
     ref = loop.scenario.reference
     period = 2 * math.pi / ref.omega
     t0 = (0.5 * math.pi - ref.phase) / ref.omega  # the crest: r' = 0

@@ -90,7 +90,22 @@ def _pow_slope(e: float, a: float) -> float:
 def reference_derivatives(ref: Reference, t: float, order: int) -> NDArray[np.float64]:
     r""":math:`(r, \dot r, \dots, r^{(order)})` at t: for a sine
     :math:`r^{(k)} = A\omega^k\sin(\omega t + \varphi + k\pi/2)`; a step's derivatives are 0;
-    samples: the slope of the linear interpolation, higher ones 0."""
+    samples: the slope of the linear interpolation, higher ones 0.
+
+    Parameters
+    ----------
+    ref
+        The reference.
+    t
+        The time [s].
+    order
+        The highest derivative, ≥ 0.
+
+    Returns
+    -------
+    ndarray
+        Shape (order + 1,).
+    """
     out = np.zeros(order + 1)
     if ref.kind == "sine":
         for k in range(order + 1):
@@ -111,6 +126,15 @@ class Nonlinearity:
     """One non-smooth scalar function of the loop: name, φ (real), its kinks."""
 
     def __init__(self, name: str, phi: Callable[[float], float], kinks: Sequence[float] = ()):
+        """Parameters
+        ----------
+        name
+            What it is (for messages).
+        phi
+            The function, e -> φ(e).
+        kinks
+            The values of |e| where φ is not smooth (δ of fal).
+        """
         self.name, self.phi, self.kinks = name, phi, tuple(kinks)
 
 
@@ -327,7 +351,20 @@ class OrbitLoop(ClosedLoop):
     ) -> NDArray[np.float64]:
         r""":math:`\partial F/\partial z` at z with the given inputs, by the complex step:
         one right-hand side call on the tangent batch :math:`Z = z\mathbf 1^T + ihI`
-        (:meth:`ClosedLoop.tangent_batch`), column j :math:`\operatorname{Im}F(z + ihe_j)/h`."""
+        (:meth:`ClosedLoop.tangent_batch`), column j :math:`\operatorname{Im}F(z + ihe_j)/h`.
+
+        Parameters
+        ----------
+        z
+            The state.
+        rd, d
+            The reference and its derivatives, and the disturbance, as for :meth:`ClosedLoop.rhs`.
+
+        Returns
+        -------
+        ndarray
+            Shape (n_z, n_z).
+        """
         return self.rhs(self.tangent_batch(z), rd=rd, d=d)[0].imag / COMPLEX_STEP
 
     def error_rows(self, z: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -136,6 +136,15 @@ def simulate_draws(
     calls that keep each call's stored trajectories and noise rows within
     :data:`CALL_TRAJECTORY_BYTES`.
     With a ``distributed.Client``: ``chunks`` tasks (default: the number of workers).
+
+    Parameters
+    ----------
+    cfg, draws, client, chunks
+        The run config, its draws, a ``distributed.Client`` (None: here) and its task count.
+
+    Returns
+    -------
+    DrawRuns
     """
     from aiofl.limits import check_run_size
 
@@ -317,6 +326,17 @@ def run_robustness(
     call(s), after the draws; their results are the ``corner_*`` fields.  Raises
     ``ValueError`` if the config has no ``[uncertainty]`` table or ``draws``/``seed`` are
     out of range (before anything runs).
+
+    Parameters
+    ----------
+    cfg, draws, seed
+        The run config, with ``[uncertainty]``; the draws and seed (None: the table's).
+    client, chunks, corners
+        As for :func:`simulate_draws`; extra draws (the box's corners) run after the draws.
+
+    Returns
+    -------
+    RobustnessResult
     """
     if cfg.uncertainty is None:
         raise ValueError(

@@ -60,7 +60,19 @@ __all__ = ["SampledLoop", "sampled_margins", "unit_circle_margins", "zoh"]
 
 def zoh(a: NDArray[np.float64], b: NDArray[np.float64], ts: float) -> tuple[Any, Any]:
     r""":math:`(\Phi, \Gamma) = (e^{AT_s}, \int_0^{T_s}e^{As}ds\,B)` by one matrix
-    exponential of :math:`\begin{bmatrix}A & B\\0 & 0\end{bmatrix}T_s`."""
+    exponential of :math:`\begin{bmatrix}A & B\\0 & 0\end{bmatrix}T_s`.
+
+    Parameters
+    ----------
+    a, b
+        The continuous system's matrices, (n, n) and (n, m).
+    ts
+        The sample time [s].
+
+    Returns
+    -------
+    Phi, Gamma : ndarray
+    """
     from scipy.linalg import expm
 
     n, m = a.shape[0], b.shape[1]
@@ -299,6 +311,19 @@ class SampledLoop:
         without a delay, ``inf`` when it stays stable up to ``d_max`` (default
         :math:`\min(\max(100T_s, 4\tau_c), 500T_s)`: the shift register has a state per
         sample of delay), None when there is no linearisation (:attr:`reason`).
+
+        Parameters
+        ----------
+        ts
+            The sample time [s].
+        d_max
+            The largest delay scanned [s] (default above).
+        rtol
+            The bisection's relative tolerance.
+
+        Returns
+        -------
+        float or None
         """
         if self.spectral_radius(ts) is None:
             return None
@@ -372,6 +397,17 @@ def unit_circle_margins(
 
     Returns ``{"gain_margin_db", "phase_crossover", "phase_margin_deg", "gain_crossover",
     "delay_margin_s"}`` (None where there is no crossing).
+
+    Parameters
+    ----------
+    a, b, c
+        The discrete loop :math:`L(z) = -c(zI-a)^{-1}b`.
+    ts
+        The sample time [s].
+
+    Returns
+    -------
+    dict
     """
     import math
 

@@ -327,6 +327,11 @@ def sampling_limits_many(
     Inside a time budget (:func:`aiofl.analysis.budget.time_budget`) the refining rounds
     stop once it is spent: the brackets are then the coarser ones found so far and
     ``gave_up`` holds the budget (the first round, the ladder, always runs).
+
+    Returns
+    -------
+    list of SamplingLimits
+        One per config, in order.
     """
     if not tolerance > 0:
         raise ValueError(f"tolerance = {tolerance}; allowed: > 0")

@@ -147,7 +147,24 @@ def trajectory(
     :math:`\dot z = F(t, z)`; absolute tolerance ``rtol`` × the typical magnitudes
     ``scale`` (default :math:`|z_0|`, floored).  Every evaluation of F checks the time
     budget (:func:`aiofl.analysis.budget.check_budget`): a spent budget raises
-    :class:`~aiofl.analysis.budget.BudgetExceeded` out of the solver."""
+    :class:`~aiofl.analysis.budget.BudgetExceeded` out of the solver.
+
+    Parameters
+    ----------
+    f, jac
+        The right-hand side F(t, z) and its Jacobian ∂F/∂z.
+    z0, t0, t1
+        The start state and the interval [s].
+    scale
+        The typical magnitudes of z (default |z0|).
+    rtol
+        The relative tolerance (default :data:`RTOL`).
+
+    Returns
+    -------
+    scipy.integrate.OdeResult
+        With dense output ``sol``.
+    """
     from scipy.integrate import solve_ivp
 
     def budgeted(t: float, z: Vector) -> Vector:
@@ -201,6 +218,13 @@ def variational_flow(
         :math:`\Phi(t_0)` (n × k; default the identity).
     scale
         Typical magnitudes of z for the absolute tolerance (default :math:`|z_0|`).
+
+    t0, t1
+        The interval [s].
+    rtol
+        The relative tolerance of :func:`trajectory` (default :data:`RTOL`).
+    split
+        Parts each solver step is cut into (default :data:`SPLIT`).
 
     Returns
     -------
@@ -300,6 +324,33 @@ def periodic_orbit(
     pass.  Raises :class:`OrbitDiverges` when, while settling, the peak of a state of
     ``close_on`` over a period grows more than ``bound``-fold over that of the period
     before.
+
+    Parameters
+    ----------
+    f, jac
+        The right-hand side F(t, z) and its Jacobian.
+    z0
+        The start state.
+    period
+        The period T [s].
+    t0
+        The start time [s].
+    settle, max_newton
+        Periods of plain simulation, and the most variational (or shooting) passes.
+    tol
+        The closing tolerance, relative to the states' magnitudes.
+    rtol, split
+        As for :func:`variational_flow`.
+    close_on
+        The indices of the states that must close (None: all).
+    newton
+        Take shooting (Newton) steps instead of plain passes.
+    bound
+        The growth of a period's peak that counts as diverging.
+
+    Returns
+    -------
+    PeriodicOrbit
     """
     idx = np.arange(np.asarray(z0).size) if close_on is None else np.asarray(close_on)
     z = np.asarray(z0, dtype=np.float64)
@@ -359,7 +410,24 @@ def finite_time_lyapunov(
     rtol: float = 1e-6,
 ) -> NDArray[np.float64]:
     """Finite-time Lyapunov exponents over :math:`[t_0, t_1]` [1/s], largest first (QR
-    re-orthonormalisation every ``renorm`` seconds; module docstring)."""
+    re-orthonormalisation every ``renorm`` seconds; module docstring).
+
+    Parameters
+    ----------
+    f, jac
+        The right-hand side F(t, z) and its Jacobian.
+    z0, t0, t1
+        The start state and the interval [s].
+    renorm
+        The re-orthonormalisation interval [s].
+    scale, rtol
+        As for :func:`variational_flow`.
+
+    Returns
+    -------
+    ndarray
+        The n exponents [1/s], largest first.
+    """
     z = np.asarray(z0, dtype=np.float64)
     n = z.size
     q = np.eye(n)
@@ -420,7 +488,21 @@ def describing_gain(
 ) -> float:
     r"""First-harmonic gain N(A) of an odd memoryless φ (module docstring), by
     :func:`scipy.integrate.quad` over :math:`[0, \pi/2]`, split where
-    :math:`A\sin\theta` crosses a kink (|e| = δ of fal)."""
+    :math:`A\sin\theta` crosses a kink (|e| = δ of fal).
+
+    Parameters
+    ----------
+    phi
+        The odd memoryless nonlinearity.
+    amplitude
+        The amplitude A > 0.
+    kinks
+        The values of |e| where φ is not smooth.
+
+    Returns
+    -------
+    float
+    """
     from scipy.integrate import quad
 
     a = float(amplitude)
@@ -482,6 +564,13 @@ def harmonic_balance(
         :math:`A \mapsto N_i(A)`, one per nonlinearity.
     mode0
         A starting mode shape (the unstable eigenvector of the linearisation).
+
+    a_range
+        The amplitudes searched, (low, high).
+    grid
+        Log-spaced amplitudes in ``a_range`` scanned for a sign change.
+    fixed_point
+        Fixed-point iterations of the mode shape per amplitude.
 
     Returns
     -------

@@ -37,6 +37,7 @@ from typer.core import TyperCommand, TyperGroup
 
 from aiofl.cli.errors import (
     FORCE_OPTION,
+    RIG_OPTION,
     SENSOR_OPTION,
     _check_out,
     _out_or_check,
@@ -227,24 +228,30 @@ def _stderr_console() -> Any:
 # ---------------------------------------------------------------------------- presets
 @app.command("presets")
 def presets_command() -> None:
-    """List the shipped presets (name and description)."""
+    """List the shipped presets by set: designs that hold on a rig, the paper's designs,
+    and the ideal-world limits (name and description)."""
     import tomllib
 
     from rich.console import Console
     from rich.table import Table
 
-    from aiofl.config import list_presets, preset_text
+    from aiofl.config import PRESET_SETS, preset_sets, preset_text
 
-    table = Table(title="aiofl presets", show_lines=False)
-    table.add_column("name", style="bold cyan", no_wrap=True)
-    table.add_column("description")
-    for name in list_presets():
-        try:
-            desc = str(tomllib.loads(preset_text(name)).get("description", ""))
-        except tomllib.TOMLDecodeError:
-            desc = "(malformed TOML)"
-        table.add_row(name, desc)
-    Console().print(table)
+    console = Console()
+    sets = preset_sets()
+    for key, _, title in PRESET_SETS:
+        if not sets[key]:
+            continue
+        table = Table(title=title, show_lines=False, title_justify="left")
+        table.add_column("name", style="bold cyan", no_wrap=True)
+        table.add_column("description")
+        for name in sets[key]:
+            try:
+                desc = str(tomllib.loads(preset_text(name)).get("description", ""))
+            except tomllib.TOMLDecodeError:
+                desc = "(malformed TOML)"
+            table.add_row(name, desc)
+        console.print(table)
 
 
 @app.command("show")
@@ -333,6 +340,19 @@ def simulation_record(cfg: Any, result: Any, source_name: str) -> dict[str, Any]
     ``source`` is ``"config"``.  ``config`` is what was run, as given (the preset's name,
     or the file's path: a preset copied to ``my.toml`` and edited is ``"my.toml"``, not the
     preset), ``name`` the config's own ``name``.
+
+    Parameters
+    ----------
+    cfg
+        The run config.
+    result
+        Its simulation result.
+    source_name
+        The config as given (a preset's name or a path).
+
+    Returns
+    -------
+    dict
     """
     from aiofl.config import list_presets
     from aiofl.reporting.cases import computed_record, scenario_number
@@ -397,6 +417,7 @@ def simulate_command(
         ),
     ] = None,
     sensor: Annotated[str | None, SENSOR_OPTION] = None,
+    rig: Annotated[str | None, RIG_OPTION] = None,
 ) -> None:
     """Simulate one config: metrics.json, trajectory.csv and figure.png in OUT.
 
@@ -428,6 +449,10 @@ def simulate_command(
                 t_final=t_final, dt=dt, method=method, source=f"{config} with {flags}"
             )
         cfg = cfg.with_sensor(sensor, source=f"{config} with --sensor {sensor}") if sensor else cfg
+        if rig:
+            from aiofl.analysis.rig_check import rig_config
+
+            cfg = rig_config(cfg, rig)
         cfg = cfg.with_sample_time(ts) if ts is not None else cfg
         cfg.check_sampling()  # Ts must stay a multiple of an overridden dt
     if check or out is None:

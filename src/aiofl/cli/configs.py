@@ -2,7 +2,7 @@
 
 :func:`load_run_config` reads a config like :func:`aiofl.config.load_config` and, when it
 has a ``[tune]`` table, validates that table exactly as ``aiofl tune`` does
-(:func:`aiofl.tuning.search.prepare`: the schema, every tuned parameter against the
+(:func:`aiofl.tuning.prepared.prepare`: the schema, every tuned parameter against the
 controller and its bounds against the config's ranges, the tuning horizon, the robust
 draws, the objectives and constraints).  ``simulate``, ``analyze``, ``robustness`` and
 ``export`` load through it, so a ``[tune]`` table that ``aiofl tune`` refuses
@@ -26,7 +26,7 @@ def load_run_config(config: str | Path) -> Any:
 
     cfg = load_config(config)
     if cfg.raw.get("tune") is not None:
-        from aiofl.tuning.search import prepare
+        from aiofl.tuning.prepared import prepare
 
         prepare(config)  # as `aiofl tune CONFIG` calls it: the messages name CONFIG alike
     return cfg

@@ -100,6 +100,17 @@ SENSOR_OPTION = typer.Option(
 )
 """The ``--sensor PRESET`` option of simulate, robustness and tune."""
 
+RIG_OPTION = typer.Option(
+    "--rig",
+    help="Put the design on this rig preset (ideal, servo-1khz: 12-bit encoder at 1 ms, "
+    "1 ms measurement delay and actuator lag, 1 % Coulomb friction): replaces the config's "
+    "[rig] and [sensor]; friction acts on the shipped plants' velocity state; the rig's lag "
+    "and friction join the [uncertainty] draws (x U[0.5, 1.5]).  The controller is told the "
+    "delay only if its [controller.eso] delay says so.",
+)
+"""The ``--rig PRESET`` option of simulate, robustness and tune
+(:func:`aiofl.analysis.rig_check.rig_config`)."""
+
 FORCE_OPTION = typer.Option(
     "--force",
     help="Replace an existing non-empty OUT (a folder aiofl wrote, as a whole); without it "

@@ -19,7 +19,7 @@ from typing import Annotated, Any
 
 import typer
 
-from aiofl.cli.errors import FORCE_OPTION, SENSOR_OPTION, _check_out, bad_input_exits
+from aiofl.cli.errors import FORCE_OPTION, RIG_OPTION, SENSOR_OPTION, _check_out, bad_input_exits
 
 __all__ = ["robustness_command"]
 
@@ -116,6 +116,7 @@ def robustness_command(
         typer.Option("--dask-workers", help="Start a local Dask cluster with N workers."),
     ] = None,
     sensor: Annotated[str | None, SENSOR_OPTION] = None,
+    rig: Annotated[str | None, RIG_OPTION] = None,
     corners: Annotated[
         bool,
         typer.Option(
@@ -148,6 +149,10 @@ def robustness_command(
         cfg = load_run_config(config)
         if sensor:
             cfg = cfg.with_sensor(sensor, source=f"{config} with --sensor {sensor}")
+        if rig:
+            from aiofl.analysis.rig_check import rig_config
+
+            cfg = rig_config(cfg, rig)
         if cfg.uncertainty is None:
             raise ValueError(
                 f"{config}: no [uncertainty] table; add one, e.g.\n  [uncertainty]\n"

@@ -69,7 +69,23 @@ def run_sampling(
     budget: float | None = None,
 ) -> None:
     """The body of ``aiofl analyze CONFIG --sampling`` (``budget``: seconds for the refining
-    rounds, :mod:`aiofl.analysis.budget`)."""
+    rounds, :mod:`aiofl.analysis.budget`).
+
+    Parameters
+    ----------
+    target
+        The config (a path or a preset name).
+    as_json
+        Print JSON instead of text.
+    out
+        A folder to write the report into (None: none).
+    tolerance
+        The ITAE allowance (> 0) of :func:`aiofl.analysis.sampling.sampling_limits`.
+    force
+        Replace ``out``.
+    budget
+        Seconds for the refining rounds (None: no limit).
+    """
     from aiofl.analysis.budget import time_budget
     from aiofl.analysis.sampling import sampling_figure, sampling_limits
     from aiofl.cli.configs import load_run_config

@@ -1,7 +1,8 @@
 """``aiofl tune CONFIG --out DIR``: tune a controller from the config's ``[tune]`` table.
 
 A thin command over :mod:`aiofl.tuning`: it validates the input (exit status 2 and one
-message on bad input, :mod:`aiofl.cli.errors`), runs :func:`aiofl.tuning.search.tune` with
+message on bad input, :mod:`aiofl.cli.errors`), prepares the run once
+(:func:`aiofl.tuning.prepared.prepare`) and runs it with :func:`aiofl.tuning.search.tune` with
 a progress bar, a checkpoint in ``DIR`` and optional Dask evaluation, then writes the
 outputs (:func:`aiofl.tuning.results.write_outputs`: the results first, then the figures;
 what was left out is printed as a note) and prints a summary.  numpy, pymoo
@@ -18,6 +19,7 @@ import typer
 
 from aiofl.cli.errors import (
     FORCE_OPTION,
+    RIG_OPTION,
     SENSOR_OPTION,
     _check_out,
     _out_or_check,
@@ -72,6 +74,7 @@ def tune_command(
         ),
     ] = None,
     sensor: Annotated[str | None, SENSOR_OPTION] = None,
+    rig: Annotated[str | None, RIG_OPTION] = None,
     omega0_ceiling: Annotated[
         bool,
         typer.Option(
@@ -99,8 +102,9 @@ def tune_command(
     """
     from aiofl.tuning.checkpoint import CHECKPOINT, discard_new_checkpoint, load_checkpoint
     from aiofl.tuning.front import NoFeasibleDesign
+    from aiofl.tuning.prepared import prepare
     from aiofl.tuning.results import write_outputs
-    from aiofl.tuning.search import prepare, tune
+    from aiofl.tuning.search import tune
 
     with bad_input_exits():
         if scheduler is not None and dask_workers is not None:
@@ -113,12 +117,16 @@ def tune_command(
         if out is not None:  # --resume continues the run whose checkpoint OUT holds
             _check_out(out, force=force or (resume and (out / CHECKPOINT).is_file()))
         target: Any = config
-        if sensor or ts is not None:  # the sampled controller is tuned (and written)
+        if sensor or rig or ts is not None:  # the sampled controller is tuned (and written)
             from aiofl.config import load_config
 
             target = load_config(config)
             if sensor:
                 target = target.with_sensor(sensor, source=f"{config} with --sensor {sensor}")
+            if rig:
+                from aiofl.analysis.rig_check import rig_config
+
+                target = rig_config(target, rig)
             if ts is not None:
                 target = target.with_sample_time(ts)
         ceiling = True if omega0_ceiling else None  # None: the [tune] table's setting
@@ -142,17 +150,13 @@ def tune_command(
     found = (out.exists(), (out / CHECKPOINT).exists())  # what this run leaves is its own
     with bad_input_exits(run=True):
         try:
-            result = tune(
-                target,
+            result = tune(  # the run prepared (and checked) above
+                prep,
                 progress=not quiet,
                 checkpoint_dir=out,
                 resume=resume,
                 scheduler=scheduler,
                 n_workers=dask_workers,
-                seed=seed,
-                generations=generations,
-                population=population,
-                omega0_ceiling=ceiling,
             )
         except KeyboardInterrupt:
             typer.echo(
@@ -210,6 +214,19 @@ def summary_text(result: Any, summary: dict[str, Any], out: Path) -> str:
     The numbers are the progress bar's: its "best" is the best objective (with NSGA-II
     its "lowest <first objective>", printed here next to the chosen design's objectives),
     its eval/s the whole run's :attr:`~aiofl.tuning.search.TuneResult.evals_per_second`.
+
+    Parameters
+    ----------
+    result
+        The run's :class:`~aiofl.tuning.search.TuneResult`.
+    summary
+        What :func:`aiofl.tuning.results.write_outputs` returned.
+    out
+        The output folder.
+
+    Returns
+    -------
+    str
     """
     import math
 

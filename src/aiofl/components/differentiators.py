@@ -50,6 +50,19 @@ def han_td_rhs(r1: float, r2: float, r: float, big_r: float) -> tuple[float, flo
     r"""Han's tracking differentiator, eq. (18) with the :math:`2R` correction.
 
     Returns :math:`(\dot r_1, \dot r_2)`.
+
+    Parameters
+    ----------
+    r1, r2
+        The TD's states (the tracked reference and its derivative).
+    r
+        The reference.
+    big_r
+        The speed factor R > 0 (``td.R``).
+
+    Returns
+    -------
+    tuple of (float, float)
     """
     s = r1 - r + r2 * abs(r2) / (2.0 * big_r)
     sgn = 1.0 if s > 0.0 else 0.0  # sign(s); plain selects vectorize over lanes
@@ -69,13 +82,38 @@ def improved_td_rhs_scaled(
 
     ``b_over_c`` = :math:`b/c` and ``gain`` = :math:`(1-a)/c` (:func:`improved_td_constants`;
     the engine computes them once per member).  Returns :math:`(\dot r_1, \dot r_2)`.
+
+    Parameters
+    ----------
+    r1, r2
+        The TD's states.
+    r
+        The reference.
+    b_over_c, gain
+        b/c and (1 - a)/c.
+    rho
+        ϱ (``td.rho``).
+
+    Returns
+    -------
+    tuple of (float, float)
     """
     return r2, -rho * rho * fast_tanh(b_over_c * r1 - gain * r) - rho * r2
 
 
 @njit(**CALLER_JIT_OPTIONS)
 def improved_td_constants(a: float, b: float, c: float) -> tuple[float, float]:
-    r"""The ITD's constants :math:`(b/c,\ (1-a)/c)` for :func:`improved_td_rhs_scaled`."""
+    r"""The ITD's constants :math:`(b/c,\ (1-a)/c)` for :func:`improved_td_rhs_scaled`.
+
+    Parameters
+    ----------
+    a, b, c
+        The ITD's constants (``td.a``, ``td.b``, ``td.c``; c ≠ 0).
+
+    Returns
+    -------
+    tuple of (float, float)
+    """
     return b / c, (1.0 - a) / c
 
 
@@ -89,20 +127,59 @@ def improved_td_rhs(
               - \varrho r_2
 
     Computed as :func:`improved_td_rhs_scaled` with :math:`b/c` and :math:`(1-a)/c`.
+
+    Parameters
+    ----------
+    r1, r2
+        The TD's states.
+    r
+        The reference.
+    a, b, c, rho
+        The ITD's constants a, b, c (c ≠ 0) and ϱ.
+
+    Returns
+    -------
+    tuple of (float, float)
     """
     b_over_c, gain = improved_td_constants(a, b, c)
     return improved_td_rhs_scaled(r1, r2, r, b_over_c, gain, rho)
 
 
 def itd_steady_state(r: float, a: float, b: float) -> float:
-    r"""Equilibrium :math:`r_1 = (1-a)\,r/b` of the ITD (eq. 21) for a constant input r."""
+    r"""Equilibrium :math:`r_1 = (1-a)\,r/b` of the ITD (eq. 21) for a constant input r.
+
+    Parameters
+    ----------
+    r
+        The constant input.
+    a, b
+        The ITD's constants (b ≠ 0).
+
+    Returns
+    -------
+    float
+    """
     return (1.0 - a) * r / b
 
 
 @njit(**CALLER_JIT_OPTIONS)
 def linear_prefilter_coefficient(rho: int, i: int, omega: float) -> float:
     r"""Coefficient :math:`c_i = \binom{\rho}{i-1}\omega^{\rho-i+1}` (i = 1..ρ) of
-    :math:`(s+\omega)^\rho` (:func:`aiofl.components.fastmath.binomial_power`)."""
+    :math:`(s+\omega)^\rho` (:func:`aiofl.components.fastmath.binomial_power`).
+
+    Parameters
+    ----------
+    rho
+        The order ρ.
+    i
+        The index, 1..ρ.
+    omega
+        The prefilter's bandwidth ω [rad/s].
+
+    Returns
+    -------
+    float
+    """
     return binomial_power(rho, i - 1, omega)
 
 
@@ -131,6 +208,23 @@ def linear_prefilter_update(
     :math:`r_i` at ``state[o + i - 1]`` and :math:`\dot r_i` written to
     ``d_state[o + i - 1]`` (offsets, so the engine passes its state vector without slicing
     it).  Returns :math:`r_1^{(\rho)} = \dot r_\rho`.
+
+    Parameters
+    ----------
+    state, d_state
+        The engine's state and derivative vectors.
+    o
+        The offset of :math:`r_1` in both.
+    rho
+        The order ρ.
+    r
+        The reference.
+    coeffs, oc
+        The coefficients and the offset of :math:`c_1` in them.
+
+    Returns
+    -------
+    float
     """
     acc = coeffs[oc] * (r - state[o])
     for i in range(1, rho):
@@ -149,6 +243,21 @@ def linear_prefilter_rhs(
     Writes :math:`\dot r_1..\dot r_\rho` into ``d_state`` and returns
     :math:`r_1^{(\rho)} = \dot r_\rho` (:func:`linear_prefilter_update` with the
     coefficients of :func:`linear_prefilter_coefficient`).
+
+    Parameters
+    ----------
+    state, d_state
+        :math:`r_1..r_\rho` and their derivatives (written), ρ entries each.
+    rho
+        The order ρ.
+    r
+        The reference.
+    omega
+        The bandwidth ω [rad/s].
+
+    Returns
+    -------
+    float
     """
     coeffs = np.empty(rho)
     for i in range(rho):

@@ -140,6 +140,17 @@ def zoh(
     is; unscaling multiplies by powers of T exactly.  Unscaled (as
     :func:`scipy.signal.cont2discrete` does it) the entries :math:`T^j/j!` of a long chain
     lose their relative precision: at ρ = 8, T = 3 ms, :math:`T^8/8!` came out 40 % off.
+
+    Parameters
+    ----------
+    a, b
+        A (n × n) and b (n,).
+    ts
+        The sample time T [s].
+
+    Returns
+    -------
+    Phi, Phi_minus_I, Gamma : ndarray
     """
     from scipy.linalg import expm
 
@@ -164,7 +175,21 @@ def zoh(
 def eso_zoh(rho: int, b0: float, ts: float) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     r"""Exact zero-order-hold discretisation of the ESO's model (6) (:func:`zoh`):
     :math:`\Phi = e^{AT}` (entries :math:`T^{j-i}/(j-i)!`), :math:`\Gamma = \int_0^T e^{As}
-    ds\,B b_0` (:math:`b_0 T^{\rho-i+1}/(\rho-i+1)!` for i ≤ ρ, 0 for the extended state)."""
+    ds\,B b_0` (:math:`b_0 T^{\rho-i+1}/(\rho-i+1)!` for i ≤ ρ, 0 for the extended state).
+
+    Parameters
+    ----------
+    rho
+        The order ρ (the observer has ρ + 1 states).
+    b0
+        The input gain b₀.
+    ts
+        The sample time T [s].
+
+    Returns
+    -------
+    Phi, Gamma : ndarray
+    """
     a, b = eso_chain(rho)
     phi, _, gam = zoh(a, b * b0, ts)
     return np.triu(phi), gam
@@ -185,7 +210,21 @@ def eso_continuous_poles(alphas: ArrayLike, omega0: float) -> NDArray[np.complex
 def eso_discrete_poles(alphas: ArrayLike, omega0: float, ts: float) -> NDArray[np.complex128]:
     r"""The discrete observer poles :math:`z_i = e^{s_i T}` of the continuous ESO's poles
     :math:`s_i` (:func:`eso_continuous_poles`): :math:`e^{-\omega_0 T}`, ρ+1 times, with
-    Gao's gains."""
+    Gao's gains.
+
+    Parameters
+    ----------
+    alphas
+        The ρ + 1 coefficients α.
+    omega0
+        ω₀ [rad/s].
+    ts
+        The sample time T [s].
+
+    Returns
+    -------
+    ndarray
+    """
     return np.exp(eso_continuous_poles(alphas, omega0) * ts)
 
 
@@ -203,6 +242,20 @@ def current_observer_gain(rho: int, ts: float, s_poles: ArrayLike) -> NDArray[np
     :math:`z_i - 1 = \operatorname{expm1}(s_i T)` of :math:`\tilde\Phi - I - L_pC` (the same
     L_p), so the small gains :math:`\tilde L_i \sim (1 - e^{-\omega_0 T})^i` keep their
     relative precision; then :math:`L_i = \tilde L_i / T^{i-1}`.
+
+    Parameters
+    ----------
+    rho
+        The order ρ.
+    ts
+        The sample time T [s].
+    s_poles
+        The ρ + 1 continuous poles.
+
+    Returns
+    -------
+    ndarray
+        L, ρ + 1 entries.
     """
     import control
     from scipy.linalg import expm
@@ -225,7 +278,17 @@ def eso_current_observer(
 ) -> DiscreteESO:
     """The linear ESO discretised exactly (ZOH) in current-observer form (Miklosovic et al.
     2006): Φ, Γ of :func:`eso_zoh`, K = 0, L of :func:`current_observer_gain` at the
-    continuous poles :func:`eso_continuous_poles`."""
+    continuous poles :func:`eso_continuous_poles`.
+
+    Parameters
+    ----------
+    rho, alphas, omega0, b0, ts
+        ρ, the ρ + 1 coefficients α, ω₀ [rad/s], b₀ and T [s].
+
+    Returns
+    -------
+    DiscreteESO
+    """
     a, b = eso_chain(rho)
     phi, dphi, gam = zoh(a, b * b0, ts)
     l = current_observer_gain(rho, ts, eso_continuous_poles(alphas, omega0))
@@ -234,7 +297,21 @@ def eso_current_observer(
 
 def eso_forward_euler(rho: int, betas: ArrayLike, b0: float, ts: float) -> DiscreteESO:
     r"""The ESO (5)/(16)/(19) by forward Euler: :math:`\Phi = I + TA`,
-    :math:`\Gamma = T b_0 B`, :math:`K = T\beta`, :math:`L = 0` (see the module notes)."""
+    :math:`\Gamma = T b_0 B`, :math:`K = T\beta`, :math:`L = 0` (see the module notes).
+
+    Parameters
+    ----------
+    rho
+        The order ρ.
+    betas
+        The ρ + 1 observer gains β.
+    b0, ts
+        b₀ and T [s].
+
+    Returns
+    -------
+    DiscreteESO
+    """
     a, b = eso_chain(rho)
     beta = np.asarray(betas, dtype=np.float64)
     if beta.size != rho + 1:
@@ -259,7 +336,19 @@ def linear_prefilter_zoh(
     :func:`aiofl.components.differentiators.linear_prefilter_update`, discretised exactly
     under a zero-order hold of r (:func:`zoh`): returns :math:`(\Phi, \Gamma)` with
     :math:`r_{k+1} = \Phi r_k + \Gamma r(t_k)`, or :math:`(\Phi - I, \Gamma)` with
-    ``delta``."""
+    ``delta``.
+
+    Parameters
+    ----------
+    rho, omega, ts
+        The order ρ, the bandwidth ω [rad/s] and T [s].
+    delta
+        Return Φ − I instead of Φ.
+
+    Returns
+    -------
+    Phi, Gamma : ndarray
+    """
     from aiofl.components.differentiators import linear_prefilter_coefficients
 
     c = linear_prefilter_coefficients(rho, omega)
@@ -294,6 +383,19 @@ def fhan(x1: float, x2: float, r: float, h: float) -> float:
     :math:`\mathrm{fsg}(x,d) = (\operatorname{sign}(x+d) - \operatorname{sign}(x-d))/2`
     (h times this a; the tests check both agree).  r is the speed factor (``td.R``), h the
     filter factor :math:`h_0`.
+
+    Parameters
+    ----------
+    x1, x2
+        The position error and the velocity.
+    r
+        The speed factor R.
+    h
+        The filter factor :math:`h_0` > 0.
+
+    Returns
+    -------
+    float
     """
     d = r * h
     d0 = h * d
@@ -310,7 +412,22 @@ def fhan_td_step(
     r1: float, r2: float, r: float, big_r: float, ts: float, h0: float
 ) -> tuple[float, float]:
     r"""One sample of Han's discrete TD (Han 2009, Sec. III-A):
-    :math:`r_1^+ = r_1 + T r_2`, :math:`r_2^+ = r_2 + T\,\mathrm{fhan}(r_1 - r, r_2, R, h_0)`."""
+    :math:`r_1^+ = r_1 + T r_2`, :math:`r_2^+ = r_2 + T\,\mathrm{fhan}(r_1 - r, r_2, R, h_0)`.
+
+    Parameters
+    ----------
+    r1, r2
+        The TD's states.
+    r
+        The reference at the sample.
+    big_r, ts, h0
+        R, the sample time T [s] and :math:`h_0`.
+
+    Returns
+    -------
+    tuple of (float, float)
+        :math:`(r_1^+, r_2^+)`.
+    """
     fh = fhan(r1 - r, r2, big_r, h0)
     return r1 + ts * r2, r2 + ts * fh
 
@@ -319,7 +436,21 @@ def fhan_td_step(
 def observer_innovation(state: NDArray[np.float64], o_p: int, o_y: int, y: float) -> float:
     r"""The innovation :math:`e_k = y_k - p_{1,k}` in increment form,
     :math:`e_k = (y_k - y_{k-1}) - q_k` with :math:`q_k = p_{1,k} - y_{k-1}` at
-    ``state[o_p]`` and :math:`y_{k-1}` at ``state[o_y]`` (see :func:`observer_predict`)."""
+    ``state[o_p]`` and :math:`y_{k-1}` at ``state[o_y]`` (see :func:`observer_predict`).
+
+    Parameters
+    ----------
+    state
+        The engine's state vector.
+    o_p, o_y
+        The offsets of :math:`q_k` and :math:`y_{k-1}`.
+    y
+        :math:`y_k`.
+
+    Returns
+    -------
+    float
+    """
     return (y - state[o_y]) - state[o_p]
 
 
@@ -338,7 +469,28 @@ def observer_correct(
     r"""Correction :math:`\hat\xi = p + L\phi`, with :math:`\hat\xi_1 = y_k + d_k`,
     :math:`d_k = L_1\phi_k - e_k` (:math:`= \hat\xi_1 - y_k`, returned): :math:`p_i` at
     ``state[o_p + i]`` (i ≥ 1), :math:`\hat\xi_i` to ``state[o_x + i]``, :math:`L_i` at
-    ``coef[o_l + i]``, i < n."""
+    ``coef[o_l + i]``, i < n.
+
+    Parameters
+    ----------
+    state
+        The engine's state vector.
+    o_p, o_x
+        The offsets of p and of :math:`\hat\xi`.
+    n
+        The observer's order ρ + 1.
+    coef, o_l
+        The coefficients and the offset of :math:`L_1`.
+    y, e
+        :math:`y_k` and the innovation :math:`e_k`.
+    phi
+        φ: the innovation the gain acts on (:math:`e_k`, or a nonlinear function of it).
+
+    Returns
+    -------
+    float
+        :math:`d_k`.
+    """
     d = coef[o_l] * phi - e
     state[o_x] = y + d
     for i in range(1, n):
@@ -375,6 +527,25 @@ def observer_predict(
     Only small quantities meet in the innovation, so the observer does not lose the
     precision of :math:`\hat\xi_1 \approx y` (one unit in the last place of y, amplified
     by the gains :math:`L_i \sim T^{1-i}`, was the largest error of single-precision code).
+
+    Parameters
+    ----------
+    state, coef
+        The engine's state vector and coefficients.
+    o_p, o_x, o_y
+        The offsets of p (q first), :math:`\hat\xi` and :math:`y_k` in ``state``.
+    n
+        The observer's order ρ + 1.
+    o_phi, stride, o_g, o_k
+        The offsets of Φ − I (row stride ``stride``), Γ and K in ``coef``.
+    u
+        The command :math:`u_k`.
+    phi
+        φ of the innovation (as for :func:`observer_correct`).
+    y
+        :math:`y_k`.
+    d
+        :math:`d_k` of :func:`observer_correct`.
     """
     for i in range(n):
         acc = coef[o_g + i] * u + coef[o_k + i] * phi
@@ -400,7 +571,19 @@ def linear_discrete_update(
     r"""A linear discrete state update in delta form, :math:`s^+ = s + ((\Phi - I)s +
     \Gamma w)` (full Φ), in place: s at ``state[o:o+n]``, :math:`(\Phi - I)_{ij}` at
     ``coef[o_phi + i*stride + j]``, :math:`\Gamma_i` at ``coef[o_g + i]``;
-    ``scratch[o_s:o_s+n]`` holds the new state until all of it is computed."""
+    ``scratch[o_s:o_s+n]`` holds the new state until all of it is computed.
+
+    Parameters
+    ----------
+    state, o, n
+        The engine's state vector, the offset of s and its length n.
+    coef, o_phi, stride, o_g
+        The coefficients, the offsets of Φ − I (row stride ``stride``) and of Γ.
+    w
+        The held input.
+    scratch, o_s
+        A scratch vector and the offset of the n entries used.
+    """
     for i in range(n):
         acc = coef[o_g + i] * w
         for j in range(n):

@@ -69,6 +69,19 @@ def abspow(x: float, a: float, log_x: float) -> float:
     Cheaper than ``pow`` and lets two powers of the same x share one logarithm; the result
     differs from ``x**a`` by a few ulp (exact for a = 0 and 1).  :math:`0^a = 0` for
     a > 0 (``exp(-inf) = 0``); inf and NaN propagate.
+
+    Parameters
+    ----------
+    x
+        x ≥ 0.
+    a
+        The exponent.
+    log_x
+        log x.
+
+    Returns
+    -------
+    float
     """
     if a == 1.0:
         return x
@@ -115,6 +128,19 @@ def binomial_power(rho: int, j: int, omega: float) -> float:
 
     The binomial coefficient is built as a float product,
     :math:`\binom{\rho}{i} = \binom{\rho}{i-1}(\rho-i+1)/i`, exact for the orders used here.
+
+    Parameters
+    ----------
+    rho
+        ρ ≥ 0.
+    j
+        0 ≤ j ≤ ρ.
+    omega
+        ω.
+
+    Returns
+    -------
+    float
     """
     binom = 1.0
     for i in range(1, j + 1):

@@ -57,6 +57,19 @@ def fal_scaled(e: float, alpha: float, delta: float, inner_slope: float) -> floa
 
     ``inner_slope`` must be :math:`\delta^{\alpha-1}` (:func:`fal_inner_slope`); the engine
     computes it once per member.  :func:`fal` is this function with the slope computed from α and δ.
+
+    Parameters
+    ----------
+    e
+        The error.
+    alpha, delta
+        α and the linear zone's half-width δ > 0.
+    inner_slope
+        :math:`\delta^{\alpha-1}`.
+
+    Returns
+    -------
+    float
     """
     if not fal_power_needed(e, alpha, delta):
         return fal_linear(e, delta, inner_slope)
@@ -68,7 +81,17 @@ def fal_scaled(e: float, alpha: float, delta: float, inner_slope: float) -> floa
 def fal_power_needed(e: float, alpha: float, delta: float) -> bool:
     r"""Whether :math:`\mathrm{fal}(e,\alpha,\delta)` needs the power :math:`|e|^\alpha`:
     outside the linear zone (:math:`|e| > \delta`, or e NaN) with :math:`\alpha \ne 1`.
-    Otherwise :func:`fal_scaled` is :func:`fal_linear`."""
+    Otherwise :func:`fal_scaled` is :func:`fal_linear`.
+
+    Parameters
+    ----------
+    e, alpha, delta
+        As for :func:`fal`.
+
+    Returns
+    -------
+    bool
+    """
     return not abs(e) <= delta and alpha != 1.0
 
 
@@ -78,7 +101,17 @@ def fal_linear(e: float, delta: float, inner_slope: float) -> float:
     :math:`e\,\delta^{\alpha-1}` for :math:`|e| \le \delta`, else :math:`e` (α = 1).
 
     The engine's SIMD lanes evaluate fal as this alone when no lane of a group needs the
-    power (the same value, bit for bit, as :func:`fal_scaled`)."""
+    power (the same value, bit for bit, as :func:`fal_scaled`).
+
+    Parameters
+    ----------
+    e, delta, inner_slope
+        As for :func:`fal_scaled`.
+
+    Returns
+    -------
+    float
+    """
     return e * inner_slope if abs(e) <= delta else e
 
 
@@ -101,6 +134,19 @@ def fal(e: float, alpha: float, delta: float) -> float:
     discontinuous at :math:`|e| = \delta` (erratum); both branches equal
     :math:`\delta^\alpha\operatorname{sign}(e)` there with the form used here.
     Computed as :func:`fal_scaled` with the slope :math:`\delta^{\alpha-1}`.
+
+    Parameters
+    ----------
+    e
+        The error.
+    alpha
+        The exponent α.
+    delta
+        The linear zone's half-width δ > 0.
+
+    Returns
+    -------
+    float
     """
     return fal_scaled(e, alpha, delta, fal_inner_slope(alpha, delta))
 
@@ -113,7 +159,22 @@ def nonlinear_sef(
     alpha: NDArray[np.float64],
     delta: NDArray[np.float64],
 ) -> float:
-    r"""NLSEF :math:`v = \sum_{i\le m} k_i\,\mathrm{fal}(e_i,\alpha_i,\delta_i)`, eq. (17)."""
+    r"""NLSEF :math:`v = \sum_{i\le m} k_i\,\mathrm{fal}(e_i,\alpha_i,\delta_i)`, eq. (17).
+
+    Parameters
+    ----------
+    e
+        The errors :math:`e_i`.
+    m
+        How many are fed back.
+    k, alpha, delta
+        The gains, exponents and δ of each.
+
+    Returns
+    -------
+    float
+        v.
+    """
     v = 0.0
     for i in range(m):
         v += k[i] * fal(e[i], alpha[i], delta[i])
@@ -128,6 +189,17 @@ def inlsef_term(e: float, k1: float, k2: float, mu: float, alpha: float) -> floa
               |e_i|^{\alpha_i}\operatorname{sign}(e_i)
 
     (the exponential is skipped when :math:`k_{i2} = 0`).
+
+    Parameters
+    ----------
+    e
+        The error :math:`e_i`.
+    k1, k2, mu, alpha
+        :math:`k_{i1}`, :math:`k_{i2}`, :math:`\mu_i` and :math:`\alpha_i`.
+
+    Returns
+    -------
+    float
     """
     gain = k1
     if k2 != 0.0:
@@ -155,7 +227,22 @@ def improved_sef(
     delta: float,
 ) -> float:
     r"""INLSEF, eq. (20): :math:`v = \delta\tanh((v_1+\dots+v_m)/\delta)` with the terms
-    :math:`v_i` of :func:`inlsef_term`."""
+    :math:`v_i` of :func:`inlsef_term`.
+
+    Parameters
+    ----------
+    e, m
+        The errors and how many are fed back.
+    k1, k2, mu, alpha
+        The terms' constants, one each per error (:func:`inlsef_term`).
+    delta
+        The limit δ > 0.
+
+    Returns
+    -------
+    float
+        v.
+    """
     s = 0.0
     for i in range(m):
         s += inlsef_term(e[i], k1[i], k2[i], mu[i], alpha[i])
@@ -167,7 +254,22 @@ def linear_sef(weighted_errors: float, r_rho: float, b0: float) -> float:
     r"""Linear full-state feedback for the chain (14),
     :math:`v = \big(\sum_{i=1}^m k_i e_i + r^{(\rho)}\big)/b_0`, given the weighted sum
     :math:`\sum k_i e_i` (gains from :func:`linear_sef_gains`) and the feed-forward
-    :math:`r^{(\rho)}`."""
+    :math:`r^{(\rho)}`.
+
+    Parameters
+    ----------
+    weighted_errors
+        :math:`\sum k_i e_i`.
+    r_rho
+        :math:`r^{(\rho)}`.
+    b0
+        b₀ ≠ 0.
+
+    Returns
+    -------
+    float
+        v.
+    """
     return (weighted_errors + r_rho) / b0
 
 
@@ -175,7 +277,17 @@ def linear_sef(weighted_errors: float, r_rho: float, b0: float) -> float:
 def linear_sef_gain(rho: int, i: int, omega_c: float) -> float:
     r"""Gain :math:`k_i = \binom{\rho}{i-1}\omega_c^{\rho-i+1}` (i = 1..ρ) of the linear SEF:
     the coefficient of :math:`s^{i-1}` in :math:`(s+\omega_c)^\rho`
-    (:func:`aiofl.components.fastmath.binomial_power`)."""
+    (:func:`aiofl.components.fastmath.binomial_power`).
+
+    Parameters
+    ----------
+    rho, i, omega_c
+        ρ, the index 1..ρ and :math:`\omega_c` [rad/s].
+
+    Returns
+    -------
+    float
+    """
     return binomial_power(rho, i - 1, omega_c)
 
 

@@ -105,7 +105,20 @@ def _check_intensities(q: float, r: float, r_name: str = "r") -> None:
 
 def kalman_bandwidth(rho: int, q: float, r: float) -> float:
     r"""The radius :math:`\omega = (q/r)^{1/(2\rho+2)}` of the Kalman–Bucy observer's
-    Butterworth poles: the ESO bandwidth :math:`\omega_0` of its gains (module notes)."""
+    Butterworth poles: the ESO bandwidth :math:`\omega_0` of its gains (module notes).
+
+    Parameters
+    ----------
+    rho
+        The order ρ.
+    q, r
+        The process- and measurement-noise intensities, finite and > 0.
+
+    Returns
+    -------
+    float
+        ω [rad/s].
+    """
     _check_intensities(q, r)
     # in logarithms: q/r itself may overflow (q = 1e300, r = 1e-300)
     return math.exp((math.log(q) - math.log(r)) / (2 * rho + 2))
@@ -141,7 +154,18 @@ def kalman_gain_parameters(rho: int, q: float, r: float) -> tuple[NDArray[np.flo
     :func:`continuous_kalman_gain` computes (:func:`kalman_alphas`,
     :func:`kalman_bandwidth`).  ``ValueError`` naming ``controller.eso.q`` if q or r is not
     finite and positive, or if the gains overflow (:math:`\omega_0^{\rho+1} = \sqrt{q/r}`
-    beyond the largest double)."""
+    beyond the largest double).
+
+    Parameters
+    ----------
+    rho, q, r
+        As for :func:`kalman_bandwidth`.
+
+    Returns
+    -------
+    alphas : ndarray
+    omega0 : float
+    """
     w0 = kalman_bandwidth(rho, q, r)
     alphas = kalman_alphas(rho)
     if (rho + 1) * math.log(w0) + math.log(float(np.max(alphas))) > 700.0:
@@ -172,6 +196,15 @@ def continuous_kalman_gain(
     :math:`P_{ij} = r\,\omega^{i+j-1}\tilde P_{ij}`, :math:`L_i = \omega^i\tilde P_{i1}`,
     :math:`\omega = (q/r)^{1/(2\rho+2)}`: exact, and accurate for any ratio q/r (a direct
     solve of the unscaled equation has entries from r ω to r ω^{2ρ+1}).
+
+    Parameters
+    ----------
+    rho, q, r
+        As for :func:`kalman_bandwidth`.
+
+    Returns
+    -------
+    L, P : ndarray
     """
     w = kalman_bandwidth(rho, q, r)
     _, p = _normalised(rho)
@@ -190,6 +223,19 @@ def van_loan(
         \exp\left(\begin{bmatrix}-A & Q_c\\ 0 & A^T\end{bmatrix}T\right)
         = \begin{bmatrix}F_{11} & F_{12}\\ 0 & F_{22}\end{bmatrix},\qquad
         \Phi = F_{22}^T,\quad Q_d = F_{22}^T F_{12}.
+
+    Parameters
+    ----------
+    a
+        A (n × n).
+    qc
+        :math:`Q_c` (n × n).
+    ts
+        The sample time T [s].
+
+    Returns
+    -------
+    Phi, Qd : ndarray
     """
     from scipy.linalg import expm
 
@@ -224,6 +270,20 @@ def discrete_process_noise(rho: int, q: float, ts: float) -> NDArray[np.float64]
     :math:`Q_{d,ij} = q\,T^{2\rho+3-i-j}\hat Q_{ij}` with :math:`\hat Q` Van Loan's integral
     over unit time (:math:`\hat Q_{ij} = 1/((n-i)!\,(n-j)!\,(2n+1-i-j))`, n = ρ+1): every
     entry keeps its relative precision for any T (cf. :func:`aiofl.components.discrete.zoh`).
+
+    Parameters
+    ----------
+    rho
+        The order ρ.
+    q
+        The process-noise intensity, finite and > 0.
+    ts
+        The sample time T [s] > 0.
+
+    Returns
+    -------
+    ndarray
+        :math:`Q_d`, (ρ + 1) × (ρ + 1).
     """
     if not (math.isfinite(q) and q > 0):
         raise ValueError(f"controller.eso.q = {q}; allowed: finite and > 0")
@@ -260,6 +320,19 @@ def discrete_kalman_gain(
     :math:`M_i = \bar M_i/\tau^{i-1}`, :math:`P_{ij} = R_d\bar P_{ij}/\tau^{i+j-2}`.
     Raises ``ValueError`` if the solver finds no stabilising solution (h far above 1
     for a long chain).
+
+    Parameters
+    ----------
+    rho
+        The order ρ.
+    q, r_d
+        The process-noise intensity and the measurement variance per sample, finite, > 0.
+    ts
+        The sample time T [s] > 0.
+
+    Returns
+    -------
+    M, P : ndarray
     """
     from numpy.linalg import LinAlgError
     from scipy.linalg import expm, solve_discrete_are
@@ -319,7 +392,19 @@ def eso_kalman_observer(rho: int, q: float, r_d: float, b0: float, ts: float) ->
     steady-state Kalman gain: Φ, Φ − I, Γ of :func:`aiofl.components.discrete.zoh`,
     K = 0, L = M of :func:`discrete_kalman_gain` (q the process-noise intensity, ``r_d``
     the measurement variance per sample); a
-    :class:`~aiofl.components.discrete.DiscreteESO`."""
+    :class:`~aiofl.components.discrete.DiscreteESO`.
+
+    Parameters
+    ----------
+    rho, q, r_d, ts
+        As for :func:`discrete_kalman_gain`.
+    b0
+        The input gain b₀.
+
+    Returns
+    -------
+    DiscreteESO
+    """
     from aiofl.components.discrete import DiscreteESO, eso_chain, zoh
 
     a, b = eso_chain(rho)

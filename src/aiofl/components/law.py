@@ -51,6 +51,17 @@ def saturate_range(u: float, u_min: float, u_max: float) -> float:
     engine's divergence check sees it).  With ``u_min = -u_max`` this is :func:`saturate`
     exactly.  The caller guarantees :math:`u_{min} < u_{max}`.  Written as two plain
     selects, which LLVM vectorizes in a loop over lanes (:mod:`aiofl.engine.loop`).
+
+    Parameters
+    ----------
+    u
+        The command.
+    u_min, u_max
+        The range, :math:`u_{min} < u_{max}` (±inf: open).
+
+    Returns
+    -------
+    float
     """
     v = u_max if u > u_max else u
     return u_min if v < u_min else v
@@ -58,7 +69,22 @@ def saturate_range(u: float, u_min: float, u_max: float) -> float:
 
 @njit(**JIT_OPTIONS)
 def aiofl_law(v: float, xi_hat_ext: float, b0: float) -> float:
-    r"""Active linearizing law, eq. (14): :math:`u = v - \hat\xi_{\rho+1}/b_0`."""
+    r"""Active linearizing law, eq. (14): :math:`u = v - \hat\xi_{\rho+1}/b_0`.
+
+    Parameters
+    ----------
+    v
+        The SEF's output.
+    xi_hat_ext
+        :math:`\hat\xi_{\rho+1}`, the total-disturbance estimate.
+    b0
+        b₀ ≠ 0.
+
+    Returns
+    -------
+    float
+        u.
+    """
     return v - xi_hat_ext / b0
 
 
@@ -78,11 +104,36 @@ def model_assisted_law(
     :math:`y^{(\rho)} \approx b_0 v`: the same chain (14) as :func:`aiofl_law`, whose v (and
     SEF gains) it keeps.  With :math:`\hat\alpha = 0`, :math:`\hat\beta = b_0` it is
     :func:`aiofl_law`.
+
+    Parameters
+    ----------
+    v, xi_hat_ext, b0
+        As for :func:`aiofl_law`.
+    alpha_hat, beta_hat
+        :math:`\hat\alpha` and :math:`\hat\beta` ≠ 0 of the nominal model.
+
+    Returns
+    -------
+    float
+        u.
     """
     return (b0 * v - alpha_hat - xi_hat_ext) / beta_hat
 
 
 @njit(**JIT_OPTIONS)
 def iofl_law(v: float, alpha: float, beta: float) -> float:
-    r"""Classical IOFL law (Section III): :math:`u = (-\alpha(x) + v)/\beta(x)`."""
+    r"""Classical IOFL law (Section III): :math:`u = (-\alpha(x) + v)/\beta(x)`.
+
+    Parameters
+    ----------
+    v
+        The SEF's output.
+    alpha, beta
+        α(x) and β(x) ≠ 0 of the normal form.
+
+    Returns
+    -------
+    float
+        u.
+    """
     return (-alpha + v) / beta

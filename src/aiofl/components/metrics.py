@@ -35,18 +35,50 @@ def _trapz(values: ArrayLike, t: ArrayLike) -> float:
 
 
 def itae(t: ArrayLike, y: ArrayLike, r: ArrayLike) -> float:
-    r"""Integral of time-weighted absolute error :math:`\int t|y-r|dt` (eq. 22)."""
+    r"""Integral of time-weighted absolute error :math:`\int t|y-r|dt` (eq. 22).
+
+    Parameters
+    ----------
+    t
+        The sample times [s].
+    y, r
+        The output and the reference at ``t``.
+
+    Returns
+    -------
+    float
+    """
     t = np.asarray(t, dtype=float)
     return _trapz(t * np.abs(np.asarray(y) - np.asarray(r)), t)
 
 
 def iae(t: ArrayLike, y: ArrayLike, r: ArrayLike) -> float:
-    r"""Integral of absolute error :math:`\int |y-r|dt`."""
+    r"""Integral of absolute error :math:`\int |y-r|dt`.
+
+    Parameters
+    ----------
+    t, y, r
+        As for :func:`itae`.
+
+    Returns
+    -------
+    float
+    """
     return _trapz(np.abs(np.asarray(y) - np.asarray(r)), t)
 
 
 def ise(t: ArrayLike, y: ArrayLike, r: ArrayLike) -> float:
-    r"""Integral of squared error :math:`\int (y-r)^2 dt`."""
+    r"""Integral of squared error :math:`\int (y-r)^2 dt`.
+
+    Parameters
+    ----------
+    t, y, r
+        As for :func:`itae`.
+
+    Returns
+    -------
+    float
+    """
     return _trapz((np.asarray(y) - np.asarray(r)) ** 2, t)
 
 
@@ -89,7 +121,19 @@ def opi(
     iau_value: ArrayLike,
     weights: OPIWeights | None = None,
 ) -> np.ndarray | float:
-    r"""Objective performance index, eq. (22); works elementwise on arrays."""
+    r"""Objective performance index, eq. (22); works elementwise on arrays.
+
+    Parameters
+    ----------
+    itae_value, isu_value, iau_value
+        ITAE, ISU and IAU (numbers or arrays of one shape).
+    weights
+        The weights and normalisations (default :class:`OPIWeights`, the paper's).
+
+    Returns
+    -------
+    float or ndarray
+    """
     w = weights or OPIWeights()
     out = (
         w.w_itae * np.asarray(itae_value, dtype=float) / w.n_itae

@@ -50,7 +50,22 @@ def design_point_jacobian(
     r""":math:`J = \partial(\hat\alpha + \hat\beta u^*)/\partial\xi` at ``xi_star``, with
     :math:`u^* = -\hat\alpha(\xi^*)/\hat\beta(\xi^*)`, by :func:`scipy.differentiate.jacobian`
     (adaptive central differences with Richardson extrapolation) on the plant's
-    ``alpha_beta_of_xi`` at the nominal parameters ``p``."""
+    ``alpha_beta_of_xi`` at the nominal parameters ``p``.
+
+    Parameters
+    ----------
+    alpha_beta_of_xi
+        The plant's ``(ξ, p) -> (α, β)``.
+    xi_star
+        ξ*, ρ entries.
+    p
+        The nominal parameters.
+
+    Returns
+    -------
+    ndarray
+        J, ρ entries.
+    """
     from scipy.differentiate import jacobian
 
     xs = np.asarray(xi_star, dtype=np.float64)
@@ -91,7 +106,22 @@ def _model_matrix(jac: NDArray[np.float64]) -> NDArray[np.float64]:
 def model_gain(jac: ArrayLike, alphas: ArrayLike, omega0: float) -> NDArray[np.float64]:
     r"""Continuous gains L with :math:`\operatorname{eig}(A_m - LC) = \omega_0\lambda_i`,
     the poles Gao's gains give the chain (module notes); J = 0 gives them back,
-    :math:`L_i = \alpha_i\omega_0^i`."""
+    :math:`L_i = \alpha_i\omega_0^i`.
+
+    Parameters
+    ----------
+    jac
+        J (ρ entries).
+    alphas
+        The ρ + 1 coefficients α.
+    omega0
+        ω₀ [rad/s].
+
+    Returns
+    -------
+    ndarray
+        L, ρ + 1 entries.
+    """
     import control
 
     j = np.asarray(jac, dtype=np.float64)
@@ -114,7 +144,20 @@ def discrete_model_gain(
     (module notes), placed like :func:`aiofl.components.discrete.current_observer_gain`:
     the predictor gain :math:`L_p = \Phi_m L` by Ackermann's formula on
     :math:`\tilde\Phi_m - I` in the scaled coordinates :math:`\tilde\xi_i = T^{i-1}\xi_i`,
-    eigenvalues :math:`\operatorname{expm1}(s_iT)`; J = 0 gives that function's gain."""
+    eigenvalues :math:`\operatorname{expm1}(s_iT)`; J = 0 gives that function's gain.
+
+    Parameters
+    ----------
+    jac, alphas, omega0
+        As for :func:`model_gain`.
+    ts
+        The sample time T [s].
+
+    Returns
+    -------
+    ndarray
+        L, ρ + 1 entries.
+    """
     import control
 
     j = np.asarray(jac, dtype=np.float64)

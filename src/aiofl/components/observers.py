@@ -44,7 +44,21 @@ __all__ = [
 
 @njit(**CALLER_JIT_OPTIONS)
 def eso_gain(alpha_i: float, omega0: float, i: int) -> float:
-    r"""Observer gain :math:`\beta_i = \alpha_i\,\omega_0^i` (text after eq. 16)."""
+    r"""Observer gain :math:`\beta_i = \alpha_i\,\omega_0^i` (text after eq. 16).
+
+    Parameters
+    ----------
+    alpha_i
+        :math:`\alpha_i`.
+    omega0
+        ω₀ [rad/s].
+    i
+        The index i, 1..ρ+1.
+
+    Returns
+    -------
+    float
+    """
     return alpha_i * omega0**i
 
 
@@ -87,6 +101,20 @@ def inleso_injection(e: float, k_alpha: float, k_beta: float, a: float, b: float
 
     Both powers share one :math:`\log|e|`; the second term is skipped when
     :math:`k_\beta = 0`.
+
+    Parameters
+    ----------
+    e
+        The error :math:`y - \hat\xi_1`.
+    k_alpha, k_beta
+        :math:`k_\alpha` and :math:`k_\beta`.
+    a, b
+        The exponents α and β.
+
+    Returns
+    -------
+    float
+        g(e).
     """
     ae = abs(e)
     la = np.log(ae)
@@ -120,6 +148,23 @@ def eso_update(
     ``d_xi_hat[o + i - 1]`` and :math:`\beta_i` is ``betas[ob + i - 1]`` (offsets, so the
     engine passes its state vector without slicing it).  :math:`\phi = e` for the LESO,
     :func:`inleso_injection` for the INLESO.
+
+    Parameters
+    ----------
+    xi_hat, d_xi_hat
+        The engine's state and derivative vectors.
+    o
+        The offset of :math:`\hat\xi_1` in both.
+    rho
+        The order ρ.
+    betas, ob
+        The gains and the offset of :math:`\beta_1`.
+    b0
+        b₀.
+    u
+        The command.
+    phi
+        The injected error φ.
     """
     for i in range(rho):
         d_xi_hat[o + i] = xi_hat[o + i + 1] + betas[ob + i] * phi
@@ -147,6 +192,23 @@ def eso_rhs(
     Writes :math:`\dot{\hat\xi}` into ``d_xi_hat[:rho+1]``.  ``improved`` selects the
     INLESO injection :math:`g(e)` of eq. (19) instead of the linear :math:`e`
     (:func:`inleso_injection`, then :func:`eso_update`).
+
+    Parameters
+    ----------
+    xi_hat, d_xi_hat
+        :math:`\hat\xi` and its derivative (written), ρ + 1 entries each.
+    rho
+        The order ρ.
+    betas
+        The ρ + 1 gains β.
+    b0
+        b₀.
+    y, u
+        The measurement and the command.
+    improved
+        The INLESO's injection instead of the linear one.
+    k_alpha, k_beta, a, b
+        The INLESO's constants (:func:`inleso_injection`).
     """
     e = y - xi_hat[0]
     if improved:

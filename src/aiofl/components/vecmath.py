@@ -90,7 +90,20 @@ def _as_float(typingctx: Any, k: Any) -> Any:
 @intrinsic
 def fma(typingctx: Any, a: Any, b: Any, c: Any) -> Any:
     """:math:`a b + c` rounded once (LLVM's ``llvm.fma``: one instruction on a CPU with
-    FMA, scalar or vector, the same bits either way)."""
+    FMA, scalar or vector, the same bits either way).
+
+    Parameters
+    ----------
+    typingctx
+        numba's typing context (numba passes it; a caller writes ``fma(a, b, c)``).
+    a, b, c
+        float64 values.
+
+    Returns
+    -------
+    tuple
+        The signature and code generator numba compiles (float64 only; None otherwise).
+    """
     if not all(isinstance(t, types.Float) and t.bitwidth == 64 for t in (a, b, c)):
         return None
 

@@ -10,17 +10,20 @@ config from a Python ``Plant``, ``Controller`` and ``Scenario`` (:mod:`aiofl.con
 
 from aiofl.config.objects import run_config_from_objects
 from aiofl.config.run_config import (
+    PRESET_SETS,
     PlantFileGiven,
     RunConfig,
     list_presets,
     load_config,
     parse_config,
+    preset_sets,
     preset_text,
     resolve_plant,
 )
 from aiofl.config.schema import REQUIRED_KEYS, ConfigError
 
 __all__ = [
+    "PRESET_SETS",
     "REQUIRED_KEYS",
     "ConfigError",
     "PlantFileGiven",
@@ -28,6 +31,7 @@ __all__ = [
     "list_presets",
     "load_config",
     "parse_config",
+    "preset_sets",
     "preset_text",
     "resolve_plant",
     "run_config_from_objects",

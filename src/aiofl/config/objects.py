@@ -116,6 +116,8 @@ def controller_table(c: Controller) -> dict[str, Any]:
     }
     if c.value("eso.u0") != 0.0:  # a start at a held command
         eso["u0"] = c.value("eso.u0")
+    if c.value("eso.delay") != 0.0:  # a known measurement delay
+        eso["delay"] = c.value("eso.delay")
     if c.eso_gains == "kalman":
         eso.update(q=c.value("eso.q"), r=c.value("eso.r"))
     else:
@@ -246,6 +248,36 @@ def config_dict(
     ``sensor`` (a preset name or a :class:`~aiofl.sensor.Sensor`) ``[sensor]``,
     ``uncertainty`` (an :class:`aiofl.uncertainty.UncertaintyModel` or its dict)
     ``[uncertainty]``.  Nothing is validated here (:func:`run_config_from_objects` does).
+
+    Parameters
+    ----------
+    plant
+        The plant: a registered plant's name is kept, a plant file's path too.
+    controller, scenario
+        A :class:`~aiofl.controller.Controller` and a :class:`~aiofl.scenario.Scenario`.
+    dt, method, decimation, divergence_threshold
+        ``[simulation]``: fixed step [s], ``"rk4"`` or ``"euler"``, the stored-step interval
+        and the divergence bound (as for :func:`aiofl.engine.simulate_batch`).
+    sampling
+        ``[controller.discrete]``; None: a continuous controller.
+    sensor
+        ``[sensor]``: a preset name or a :class:`~aiofl.sensor.Sensor`; None: no sensor table.
+    uncertainty
+        ``[uncertainty]``: a model or its dict; None: none.
+    weights
+        ``[objective]`` weights (default :class:`~aiofl.components.metrics.OPIWeights()`).
+    name, description
+        The config's name and its one-line description.
+
+    Returns
+    -------
+    dict
+        The config's tables, as :func:`tomllib.loads` would give them.
+
+    Raises
+    ------
+    ValueError
+        For a controller, scenario or weights of the wrong type.
     """
     if not isinstance(controller, Controller):
         raise ValueError(f"controller = {controller!r}; allowed: an aiofl.Controller")
@@ -288,7 +320,24 @@ def run_config_from_objects(
     """The validated :class:`~aiofl.config.RunConfig` of these objects (keywords as for
     :func:`config_dict`); raises :class:`~aiofl.config.ConfigError` naming the field, as a
     file with these values would.  The rebuilt controller is checked to be the given one
-    (same kinds and parameter values): a value the config cannot carry is refused."""
+    (same kinds and parameter values): a value the config cannot carry is refused.
+
+    Parameters
+    ----------
+    plant, controller, scenario
+        As for :func:`config_dict`.
+    **kw
+        The keywords of :func:`config_dict`.
+
+    Returns
+    -------
+    RunConfig
+
+    Raises
+    ------
+    ConfigError
+        For a value the config refuses or cannot carry (naming the field).
+    """
     from aiofl.config.run_config import parse_config
 
     data = config_dict(plant, controller, scenario, **kw)

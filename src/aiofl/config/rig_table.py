@@ -65,7 +65,22 @@ def refined_step(dt: float, delays: dict[str, float]) -> int:
 def merge_rig(data: dict[str, Any], table: RigModel, source: str) -> tuple[dict[str, Any], Rig]:
     """``data`` without its ``[rig]`` table, with the tables the rig fills (module
     docstring), and the :class:`~aiofl.rig.Rig`; raises :class:`ConfigError` naming a
-    quantity set twice or a delay no refined step holds."""
+    quantity set twice or a delay no refined step holds.
+
+    Parameters
+    ----------
+    data
+        The config dict.
+    table
+        Its validated ``[rig]`` table.
+    source
+        The config's name, for messages.
+
+    Returns
+    -------
+    data : dict
+    rig : Rig
+    """
 
     def refuse(msg: str) -> ConfigError:
         return ConfigError(f"invalid config {source}:\n  {msg}")
@@ -121,7 +136,20 @@ def merge_rig(data: dict[str, Any], table: RigModel, source: str) -> tuple[dict[
 
 def apply_rig(plant: Plant, scenario: Scenario, rig: Rig) -> tuple[Plant, Scenario]:
     """The plant on the rig (:func:`~aiofl.plants.actuated.with_rig`) and the scenario with
-    its initial state extended by the actuator's (at rest at 0)."""
+    its initial state extended by the actuator's (at rest at 0).
+
+    Parameters
+    ----------
+    plant, scenario
+        The config's plant and scenario.
+    rig
+        The rig.
+
+    Returns
+    -------
+    plant : Plant
+    scenario : Scenario
+    """
     rigged = with_rig(plant, rig)
     if rigged is plant:
         return plant, scenario

@@ -178,7 +178,18 @@ class RunConfig:
         """This config with ``[scenario] t_final`` and ``[simulation] dt`` / ``method``
         replaced, validated again by :func:`parse_config`: a command-line override passes
         exactly the checks a value in the file does (types, ranges, run size, events within
-        the horizon).  Raises :class:`ConfigError`; ``source`` names the override in it."""
+        the horizon).  Raises :class:`ConfigError`; ``source`` names the override in it.
+
+        Parameters
+        ----------
+        t_final, dt, method, source
+            ``[scenario] t_final`` [s], ``[simulation] dt`` [s] and ``method`` (None: the
+            config's); how messages name the new config (default: "NAME (overridden)").
+
+        Returns
+        -------
+        RunConfig
+        """
         data = copy.deepcopy(self.raw)
         for table, key, value in (
             ("scenario", "t_final", t_final),
@@ -441,10 +452,19 @@ def parse_config(
 ) -> RunConfig:
     """Validate a config dict and build the engine objects; raises :class:`ConfigError`.
 
-    ``base_dir`` resolves a relative ``plant = "file.toml"`` (defaults to the working folder).
     Types are strict (no bool or string coercion into numbers), the :data:`REQUIRED_KEYS`
     must be set (a plant file is refused as such: :class:`PlantFileGiven`), and the run's
     size is bounded before anything is allocated (:func:`check_run_size`).
+
+    Parameters
+    ----------
+    data, source, base_dir
+        The config as :func:`tomllib.loads` gives it; how messages name it; the folder that
+        resolves a relative ``plant = "file.toml"`` (default: the working folder).
+
+    Returns
+    -------
+    RunConfig
     """
     if not isinstance(data, dict):
         raise ConfigError(f"invalid config {source}: a TOML table expected, got {type(data)}")
@@ -518,6 +538,13 @@ def parse_config(
         if model.controller.eso.u0 == "trim":  # a start at the holding input
             u_e = holding_input(plant, scenario, "controller.eso.u0")
             controller = controller.with_values(**{"eso.u0": u_e})
+        if model.controller.eso.delay == "rig":  # told the rig's measurement delay
+            if rig is None:
+                raise ValueError(
+                    'controller.eso.delay = "rig" needs a [rig] table (its measurement_delay); '
+                    "allowed: a delay in seconds, a whole number of the controller's ts"
+                )
+            controller = controller.with_values(**{"eso.delay": rig.measurement_delay})
         columns = len(L.trajectory_columns(plant.n_states))
         check_run_size(sc.t_final, sim.dt, trajectory_columns=columns, decimation=sim.decimation)
     except (ValueError, PlantError) as exc:
@@ -559,17 +586,44 @@ def _presets_dir() -> Any:
     return resources.files("aiofl") / "presets"
 
 
+#: the sets of shipped presets: (key, folder under presets/, title).  A preset's set is a
+#: measured fact (benchmarks/rig_verdicts.py, tests/test_preset_sets.py): "designs" hold on
+#: the servo-1khz rig (aiofl.analysis.rig_check), "paper" is the paper's reproduction as
+#: printed (an ideal world: a continuous controller, an exact measurement), "limits" are
+#: designs tuned for an ideal world that a real rig loses or drives beyond its own figures.
+PRESET_SETS: tuple[tuple[str, str, str], ...] = (
+    ("designs", "", "Designs for a rig (hold on the servo-1khz rig)"),
+    ("paper", "paper", "The paper's designs (the reproduction: an ideal world)"),
+    ("limits", "limits", "Ideal-world limits (tuned for an exact model and sensor; fail a rig)"),
+)
+
+
+def preset_sets() -> dict[str, list[str]]:
+    """The shipped presets' names by set (:data:`PRESET_SETS`), each sorted."""
+    out: dict[str, list[str]] = {}
+    for key, folder, _ in PRESET_SETS:
+        base = _presets_dir() / folder if folder else _presets_dir()
+        files = base.iterdir() if base.is_dir() else ()
+        names = [p.name[:-5] for p in files if p.is_file() and p.name.endswith(".toml")]
+        out[key] = sorted(names)
+    return out
+
+
 def list_presets() -> list[str]:
-    """Names of the presets shipped with the package."""
-    return sorted(p.name[:-5] for p in _presets_dir().iterdir() if p.name.endswith(".toml"))
+    """Names of the presets shipped with the package, every set (:func:`preset_sets`)."""
+    return sorted(n for names in preset_sets().values() for n in names)
 
 
 def preset_text(name: str) -> str:
-    """The TOML text of preset ``name``."""
-    path = _presets_dir() / f"{name}.toml"
-    if not path.is_file():
+    """The TOML text of preset ``name`` (searched in every set)."""
+    if not name or "/" in name or "\\" in name or name.startswith("."):
         raise ConfigError(f"unknown preset {name!r}; available: {', '.join(list_presets())}")
-    return path.read_text(encoding="utf-8")
+    for _, folder, _ in PRESET_SETS:
+        base = _presets_dir() / folder if folder else _presets_dir()
+        path = base / f"{name}.toml"
+        if path.is_file():
+            return path.read_text(encoding="utf-8")
+    raise ConfigError(f"unknown preset {name!r}; available: {', '.join(list_presets())}")
 
 
 def load_config(path_or_preset: str | Path) -> RunConfig:

@@ -210,6 +210,10 @@ class ESOModel(_Model):
     # the command held at the start (output / bumpless start): the extended state starts at
     # -b0 u0, so u(0) = u0; "trim": the holding input at the scenario's initial output
     u0: Finite | Literal["trim"] = 0.0
+    # a known measurement delay [s], a whole number (<= 8) of the sampled controller's ts:
+    # the ESO is fed the command that many samples older and the reference is delayed as
+    # much (aligned with the measurement); "rig": the [rig]'s measurement_delay
+    delay: Annotated[float, Field(ge=0, le=1)] | Literal["rig"] = 0.0
     # what the observer is given besides rho and b0: "none" (model-free, eq. 5) or
     # "nominal" (model-assisted: the plant's nominal alpha + beta u at x_hat = Phi^-1(xi_hat))
     model: Literal["none", "nominal"] = "none"
@@ -398,6 +402,8 @@ class ControllerModel(_Model):
         q, r = eso.pop("q"), eso.pop("r")
         if eso["u0"] == "trim":  # the holding input: aiofl.config.run_config resolves it
             eso["u0"] = 0.0
+        if eso["delay"] == "rig":  # the rig's measurement delay: run_config resolves it
+            eso["delay"] = 0.0
         if gains == "kalman":
             eso.pop("omega0")  # derived from q and r
             if r is None and not measurement_r > 0:

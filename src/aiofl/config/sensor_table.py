@@ -17,7 +17,17 @@ __all__ = ["SENSOR_NOISE", "check_sensor_ts", "merge_sensor"]
 
 def check_sensor_ts(ts: float | None, dt: float, source: str) -> None:
     """Refuse a ``[sensor]`` sample time shorter than the step (e.g. 5e-324), naming
-    ``sensor.ts`` (it also becomes the noise hold, whose own check would name that)."""
+    ``sensor.ts`` (it also becomes the noise hold, whose own check would name that).
+
+    Parameters
+    ----------
+    ts
+        ``[sensor] ts`` [s] (None: not set).
+    dt
+        ``[simulation] dt`` [s].
+    source
+        The config's name, for the message.
+    """
     if ts is not None and ts < dt * (1 - 1e-9):
         raise ConfigError(
             f"invalid config {source}:\n  sensor.ts = {ts!r} s is shorter than the step "
@@ -32,7 +42,21 @@ def merge_sensor(data: dict[str, Any], table: Any, source: str) -> dict[str, Any
     """``data`` with the ``[sensor]`` table's quantities filled into ``[scenario]`` (noise)
     and ``[controller.discrete]`` (ts, y_quantum); raises :class:`ConfigError` for a
     quantity set in two places (a discrete ts equal to the sensor's is accepted) or a
-    quantum without a sample time."""
+    quantum without a sample time.
+
+    Parameters
+    ----------
+    data
+        The config dict.
+    table
+        Its validated ``[sensor]`` table.
+    source
+        The config's name, for messages.
+
+    Returns
+    -------
+    dict
+    """
 
     def refuse(msg: str) -> ConfigError:
         return ConfigError(f"invalid config {source}:\n  {msg}")

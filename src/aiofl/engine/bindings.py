@@ -219,7 +219,21 @@ def bind_private(ns: dict[str, Any], variant: str = "scalar") -> None:
 def guarded(fn: Any, index: int, n: int, n_p: int) -> Any:
     """``fn`` wrapped so that an exception it raises becomes
     ``PlantFailure(index, x_1, ..., x_n, p_1, ..., p_np)`` (numba cannot bind the exception
-    itself; the host calls ``fn`` again at that state to learn it)."""
+    itself; the host calls ``fn`` again at that state to learn it).
+
+    Parameters
+    ----------
+    fn
+        The compiled plant function ``fn(x, p)``.
+    index
+        Which plant function it is (reported in the exception).
+    n, n_p
+        The numbers of states and parameters.
+
+    Returns
+    -------
+    numba dispatcher
+    """
     from numba import njit
 
     state = "".join(f", x[{i}]" for i in range(n)) + "".join(f", p[{j}]" for j in range(n_p))

@@ -249,7 +249,21 @@ def copy_function(
     name: str | None = None,
 ) -> types.FunctionType:
     """A copy of the Python function ``fn`` whose globals are ``space`` (named ``name``,
-    default ``fn``'s)."""
+    default ``fn``'s).
+
+    Parameters
+    ----------
+    fn
+        The function.
+    space
+        The copy's globals.
+    qualname, name
+        The copy's qualified name and name (None: ``fn``'s).
+
+    Returns
+    -------
+    types.FunctionType
+    """
     name = name or fn.__name__
     py = types.FunctionType(fn.__code__, space, name, fn.__defaults__, fn.__closure__)
     py.__qualname__ = qualname or fn.__qualname__
@@ -259,7 +273,23 @@ def copy_function(
 
 def instantiate(tpl: Callable[..., Any], ns: dict[str, Any], suffix: str, **options: Any) -> Any:
     """Template ``tpl`` as a numba function (compiled lazily) with the globals ``ns``; its
-    qualified name carries ``suffix`` (the instance's kind, plant key and fingerprint)."""
+    qualified name carries ``suffix`` (the instance's kind, plant key and fingerprint).
+
+    Parameters
+    ----------
+    tpl
+        The template (a Python function).
+    ns
+        Its globals.
+    suffix
+        Appended to its qualified name.
+    **options
+        numba's ``njit`` options.
+
+    Returns
+    -------
+    numba dispatcher
+    """
     from numba import njit
 
     return njit(**options)(copy_function(tpl, ns, f"{tpl.__name__}_{suffix}"))
@@ -270,7 +300,21 @@ def rejit(fn: Any, space: dict[str, Any] | None = None, **override: Any) -> Any:
     with the globals ``space`` (default its own) and its numba options updated by
     ``override``.  numba keys a function's disk cache on its own file only, so a kernel
     never links a cached function (whose callees might be stale); see
-    :func:`aiofl.engine.bindings.private_components`."""
+    :func:`aiofl.engine.bindings.private_components`.
+
+    Parameters
+    ----------
+    fn
+        The function (compiled or plain).
+    space
+        The globals (None: its own).
+    **override
+        numba options to change.
+
+    Returns
+    -------
+    numba dispatcher
+    """
     from numba import njit
 
     py = getattr(fn, "py_func", fn)
@@ -407,7 +451,21 @@ def kernel_at_hand(recipe: Recipe) -> bool:
 def has_kernel(folder: Path, template: Callable[..., Any], prefix: str) -> bool:
     """Whether ``folder`` holds an index file of an instance of ``template`` named
     ``prefix`` (kind and plant key, :func:`build`), of any fingerprint: a look at file
-    names that compiles and loads nothing (a file of an older fingerprint counts too)."""
+    names that compiles and loads nothing (a file of an older fingerprint counts too).
+
+    Parameters
+    ----------
+    folder
+        The kernel cache's folder.
+    template
+        The instance's template.
+    prefix
+        Its name (kind and plant key).
+
+    Returns
+    -------
+    bool
+    """
     start = _cache_file_start(template, prefix)
     with contextlib.suppress(OSError):
         return any(e.name.startswith(start) and e.name.endswith(".nbi") for e in os.scandir(folder))
@@ -417,7 +475,17 @@ def has_kernel(folder: Path, template: Callable[..., Any], prefix: str) -> bool:
 def being_compiled(folder: Path, template: Callable[..., Any], prefix: str) -> bool:
     """Whether another process holds the compile lock (:func:`compile_lock`) of an instance
     of ``template`` named ``prefix`` in ``folder``: it is compiling that kernel now, and a
-    caller that waits for the lock loads it."""
+    caller that waits for the lock loads it.
+
+    Parameters
+    ----------
+    folder, template, prefix
+        As for :func:`has_kernel`.
+
+    Returns
+    -------
+    bool
+    """
     try:
         import fcntl
     except ImportError:  # pragma: no cover - not POSIX
@@ -438,7 +506,15 @@ def being_compiled(folder: Path, template: Callable[..., Any], prefix: str) -> b
 
 def prune_kernels(folder: Path, template: Callable[..., Any], prefix: str, keep: str) -> None:
     """Delete the cache files of ``template``'s instances named ``prefix`` + a fingerprint
-    other than ``keep`` (the same plant and kind compiled from older code)."""
+    other than ``keep`` (the same plant and kind compiled from older code).
+
+    Parameters
+    ----------
+    folder, template, prefix
+        As for :func:`has_kernel`.
+    keep
+        The fingerprint whose files are kept.
+    """
     start = _cache_file_start(template, prefix)
     with contextlib.suppress(OSError):
         for entry in os.scandir(folder):

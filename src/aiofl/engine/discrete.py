@@ -269,6 +269,22 @@ def delay_steps(key: str, tau: float, dt: float, sampled: bool) -> int:
     would put a jump inside an RK4 step: refused (ValueError naming the field), as is a
     delay of more than :data:`DELAY_STEPS_MAX` steps.  ``sampled`` (the controller's
     timing) no longer changes what is held; it is kept for the callers.
+
+    Parameters
+    ----------
+    key
+        The scenario field (``input_delay``, ``output_delay``), for the message.
+    tau
+        The delay τ [s].
+    dt
+        The step [s].
+    sampled
+        Whether the controller is sampled (unused, see above).
+
+    Returns
+    -------
+    int
+        m.
     """
     if tau == 0.0:
         return 0
@@ -301,7 +317,17 @@ def known_delay_samples(tau: float, ts: float) -> int:
 
 def check_delays(scen: NDArray[np.float64], disc: NDArray[np.float64] | None, dt: float) -> None:
     """:func:`delay_steps` for every member's scenario row (``scen``, one row per member;
-    ``disc`` its discrete rows, None or ``D_STEPS`` 0 for a continuous member)."""
+    ``disc`` its discrete rows, None or ``D_STEPS`` 0 for a continuous member).
+
+    Parameters
+    ----------
+    scen
+        The scenario rows, one per member.
+    disc
+        Their discrete rows (None, or ``D_STEPS`` 0: a continuous member).
+    dt
+        The step [s].
+    """
     cols = [L.S_IN_DELAY, L.S_OUT_DELAY]
     for i in np.nonzero(np.any(scen[:, cols] != 0.0, axis=1))[0]:
         sampled = disc is not None and disc[i, D_STEPS] > 0
@@ -408,6 +434,22 @@ def sampling_rows(
     ``model_jacobians`` (:func:`aiofl.engine.observer_gains.model_jacobians`): for a
     model-assisted member with bandwidth gains, the nominal model's Jacobian its observer
     gain is placed for (:mod:`aiofl.components.model_gains`); NaN rows elsewhere.
+
+    Parameters
+    ----------
+    batch
+        The packed controllers.
+    samplings
+        One sampling setting per member (None: continuous).
+    dt
+        The engine step [s].
+    model_jacobians
+        (B, ρ) model Jacobians of the placed members, NaN rows elsewhere (None: none placed).
+
+    Returns
+    -------
+    ndarray
+        Shape (B, N_DISC).
     """
     if len(samplings) != len(batch):
         raise ValueError(f"{len(samplings)} sampling settings for a batch of {len(batch)}")

@@ -188,7 +188,17 @@ def recipe(
     plant: Plant, width: int, *, sampled_data: bool = False, variant: str = "lanes"
 ) -> compile_.Recipe:
     """The recipe of the instance of ``plant`` for groups of ``width``, continuous or
-    ``sampled_data``, compiled as ``variant`` (see the module notes)."""
+    ``sampled_data``, compiled as ``variant`` (see the module notes).
+
+    Parameters
+    ----------
+    plant, width, sampled_data, variant
+        The plant, lane width, timing and ``"lanes"``/``"scalar"``/``"guarded"``.
+
+    Returns
+    -------
+    Recipe
+    """
     from aiofl.components import vecmath
     from aiofl.components.fastmath import FASTMATH
 
@@ -316,7 +326,17 @@ def instance_for(
     process; a plant-independent one (:func:`plant_independent`) is shared by every plant of
     its number of states.  The guarded variant is never cached on disk (loaded from numba's
     cache, its plant wrappers no longer caught the plant's exception: the ValueError of a
-    raising plant escaped instead of the PlantFailure naming the function and the state)."""
+    raising plant escaped instead of the PlantFailure naming the function and the state).
+
+    Parameters
+    ----------
+    plant, width, sampled_data, variant
+        As for :func:`recipe`.
+
+    Returns
+    -------
+    Instance
+    """
     independent = plant_independent(width, variant)
     key, owner = _instance_key(plant, width, sampled_data, variant)
     with _LOCK:
@@ -369,7 +389,17 @@ def run(
     """Run ``groups`` of ``batch`` (a batch of ``plant``) on the instance of ``width``,
     ``sampled_data`` and ``variant`` (:func:`instance_for`), writing ``out``: the plant's
     table into the batch first when the instance is plant-independent (its entries compiled
-    or loaded now).  ``compile_only``: compile (or load) and return."""
+    or loaded now).  ``compile_only``: compile (or load) and return.
+
+    Parameters
+    ----------
+    plant, width, sampled_data, variant
+        As for :func:`recipe`.
+    groups, batch, out
+        The groups (member indices, one row each), the packed batch and its outputs.
+    compile_only
+        Compile (or load) only.
+    """
     inst = instance_for(plant, width, sampled_data=sampled_data, variant=variant)
     if plant_independent(width, variant):
         set_plant_table(plant, batch, variant)
@@ -449,7 +479,19 @@ def plan_groups(
     """The groups to run, by lane width: members of a kind that fill at least half a group
     of :data:`~aiofl.engine.loop.WIDTH` run in such groups (the last one padded), the
     others in groups of one lane.  Either way a member's numbers are the same (bitwise).
-    ``steps``: as for :func:`group_members` (sampled members)."""
+    ``steps``: as for :func:`group_members` (sampled members).
+
+    Parameters
+    ----------
+    ints, ref_kind
+        The members' integer rows and reference kinds.
+    members, steps
+        The members to plan; their sample steps (None: continuous).
+
+    Returns
+    -------
+    dict of int to ndarray
+    """
     w = loop.WIDTH
     kinds = _by_kind(ints, ref_kind, members, steps)
     wide = [i for group in kinds if 2 * len(group) >= w for i in group]
@@ -480,6 +522,15 @@ def run_groups(
     before any worker starts: with LLVM's SLP vectorizer on (:func:`_slp_on`).  Each
     thread claims the next unclaimed group (dynamic scheduling, so groups that diverge
     early do not leave a core idle); the numbers do not depend on the thread count.
+
+    Parameters
+    ----------
+    loop_fn, groups, batch, out
+        The compiled loop and what it runs: groups, packed batch, outputs.
+    plant, sampled_data
+        What the loop runs, to name a failing plant function.
+    compile_only
+        Compile (or load) and return.
     """
     import numba
     from numba.core.errors import NumbaError

@@ -237,7 +237,21 @@ class KernelCache(FunctionCache):
 
     @classmethod
     def for_function(cls, py_func: Any, folder: Path, stamp: str) -> KernelCache:
-        """The cache of ``py_func`` in ``folder``, fresh while the fingerprint is ``stamp``."""
+        """The cache of ``py_func`` in ``folder``, fresh while the fingerprint is ``stamp``.
+
+        Parameters
+        ----------
+        py_func
+            The Python function of the kernel.
+        folder
+            The cache's folder.
+        stamp
+            The code fingerprint the cache is valid for.
+
+        Returns
+        -------
+        KernelCache
+        """
         py_func._aiofl_cache = (str(folder), stamp)
         return cls(py_func)
 

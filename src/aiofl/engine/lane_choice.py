@@ -78,7 +78,15 @@ def expect(plant: Plant, sampled_data: bool, member_steps: float) -> None:
     (a tuning run's whole budget, :class:`aiofl.tuning.evaluate.EvalSpec`): when they reach
     the compile's price, the first batch compiles the lanes instead of renting (a run that
     will pay for them anyway should not pay rent first).  A new declaration replaces the
-    last."""
+    last.
+
+    Parameters
+    ----------
+    plant, sampled_data
+        The plant and the timing.
+    member_steps
+        The member-steps to come.
+    """
     with _LOCK:
         _EXPECTED[(id(plant), sampled_data)] = (plant, float(member_steps))
 
@@ -89,6 +97,17 @@ def lanes_worth_it(plant: Plant, sampled_data: bool, member_steps: float) -> boo
     True when the lanes are at hand, or when the rent so far and these steps, or the work
     declared by :func:`expect`, reach the compile's price (see the module notes); otherwise
     False, and the steps are added to the rent.
+
+    Parameters
+    ----------
+    plant, sampled_data
+        The plant and the timing.
+    member_steps
+        The member-steps of this batch.
+
+    Returns
+    -------
+    bool
     """
     import numba
 

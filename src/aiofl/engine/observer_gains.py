@@ -41,7 +41,21 @@ def model_jacobians(
     r"""(B, ρ) Jacobians :math:`J = \partial(\hat\alpha + \hat\beta u^*)/\partial\xi` at
     :math:`\Phi(x_0)` of each placed member (NaN rows for the others); None when no member
     is placed.  ``x0s``: each member's initial state (empty: the origin).  One evaluation per
-    distinct initial state."""
+    distinct initial state.
+
+    Parameters
+    ----------
+    plant
+        The plant (needs ``alpha_beta_of_xi`` and ``normal_form``).
+    batch
+        The packed controllers.
+    x0s
+        Each member's initial state (empty: the origin).
+
+    Returns
+    -------
+    ndarray or None
+    """
     placed = placed_members(batch)
     if not placed.any():
         return None

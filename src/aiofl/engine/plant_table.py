@@ -170,13 +170,35 @@ _LOCK = threading.Lock()
 def plant_table(plant: Plant, variant: str, *, cache: bool = True) -> NDArray[np.int64]:
     """The addresses of ``plant``'s entries for ``variant`` (see the module notes),
     compiled (or loaded from the disk cache) on first use in this process; the compiled
-    entries live as long as the process."""
+    entries live as long as the process.
+
+    Parameters
+    ----------
+    plant, variant
+        The plant and the instances' variant.
+    cache
+        Use the disk cache.
+
+    Returns
+    -------
+    ndarray
+    """
     return _table(plant, variant, cache)[0]
 
 
 def table_entries(plant: Plant, variant: str, *, cache: bool = True) -> tuple[Any, ...]:
     """The compiled entries of ``plant``'s table for ``variant`` (numba dispatchers, in
-    table order; their ``stats`` tell whether they came from the disk cache)."""
+    table order; their ``stats`` tell whether they came from the disk cache).
+
+    Parameters
+    ----------
+    plant, variant, cache
+        As for :func:`plant_table`.
+
+    Returns
+    -------
+    tuple
+    """
     return _table(plant, variant, cache)[1]
 
 
@@ -291,7 +313,19 @@ def direct_bindings(functions: tuple[Any, ...], tag: str) -> dict[str, Any]:
 
 def direct_binding(function: Any, second: Any = None, *, tag: str) -> Any:
     """``function(x, p)`` (and ``second(x, p)``, as a pair) called as ``f(fns, x, p)``
-    (``fns`` unread), inlined where called; ``tag`` makes its name unique."""
+    (``fns`` unread), inlined where called; ``tag`` makes its name unique.
+
+    Parameters
+    ----------
+    function, second
+        The compiled plant functions (``second`` None: one).
+    tag
+        Makes the name unique.
+
+    Returns
+    -------
+    numba dispatcher
+    """
     from numba import njit
 
     space = {"__name__": __name__, "_PLANT_FN": function, "_PLANT_FN2": second}

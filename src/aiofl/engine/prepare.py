@@ -147,7 +147,17 @@ def prepare_controller() -> None:
 
 def prepare(plant: Plant, specs: Sequence[tuple[int, bool]], *, controller: bool = False) -> None:
     """Compile (or load) the discrete controller's update (``controller``, first) and the
-    instances ``specs`` (lane width, sampled) of ``plant``."""
+    instances ``specs`` (lane width, sampled) of ``plant``.
+
+    Parameters
+    ----------
+    plant
+        The plant.
+    specs
+        ``(lane width, sampled)`` of each instance.
+    controller
+        Also the discrete controller's update.
+    """
     if controller:
         prepare_controller()
     groups, batch, out = probe(plant)
@@ -217,7 +227,19 @@ def prepare_in_background(
     registered name, a plant file, or ``--states=N``: every N-state plant's
     plant-independent ones) into the disk cache, in that order, after the discrete
     controller's update when ``controller``; None when the cache is off or nothing is
-    asked.  The process is stopped when this one exits."""
+    asked.  The process is stopped when this one exits.
+
+    Parameters
+    ----------
+    plant
+        A registered name, a plant file, or ``--states=N``.
+    specs, controller
+        As for :func:`prepare`.
+
+    Returns
+    -------
+    subprocess.Popen or None
+    """
     if not cache_enabled() or not (specs or controller):
         return None
     args = [CONTROLLER] * controller + [f"{'s' if s else 'c'}{w}" for w, s in specs]

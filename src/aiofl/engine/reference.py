@@ -213,6 +213,17 @@ def closed_loop(
     ``z = [x (n) | TD state (n_td) | ξ̂ (ρ+1) | ITAE IAE ISE ISU IAU]``.  The piecewise
     constant inputs of the current segment are passed in (``disturbance``,
     ``plant_params``, ``noise``, ``step_on``).
+
+    Parameters
+    ----------
+    s, t, z
+        The setup, the time [s] and the state (above).
+    disturbance, plant_params, noise, step_on
+        The segment's inputs.
+
+    Returns
+    -------
+    tuple of (ndarray, dict)
     """
     c = s.controller
     rho, n, n_td = s.rho, s.n, s.n_td
@@ -534,6 +545,17 @@ def reference_sampled_simulate(
     :math:`t_k + \tau_{in}` (0 before :math:`\tau_{in}`), the disturbance and the
     parameter change.  Events at one time are taken in the order: measurement, controller
     update, command change.
+
+    Parameters
+    ----------
+    plant, controller, scenario, sampling
+        The loop and its sampling.
+    rtol, atol
+        The tolerances of ``solve_ivp``.
+
+    Returns
+    -------
+    SampledReferenceResult
     """
     from aiofl.engine.standalone import DiscreteController
 

@@ -66,7 +66,21 @@ def response_figures(
 ) -> dict[str, NDArray[np.float64]]:
     """The figures of :data:`RESPONSE_NAMES` per member, from the loop's statistics
     ``stats`` (B, :data:`aiofl.layout.N_STAT`) and scenario rows ``scen`` (B,
-    :data:`aiofl.layout.N_SCEN`); ``status``, ``t_stop`` tell where a member stopped."""
+    :data:`aiofl.layout.N_SCEN`); ``status``, ``t_stop`` tell where a member stopped.
+
+    Parameters
+    ----------
+    stats, scen
+        The loop's statistics (B, N_STAT) and scenario rows (B, N_SCEN).
+    status, t_stop
+        Each member's status and when it stopped [s].
+    dt, t_final
+        The step and the horizon [s].
+
+    Returns
+    -------
+    dict of str to ndarray
+    """
     st = np.asarray(stats, dtype=np.float64)
     b = st.shape[0]
     step = scen[:, L.S_REF_KIND] == L.REF_STEP

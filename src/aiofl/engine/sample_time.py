@@ -76,7 +76,19 @@ def design_ts_range(
 ) -> tuple[float, float] | None:
     """The smallest and largest sample time of a scan of [:data:`TS_MIN`, :data:`TS_MAX`]
     (four per decade) at which ``controller`` with ``sampling``'s other settings is
-    discretised with finite coefficients, or None if at none."""
+    discretised with finite coefficients, or None if at none.
+
+    Parameters
+    ----------
+    controller, sampling
+        The design and its sampling settings.
+    jac
+        A model-assisted observer's model Jacobian (None: none).
+
+    Returns
+    -------
+    tuple of (float, float) or None
+    """
     from dataclasses import replace
 
     good = []
@@ -100,7 +112,19 @@ def discrete_row(
     (``jac``: a model-assisted observer's model Jacobian).  A sample time the design cannot
     be discretised at (non-finite coefficients, a pole placement that fails) raises
     ValueError naming ``name`` with the range a scan found (:func:`design_ts_range`); a
-    known delay (``eso.delay``) that is not a whole number of samples, naming it."""
+    known delay (``eso.delay``) that is not a whole number of samples, naming it.
+
+    Parameters
+    ----------
+    controller, sampling, jac
+        As for :func:`design_ts_range`.
+    name
+        The field named in the message (default ``"ts"``).
+
+    Returns
+    -------
+    ndarray
+    """
     known_delay_samples(controller.value("eso.delay"), sampling.ts)
     try:
         with np.errstate(all="ignore"):

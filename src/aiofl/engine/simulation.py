@@ -542,7 +542,18 @@ def simulate(
     divergence_threshold: float = 1e10,
     sampling: Sampling | None = None,
 ) -> SimulationResult:
-    """Simulate one closed loop (a batch of one). See :func:`simulate_batch`."""
+    """Simulate one closed loop (a batch of one). See :func:`simulate_batch`.
+
+    Parameters
+    ----------
+    plant, controller, scenario, dt, method, store, decimation, divergence_threshold, sampling
+        As for :func:`simulate_batch`, one controller and one scenario (``store``: True here).
+
+    Returns
+    -------
+    SimulationResult
+        The one member's result (member 0 of the batch's :class:`BatchResult`).
+    """
     res = simulate_batch(
         plant,
         controller,

@@ -211,7 +211,21 @@ class DiscreteController:
 
     def run(self, n: int, r: float | Sequence[float] | NDArray[np.float64], y: float) -> float:
         """``n`` samples (n ≥ 1) with the same reference ``r`` and measurement ``y`` in one
-        compiled call (:meth:`step` n times); returns the last u."""
+        compiled call (:meth:`step` n times); returns the last u.
+
+        Parameters
+        ----------
+        n
+            The number of samples, 1 ≤ n ≤ 1e9.
+        r
+            The reference, as for :meth:`step`.
+        y
+            The measurement.
+
+        Returns
+        -------
+        float
+        """
         if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= 10**9:
             raise ValueError(f"n = {n!r}; allowed: an integer, 1 <= n <= 1e9")
         self._reference(r)
@@ -226,7 +240,21 @@ class DiscreteController:
         """One sample from each of several controller states (rows of ``states``, shape
         (K, len(state))) with the measurements ``ys`` (K,) and one reference ``r``:
         ``(next states, commands)``, as :meth:`step` from each (the controller's own
-        state is left alone).  For finite-difference Jacobians of the update."""
+        state is left alone).  For finite-difference Jacobians of the update.
+
+        Parameters
+        ----------
+        states
+            The controller states, (K, len(state)).
+        r
+            The reference.
+        ys
+            The measurements, (K,).
+
+        Returns
+        -------
+        states, commands : ndarray
+        """
         st = np.array(states, dtype=np.float64, order="C", ndmin=2)
         yv = np.ascontiguousarray(ys, dtype=np.float64).reshape(-1)
         if st.ndim != 2 or st.shape[1] != self._cs.size or yv.size != st.shape[0]:

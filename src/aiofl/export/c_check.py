@@ -32,7 +32,29 @@ START = {"bumpless": 0, "zero": 1, "output": 2}
 def build(
     folder: Path, files: dict[str, str], extra: Sequence[str] = (), name: str = "libctl.so"
 ) -> Path:
-    """Write ``files`` into ``folder`` and link every ``.c`` into a shared library."""
+    """Write ``files`` into ``folder`` and link every ``.c`` into a shared library.
+
+    Parameters
+    ----------
+    folder
+        The folder to write into (created if missing).
+    files
+        ``{file name: text}``, as :func:`aiofl.export.export_c` gives them.
+    extra
+        More compiler flags (``-DNAME=...``).
+    name
+        The library's file name (default ``"libctl.so"``).
+
+    Returns
+    -------
+    Path
+        The shared library.
+
+    Raises
+    ------
+    RuntimeError
+        When the C does not compile (with the compiler's message).
+    """
     folder.mkdir(parents=True, exist_ok=True)
     for fname, text in files.items():
         (folder / fname).write_text(text)
@@ -56,6 +78,21 @@ class CController:
         params: str = "",
         signal: str = "double",
     ) -> None:
+        """The exported controller loaded with :mod:`ctypes`.
+
+        Parameters
+        ----------
+        lib
+            The shared library (:func:`build`), a path or a loaded ``ctypes.CDLL``.
+        precision
+            ``"double"`` or ``"float"``: the C type ``NAME_real`` the library was built with.
+        prefix
+            The exported names' prefix (default ``"aiofl"``).
+        params
+            The parameter instance to step with (default ``PREFIX_default_params``).
+        signal
+            The C type of the measurement and reference, ``NAME_signal`` (default ``"double"``).
+        """
         self.lib = lib if isinstance(lib, ctypes.CDLL) else ctypes.CDLL(str(lib))
         real = ctypes.c_double if precision == "double" else ctypes.c_float
         sig = ctypes.c_double if signal == "double" else ctypes.c_float  # NAME_signal
@@ -89,7 +126,22 @@ class CController:
 
 
 def reference(ref: Reference, t: float, rho: int) -> list[float]:
-    """r, ṙ, ..., r^(ρ) of a sine reference at t (r alone, held derivatives 0, otherwise)."""
+    """r, ṙ, ..., r^(ρ) of a sine reference at t (r alone, held derivatives 0, otherwise).
+
+    Parameters
+    ----------
+    ref
+        The reference.
+    t
+        The time [s].
+    rho
+        The highest derivative, ρ.
+
+    Returns
+    -------
+    list of float
+        ρ + 1 values.
+    """
     if ref.kind != "sine":
         return [float(ref.evaluate(t))] + [0.0] * rho
     out = [
@@ -150,7 +202,37 @@ def loop(
     """Drive ``plant`` (true parameters scaled by ``scale``; a step disturbance
     ``(amplitude, time)``) with ``step`` at Ts; returns (t, y, u) at the samples (u the
     command computed at t_k; with ``delay`` it is applied over the next interval, the first
-    interval getting ``u_start``, the command the controller holds at its start)."""
+    interval getting ``u_start``, the command the controller holds at its start).
+
+    Parameters
+    ----------
+    step
+        ``step(r, y) -> u``: the controller, with r the list of ρ + 1 reference values.
+    plant
+        The plant (its compiled kernel advances the state).
+    ref, rho
+        The reference and the number of its derivatives the controller reads.
+    ts, t_final
+        The sample time and the horizon [s].
+    x0
+        The start state (empty: zeros).
+    scale
+        Factors of the true parameters, by name.
+    disturbance
+        The step disturbance (amplitude, time [s]).
+    delay
+        Non-zero: a sample of computation delay (each command is applied over the next
+        interval).
+    n_sub
+        RK4 substeps of the plant per sample.
+    u_start
+        The command applied over the first interval with ``delay``.
+
+    Returns
+    -------
+    t, y, u : ndarray
+        At the samples; cut short where the state stops being finite or |y| > 1e6.
+    """
     names = plant.param_names
     p = plant.param_vector().copy()
     for k, v in (scale or {}).items():
@@ -175,7 +257,21 @@ def loop(
 
 
 def itae_isu(t: np.ndarray, y: np.ndarray, u: np.ndarray, ref: Reference, ts: float) -> tuple:
-    """ITAE = sum t|r - y| Ts and ISU = sum u^2 Ts over the samples."""
+    """ITAE = sum t|r - y| Ts and ISU = sum u^2 Ts over the samples.
+
+    Parameters
+    ----------
+    t, y, u
+        The samples of :func:`loop`.
+    ref
+        The reference.
+    ts
+        The sample time [s].
+
+    Returns
+    -------
+    itae, isu : float
+    """
     e = ref.evaluate(t) - y
     return float(np.sum(t * np.abs(e)) * ts), float(np.sum(u * u) * ts)
 
@@ -193,6 +289,20 @@ def float_holds(cfg: Any, sampling: Any, files: dict[str, dict[str, str]]) -> st
     measurement, and compares :math:`\mathrm{ITAE} = \sum t_k|r_k - y_k|T_s` (within
     :data:`FLOAT_ITAE_TOL`) and :math:`\mathrm{ISU} = \sum u_k^2 T_s` (within
     :data:`FLOAT_ISU_TOL`).  Raises RuntimeError without a C compiler.
+
+    Parameters
+    ----------
+    cfg
+        The run config.
+    sampling
+        Its sampling (:class:`aiofl.engine.discrete.Sampling`).
+    files
+        The C files by precision, ``{"double": ..., "float": ...}``.
+
+    Returns
+    -------
+    str or None
+        The reason the float build does not hold, or None.
     """
     import tempfile
 
@@ -231,7 +341,21 @@ def config_loop(
     step: Callable[[list[float], float], float], cfg: Any, sampling: Any
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """:func:`loop` over a run config's scenario (its plant scale, load step, reference,
-    start state and horizon) at ``sampling``'s Ts and computation delay."""
+    start state and horizon) at ``sampling``'s Ts and computation delay.
+
+    Parameters
+    ----------
+    step
+        ``step(r, y) -> u``, as for :func:`loop`.
+    cfg
+        The run config.
+    sampling
+        The sample time and computation delay.
+
+    Returns
+    -------
+    t, y, u : ndarray
+    """
     sc = cfg.scenario
     return loop(
         step,
@@ -263,6 +387,17 @@ def engine_agreement(cfg: Any, sampling: Any, files: dict[str, str]) -> dict[str
     Returns ``{"samples", "max_abs_du", "max_abs_u", "relative"}``: the largest
     :math:`|u_C - u_{engine}|`, the largest :math:`|u|` and their ratio (double precision
     C: rounding only, ~1e-13).  Raises RuntimeError without a C compiler.
+
+    Parameters
+    ----------
+    cfg, sampling
+        The run config and its sampling.
+    files
+        The exported double-precision C files.
+
+    Returns
+    -------
+    dict
     """
     import tempfile
 

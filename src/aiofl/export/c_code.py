@@ -426,6 +426,11 @@ def export_c(
         ``const NAME_params NAME_<params_only>`` for a controller exported with the same
         prefix, precision, ρ, Ts and options (a compile-time ``#error`` otherwise).
 
+    Returns
+    -------
+    dict of str to str
+        ``{file name: text}``.
+
     Raises
     ------
     ExportError

@@ -195,6 +195,23 @@ def model_code(
     ``xi_star``: a point where the model is defined (the design point, :math:`\Phi(x_0)`),
     one of those where the expressions are checked against ``plant.alpha_beta_of_xi``.
 
+    Parameters
+    ----------
+    plant
+        The plant (its nominal parameters and ``alpha_beta_of_xi``).
+    symbolic
+        Its symbolic model (:class:`aiofl.plants.symbolic.SymbolicPlant`).
+    precision
+        ``"double"`` or ``"float"``.
+    lit
+        A number -> its C literal in ``precision``.
+    xi_star
+        ξ* (above).
+
+    Returns
+    -------
+    ModelCode
+
     Raises
     ------
     ExportError
@@ -297,7 +314,26 @@ def nominal_model(
     r"""The C of a model-assisted ``controller``'s nominal model (:func:`model_code`) and the
     model's Jacobian its observer gain is placed for at :math:`\Phi(x_0)`, as the engine
     places it (:func:`aiofl.engine.observer_gains.model_jacobians`; None for Kalman gains).
-    ``source``: the config's plant entry (:func:`symbolic_model_for`)."""
+    ``source``: the config's plant entry (:func:`symbolic_model_for`).
+
+    Parameters
+    ----------
+    controller
+        The model-assisted controller.
+    plant
+        Its plant; None is refused (:class:`ExportError`).
+    source
+        The config's plant entry.
+    x0
+        The start state (empty: zeros), where :math:`\Phi(x_0)` is taken.
+    precision, lit
+        As for :func:`model_code`.
+
+    Returns
+    -------
+    model : ModelCode
+    jacobian : ndarray or None
+    """
     from aiofl.controller import controller_batch
     from aiofl.engine.observer_gains import model_jacobians
 

@@ -393,6 +393,13 @@ def fit_chain(
         (its intervals are then the usual ones); the reported delay is clipped at 0.
     friction
         :math:`-\sigma(t)` samples to include a Coulomb-friction-like term, or None.
+
+    ts
+        The sample time [s].
+
+    Returns
+    -------
+    ChainFit
     """
     tau_max = delay_max / ts
     k0 = math.ceil(tau_max) + 1

@@ -182,6 +182,11 @@ def prbs(
     seed
         Picks the register's start state (seeded: the same seed, the same signal).
 
+    Returns
+    -------
+    Excitation
+        The samples and how they were made.
+
     Raises
     ------
     ValueError
@@ -256,6 +261,11 @@ def chirp(
         Length [s] (a whole number of ts) and sample time [s].
     method
         ``"linear"`` or ``"logarithmic"``.
+
+    Returns
+    -------
+    Excitation
+        The samples and how they were made.
 
     Raises
     ------

@@ -118,7 +118,22 @@ def _nice(x: float) -> float:
 
 
 def chain_plant_file(estimate: ChainEstimate, log: Log, *, name: str = "identified-chain") -> str:
-    """The plant file (TOML) of the identified chain (module notes)."""
+    """The plant file (TOML) of the identified chain (module notes).
+
+    Parameters
+    ----------
+    estimate
+        The chain identified by :func:`aiofl.identification.chain.identify_chain`.
+    log
+        The log it was identified from (named in the file's comments).
+    name
+        The plant's name in the file (default ``"identified-chain"``).
+
+    Returns
+    -------
+    str
+        The TOML text.
+    """
     import tomlkit
 
     rho = estimate.rho
@@ -182,7 +197,22 @@ def first_config(
 ) -> str:
     """TOML text of a run config for ``aiofl simulate``: a sampled LADRC of order ρ with b0,
     ω0 from the sampling, delay and noise rules (or ``omega0``), ω_c = ω0/4, on the plant
-    file ``plant`` (write :func:`chain_plant_file`'s text there, beside the config)."""
+    file ``plant`` (write :func:`chain_plant_file`'s text there, beside the config).
+
+    Parameters
+    ----------
+    estimate, log
+        The identified chain and its log (the sample time Ts is the log's).
+    omega0
+        The observer bandwidth [rad/s], 0 < ω0 ≤ π/Ts; None: from the rules.
+    plant
+        The plant file the config names (default :data:`CHAIN_PLANT_FILE`).
+
+    Returns
+    -------
+    str
+        The TOML text.
+    """
     import tomlkit
 
     ts = log.ts

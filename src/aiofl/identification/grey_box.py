@@ -516,6 +516,10 @@ def fit_plant(
     max_lag
         M of the residual tests.
 
+    Returns
+    -------
+    GreyBoxFit
+
     Raises
     ------
     GreyBoxError, LogError

@@ -505,6 +505,15 @@ def write_log(log: Log, path: str | Path, *, names: Mapping[str, str] | None = N
     Columns are named by ``names`` (by role; default ``t``, ``u``, ``y``, ``r``) with the
     log's units in brackets; CSV values are written with 17 significant digits, so a CSV
     round trip is exact.  The file is written atomically.
+
+    Parameters
+    ----------
+    log
+        The log.
+    path
+        The file to write: ``*.npz``, else CSV.
+    names
+        The columns' names by role (``"t"``, ``"u"``, ``"y"``, ``"r"``); default the roles.
     """
     from aiofl.outputs import atomic_write_bytes, atomic_write_text
 

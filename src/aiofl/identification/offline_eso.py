@@ -164,6 +164,21 @@ def offline_eso(log: Log, rho: int, b0: float, omega0: float) -> OfflineESO:
     1..:data:`MAX_RHO`; b0 finite and non-zero; 0 < ω0·T ≤ π, the observer's poles inside
     the band the samples resolve), and :class:`LogError` for a log too short to leave the
     start-up transient behind.
+
+    Parameters
+    ----------
+    log
+        The log (uniformly sampled, Ts its sample time).
+    rho
+        The chain order ρ, an integer 1..:data:`MAX_RHO`.
+    b0
+        The input gain b0, finite and non-zero.
+    omega0
+        The observer bandwidth ω0 [rad/s], 0 < ω0·Ts ≤ π.
+
+    Returns
+    -------
+    OfflineESO
     """
     if not isinstance(rho, int) or isinstance(rho, bool) or not 1 <= rho <= MAX_RHO:
         raise ValueError(f"rho = {rho!r}; allowed: an integer 1..{MAX_RHO}")

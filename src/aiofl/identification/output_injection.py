@@ -69,7 +69,20 @@ class InjectionError(ValueError):
 def linearisation(
     plant: Plant, p: NDArray[np.float64], x0: NDArray[np.float64]
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """A = ∂f/∂x and C = ∂h/∂x at x0 (u = 0; central differences on the Python plant)."""
+    """A = ∂f/∂x and C = ∂h/∂x at x0 (u = 0; central differences on the Python plant).
+
+    Parameters
+    ----------
+    plant, p
+        The plant and its parameter vector.
+    x0
+        The state to linearise at.
+
+    Returns
+    -------
+    A, C : ndarray
+        Shapes (n, n) and (n,).
+    """
     n = plant.n_states
     a = np.empty((n, n))
     c = np.empty(n)
@@ -86,7 +99,20 @@ def injection_gain(
     plant: Plant, p: NDArray[np.float64], x0: NDArray[np.float64], omega: float | None
 ) -> NDArray[np.float64]:
     """L placing the linearised observer's poles at -ω(1, 1.2, ...) (module notes); ω None
-    for the default."""
+    for the default.
+
+    Parameters
+    ----------
+    plant, p, x0
+        As for :func:`linearisation`.
+    omega
+        The bandwidth ω [rad/s] > 0; None: twice the largest |eigenvalue| of A (at least 2).
+
+    Returns
+    -------
+    ndarray
+        L, shape (n,).
+    """
     from scipy.signal import place_poles
 
     n = plant.n_states
@@ -122,7 +148,28 @@ def continuation(
 
     ``obj`` is the grey-box fit's objective (``one(z)`` the residuals, ``params``, ``plant``,
     ``x0`` and the ``gain`` it simulates with, set here); ``polish(obj, z)`` its local
-    least-squares stage."""
+    least-squares stage.
+
+    Parameters
+    ----------
+    obj
+        The grey-box fit's objective (above); its ``gain`` is set here.
+    polish
+        ``polish(obj, z)``: the fit's local least-squares stage.
+    z
+        The estimate to start from (the fit's coordinates).
+    gain
+        The full injection gain L.
+
+    Returns
+    -------
+    z : ndarray
+        The last accepted estimate.
+    s : float
+        Its gain factor.
+    z_previous : ndarray
+        The estimate at s/:data:`CONTINUATION`.
+    """
 
     def rms(zz: NDArray[np.float64]) -> float:
         r = obj.one(zz)

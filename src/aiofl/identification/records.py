@@ -68,7 +68,23 @@ def log_record(
 ) -> dict[str, Any]:
     """What was identified from: the file, its size and sampling, the columns used (by
     role) and their units, the rows the estimators saw (``[start, stop)``, from 0) and the
-    validation data (``"rows a:b"`` of the log, or another log's file), if any."""
+    validation data (``"rows a:b"`` of the log, or another log's file), if any.
+
+    Parameters
+    ----------
+    log
+        The log.
+    columns
+        The columns' names in the file, by role.
+    estimation
+        The rows ``(start, stop)`` the estimators saw (None: all).
+    validation
+        What validated the fit (``"rows a:b"`` or a file), or None.
+
+    Returns
+    -------
+    dict
+    """
     n = log.n_samples
     return {
         "source": log.source,

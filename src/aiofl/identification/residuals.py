@@ -132,6 +132,10 @@ def residual_tests(residual: ArrayLike, u: ArrayLike, *, max_lag: int = 25) -> R
     max_lag
         M, the largest lag; 1 <= M < N/4.
 
+    Returns
+    -------
+    ResidualTests
+
     Raises
     ------
     ValueError

@@ -70,6 +70,15 @@ def simulate_log(
         then the reference :math:`r_k`, :math:`y_k` the measured output (the noise and
         quantisation of :func:`measure`, the same realisation); the log's ``u`` is the
         applied input and its ``r`` the reference.
+
+    rtol, atol
+        The tolerances of :func:`scipy.integrate.solve_ivp` (DOP853) on each interval.
+
+    Returns
+    -------
+    Log
+        Uniform samples ``t``, the applied ``u``, the measured ``y`` (and ``r`` with
+        ``feedback``).
     """
     tt = np.asarray(t, dtype=np.float64)
     uu = np.asarray(u, dtype=np.float64)
@@ -132,6 +141,21 @@ def measure(
 
     One noiseless :func:`simulate_log` and many ``measure`` calls give many noise
     realisations of the same experiment cheaply (coverage tests).
+
+    Parameters
+    ----------
+    y_true
+        The true output samples.
+    noise_std
+        Standard deviation of the Gaussian noise (0: none).
+    quantum
+        Quantisation step (0: none).
+    seed
+        Seed of the noise.
+
+    Returns
+    -------
+    ndarray
     """
     y = np.asarray(y_true, dtype=np.float64)
     rng = np.random.default_rng(seed)

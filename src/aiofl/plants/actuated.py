@@ -248,7 +248,21 @@ def _functions(plant: Plant, rig: Rig, iv: int, names: tuple[str, ...]) -> tuple
 
 def rig_x0(plant: Plant, augmented: Plant, x0: tuple[float, ...]) -> tuple[float, ...]:
     """An initial state of ``augmented`` from one of ``plant`` (the actuator starts at rest
-    at 0); ``x0`` unchanged when it already has the augmented length or is empty."""
+    at 0); ``x0`` unchanged when it already has the augmented length or is empty.
+
+    Parameters
+    ----------
+    plant
+        The plant.
+    augmented
+        The plant with its rig's actuator (:func:`with_rig`).
+    x0
+        A start state of ``plant`` (or of ``augmented``, or empty).
+
+    Returns
+    -------
+    tuple of float
+    """
     if not x0 or len(x0) == augmented.n_states:
         return x0
     if len(x0) != plant.n_states:

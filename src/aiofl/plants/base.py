@@ -153,6 +153,22 @@ class Plant:
         the floor, a joint past its stop; :mod:`aiofl.engine.loop`).
     output_range
         The output's physical range ``(low, high)``, or None; leaving it makes a run lost.
+
+    Examples
+    --------
+    A first-order lag :math:`\dot x = (u - x)/\tau`, :math:`y = x`; the functions are
+    compiled (numba) on the first simulation, evaluated in Python here:
+
+    >>> import numpy as np
+    >>> def f(x, p):
+    ...     return np.array([-x[0] / p[0]])
+    >>> def g(x, p):
+    ...     return np.array([1.0 / p[0]])
+    >>> def h(x, p):
+    ...     return x[0]
+    >>> lag = Plant("lag", 1, f, g, h, {"tau": 0.5}, relative_degree=1)
+    >>> lag.rhs([1.0], u=2.0)
+    array([2.])
     """
 
     name: str
@@ -317,7 +333,24 @@ class Plant:
         return arr
 
     def rhs(self, x: ArrayLike, u: float, d: float = 0.0, p: ArrayLike | None = None) -> np.ndarray:
-        r""":math:`\dot x = f(x,p) + g(x,p)u + b_d(x,p)\tau_d`, evaluated in Python."""
+        r""":math:`\dot x = f(x,p) + g(x,p)u + b_d(x,p)\tau_d`, evaluated in Python.
+
+        Parameters
+        ----------
+        x
+            The state, n values.
+        u
+            The input.
+        d
+            The disturbance :math:`\tau_d` (default 0).
+        p
+            The parameter vector (default: the nominal one).
+
+        Returns
+        -------
+        ndarray
+            :math:`\dot x`, shape (n,).
+        """
         pv = self.param_vector() if p is None else np.asarray(p, dtype=np.float64)
         dx = self._vector(self.f, "f", x, pv) + self._vector(self.g, "g", x, pv) * u
         if self.bd is not None and d != 0.0:

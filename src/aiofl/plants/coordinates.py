@@ -37,6 +37,22 @@ def invert_coordinates(
     model.  Returns ``(x_of_xi, note)``; ``x_of_xi`` is None, with the reason in ``note``,
     when the elimination stops.  ``tidy`` simplifies each solution (the analysis passes its
     bounded simplification, which refuses expressions that grow too large).
+
+    Parameters
+    ----------
+    xi
+        :math:`\Phi_1(x) .. \Phi_n(x)`, sympy expressions.
+    states
+        The state symbols x.
+    xi_symbols
+        The symbols ξ₁..ξₙ.
+    tidy
+        The simplification applied to each solution (default :func:`sympy.cancel`).
+
+    Returns
+    -------
+    x_of_xi : tuple or None
+    note : str
     """
     eqs = [sp.sympify(e) - z for e, z in zip(xi, xi_symbols, strict=True)]
     left = list(states)

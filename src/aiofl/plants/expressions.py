@@ -276,6 +276,19 @@ def parse_expression(text: str, symbols: Mapping[str, sp.Symbol], where: str = "
     :data:`MAX_EXPANDED_TERMS`, and every constant subexpression is evaluated in float64
     and must be finite and real.  ``where`` names the field in error messages.
 
+    Parameters
+    ----------
+    text
+        The expression (a number is taken as its ``repr``).
+    symbols
+        The allowed names, name -> sympy symbol.
+    where
+        The field, for messages.
+
+    Returns
+    -------
+    sympy.Expr
+
     Raises
     ------
     SymbolicPlantError
@@ -318,6 +331,25 @@ def check_finite(expr: Any, where: str, text: str | None = None) -> Any:
     outside the float64 range (the generated code must never contain ``inf`` or ``nan``).
 
     Returns ``expr`` unchanged.  ``where`` (and ``text``, the source) name the field.
+
+    Parameters
+    ----------
+    expr
+        A sympy expression.
+    where
+        The field, for messages.
+    text
+        The expression's source, for messages (None: printed from ``expr``).
+
+    Returns
+    -------
+    sympy.Expr
+        ``expr``.
+
+    Raises
+    ------
+    SymbolicPlantError
+        For a non-finite, complex or out-of-range value.
     """
     shown = _short(text) if text is not None else _short(sp.sstr(expr))
     if expr.has(*_NONFINITE):
@@ -402,6 +434,19 @@ def vanishes_numerically(expr: Any, states: Sequence[Any], n_points: int = 3) ->
     real :math:`|e(x)| \le 10^{-25}(1 + \sum_i |t_i(x)|)`, :math:`t_i` its additive terms
     (so cancellation error is allowed for), and there is at least one such point.  A
     nonzero analytic function vanishes at random points with probability zero.
+
+    Parameters
+    ----------
+    expr
+        A sympy expression free of parameters.
+    states
+        The state symbols it may depend on.
+    n_points
+        The random points tried (default 3).
+
+    Returns
+    -------
+    bool
     """
     import mpmath
 

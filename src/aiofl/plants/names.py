@@ -29,7 +29,22 @@ __all__ = ["declared_symbols", "normal_symbols", "plant_text", "renamed"]
 
 def plant_text(check: Any, field: str, value: Any, **kwargs: Any) -> Any:
     """``check(field, value, **kwargs)`` (:func:`aiofl.text.check_text`, ...), its
-    ``ValueError`` raised as a :class:`SymbolicPlantError`."""
+    ``ValueError`` raised as a :class:`SymbolicPlantError`.
+
+    Parameters
+    ----------
+    check
+        A text check, ``check(field, value, **kwargs)``.
+    field, value
+        The field's name and value.
+    **kwargs
+        Passed on to ``check``.
+
+    Returns
+    -------
+    object
+        What ``check`` returns (the normalised text).
+    """
     try:
         return check(field, value, **kwargs)
     except ValueError as exc:
@@ -46,6 +61,18 @@ def declared_symbols(
     (:func:`aiofl.text.check_name`), not a function or constant of the expressions, and
     distinct from every other once normalised.  Raises :class:`SymbolicPlantError` naming
     the name(s) at fault.
+
+    Parameters
+    ----------
+    plant
+        The plant's name, for messages.
+    states, params
+        The declared state and parameter names.
+
+    Returns
+    -------
+    symbols : dict of str to sympy.Symbol
+    normal : dict
     """
     symbols: dict[str, sp.Symbol] = {}
     normal: dict[Any, str] = {}
@@ -65,7 +92,19 @@ def declared_symbols(
 def normal_symbols(plant: str, states: Sequence[Any], params: Sequence[Any]) -> dict[Any, Any]:
     """The symbols among ``states`` and ``params`` whose names are not in NFKC, each mapped
     to the symbol of its normal name (same assumptions); :class:`SymbolicPlantError` when a
-    name breaks the text rule or two names are one once normalised."""
+    name breaks the text rule or two names are one once normalised.
+
+    Parameters
+    ----------
+    plant
+        The plant's name, for messages.
+    states, params
+        The state and parameter symbols.
+
+    Returns
+    -------
+    dict
+    """
     names = [str(s) for s in (*states, *params)]
     for i, nm in enumerate(names, 1):
         plant_text(check_name, f"plant {plant!r}: the name of symbol {i}", nm)

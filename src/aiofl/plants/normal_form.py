@@ -142,12 +142,12 @@ def lie_derivative(scalar: Any, field_: Any, states: Sequence[sp.Symbol]) -> Any
 
     Parameters
     ----------
-    scalar
-        The scalar function λ(x) (a sympy expression).
-    field_
-        The vector field F(x), a sequence of n sympy expressions.
-    states
-        The state symbols :math:`x_1..x_n`.
+    scalar, field_, states
+        λ(x) (a sympy expression), F(x) (n sympy expressions), the symbols :math:`x_1..x_n`.
+
+    Returns
+    -------
+    sympy.Expr
     """
     if len(field_) != len(states):
         raise SymbolicPlantError(

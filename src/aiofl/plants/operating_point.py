@@ -123,7 +123,22 @@ def _call(fn: Any, x: NDArray[np.float64], p: NDArray[np.float64]) -> NDArray[np
 def jacobian_x(
     plant: Any, x: NDArray[np.float64], u: float, p: NDArray[np.float64]
 ) -> NDArray[np.float64]:
-    r""":math:`\partial(f + g u)/\partial x` at (x, u) by central differences."""
+    r""":math:`\partial(f + g u)/\partial x` at (x, u) by central differences.
+
+    Parameters
+    ----------
+    plant
+        The plant.
+    x, u
+        The state and input.
+    p
+        The parameter vector.
+
+    Returns
+    -------
+    ndarray
+        Shape (n, n).
+    """
     n = plant.n_states
     a = np.zeros((n, n))
     for j in range(n):
@@ -159,6 +174,10 @@ def trim(
         equilibria at that output returns the one nearest the guess.
     params
         The parameter vector (default: the nominal one).
+
+    Returns
+    -------
+    OperatingPoint
 
     Raises
     ------
@@ -217,7 +236,20 @@ def trim(
 def holding_input(plant: Any, scenario: Any, field: str = "scenario.u_ref") -> float:
     """``[scenario] u_ref = "trim"`` (or ``[controller.eso] u0 = "trim"``): the input
     :math:`u_e` holding ``plant`` at the scenario's :math:`r(0)`, the search started at its
-    x0; a ``ValueError`` naming ``field`` when there is none."""
+    x0; a ``ValueError`` naming ``field`` when there is none.
+
+    Parameters
+    ----------
+    plant, scenario
+        The plant and the scenario (its reference's initial value and x0).
+    field
+        The config field named in the error (default ``"scenario.u_ref"``).
+
+    Returns
+    -------
+    float
+        :math:`u_e`.
+    """
     try:
         return trim(plant, scenario.initial_value(), x_guess=scenario.x0 or None).u
     except ValueError as exc:

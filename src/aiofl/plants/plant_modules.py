@@ -98,7 +98,24 @@ def generator_digest() -> str:
 
 def module_source(functions: Sequence[str], plant: Plant, key: str, origin: str) -> str:
     """The module of the generated ``functions`` (sources of ``_fn_f``, ``_fn_g``, ...) and
-    ``plant``'s other fields; ``key`` names the entry, ``origin`` what it was made from."""
+    ``plant``'s other fields; ``key`` names the entry, ``origin`` what it was made from.
+
+    Parameters
+    ----------
+    functions
+        The generated functions' sources.
+    plant
+        The plant whose other fields the module holds.
+    key
+        The cache entry's key.
+    origin
+        What the plant was made from.
+
+    Returns
+    -------
+    str
+        The module's source.
+    """
     code = hashlib.sha256(f"{FORMAT}|{'|'.join(functions)}".encode()).hexdigest()[:24]
     fields = {name: getattr(plant, name) for name in _FIELDS}
     fields["params"] = dict(plant.params)
@@ -221,7 +238,21 @@ def cached_plant(key: str) -> Plant | None:
 def plant_from_sources(functions: Sequence[str], built: Plant, key: str) -> Plant:
     """``built`` (a plant whose generated ``functions`` run in memory) with its functions
     imported from the module entry ``key``, written now; ``built`` itself when the cache is
-    off or unwritable."""
+    off or unwritable.
+
+    Parameters
+    ----------
+    functions
+        The generated functions' sources.
+    built
+        The plant built in memory.
+    key
+        The cache entry's key.
+
+    Returns
+    -------
+    Plant
+    """
     folder = subdir("plants")
     if folder is None:
         return built

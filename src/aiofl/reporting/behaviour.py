@@ -295,7 +295,21 @@ def _pct(share: float) -> str:
 
 
 def simulation_text(b: Behaviour, unit: str, tolerance: float = TOLERANCE) -> str:
-    """What the run did, as a clause (``"the simulation tracks: max |e| ... = 0.01 rad"``)."""
+    """What the run did, as a clause (``"the simulation tracks: max |e| ... = 0.01 rad"``).
+
+    Parameters
+    ----------
+    b
+        The measured run (:func:`measure`).
+    unit
+        The output's unit (``""`` or ``"-"``: none).
+    tolerance
+        The tracking tolerance named for a bounded run (default :data:`TOLERANCE`).
+
+    Returns
+    -------
+    str
+    """
     u = f" {unit}" if unit and unit != "-" else ""
     w = f"over the last {_g(b.window)} s"
     if b.kind in ("lost", "diverged"):
@@ -348,6 +362,10 @@ def reconcile(verdict: Mapping[str, Any], behaviour: Behaviour, unit: str = "") 
         The measured run (:func:`measure`).
     unit
         The plant's output unit, for the error values.
+
+    Returns
+    -------
+    str
     """
     v = str(verdict.get("verdict", ""))
     first = verdict_text(verdict, unit)

@@ -268,6 +268,21 @@ def computed_record(
     diverged) and the step metrics and noise in u of
     :data:`aiofl.engine.response.RESPONSE_NAMES` (null where they do not apply); with
     ``extra`` also ``iae`` and ``ise``.
+
+    Parameters
+    ----------
+    result
+        The run.
+    scenario, structure, source
+        The record's labels (scenario None: not a paper scenario).
+    opi
+        Its OPI (None: not computed).
+    extra
+        Add ``iae`` and ``ise``.
+
+    Returns
+    -------
+    dict
     """
     m = result.metrics
     rec: dict[str, Any] = {
@@ -463,6 +478,8 @@ class Reproduction:
     noise_fronts: Any = None
     # scenario 3's designs on fresh noise seeds (reporting.fresh_seeds.FreshSeeds), or None
     fresh: Any = None
+    # every design on the servo-1khz rig (reporting.rig_rows.RigTable), or None
+    rig: Any = None
 
     def scenario_runs(self, scenario: int) -> list[CaseRun]:
         """The runs of one scenario, in table order."""
@@ -552,7 +569,21 @@ def compute(
     The closed-loop verdicts of the runs that did not diverge (linearisation and orbit:
     :func:`aiofl.reporting.orbit_pool.case_verdicts`) are computed in worker processes,
     which load each design's preset by its name (and apply ``ts``), while this process
-    computes the sampling limits."""
+    computes the sampling limits.
+
+    Parameters
+    ----------
+    available
+        Preset names to choose from (as for :func:`discover_cases`).
+    on_stage
+        Called with a description before each stage (None: silent).
+    ts
+        Run every design sampled at this sample time [s] (None: as configured).
+
+    Returns
+    -------
+    Reproduction
+    """
     stage = on_stage or (lambda _msg: None)
     t0 = time.perf_counter()
     stage("loading presets")

@@ -235,7 +235,21 @@ def _sensor_rows(cfg: Any) -> list[list[str]]:
 
 
 def design_report(cfg: Any, label: str, *, draws: int | None = None) -> DesignReport:
-    """Run and measure ``cfg`` (a :class:`~aiofl.config.RunConfig`) for its report."""
+    """Run and measure ``cfg`` (a :class:`~aiofl.config.RunConfig`) for its report.
+
+    Parameters
+    ----------
+    cfg
+        The run config.
+    label
+        How the report names it.
+    draws
+        Draws of its ``[uncertainty]`` table to run (None: the table's; without one, none).
+
+    Returns
+    -------
+    DesignReport
+    """
     from aiofl.plants.operating_point import trim
     from aiofl.reporting.cases import computed_record
     from aiofl.reporting.figures import config_figure, figure_png

@@ -327,7 +327,29 @@ def result_figure(
     input_unit: str = "",
 ) -> Figure:
     """The figure of one simulation (``aiofl simulate``): output vs reference, tracking
-    error and control, in the plant's units."""
+    error and control, in the plant's units.
+
+    Parameters
+    ----------
+    result
+        The run (with stored trajectories).
+    title
+        The figure's title.
+    t_final
+        The horizon [s].
+    structure
+        The controller's structure (its colour and label).
+    reference
+        t -> r(t), drawn with the output (None: not drawn).
+    events
+        ``(time, label)`` marks (disturbance, parameter change).
+    output_unit, input_unit
+        The plant's units.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     panel = Panel(
         structure or "run",
         result,
@@ -343,7 +365,21 @@ def result_figure(
 
 def config_figure(cfg: Any, result: SimulationResult, title: str) -> Figure:
     """:func:`result_figure` of a run config's run: its horizon, structure, reference,
-    events and the plant's units (``aiofl simulate``'s and ``aiofl report``'s figure)."""
+    events and the plant's units (``aiofl simulate``'s and ``aiofl report``'s figure).
+
+    Parameters
+    ----------
+    cfg
+        The run config.
+    result
+        Its run (with stored trajectories).
+    title
+        The figure's title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     return result_figure(
         result,
         title,

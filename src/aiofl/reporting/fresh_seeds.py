@@ -87,7 +87,21 @@ def compute_fresh_seeds(
 ) -> FreshSeeds:
     """Run every scenario-3 case (with noise) on every seed of ``seeds`` with its own
     measurement: one :func:`~aiofl.engine.simulation.simulate_batch` call per group of
-    designs sharing the plant, horizon, step, method and divergence threshold."""
+    designs sharing the plant, horizon, step, method and divergence threshold.
+
+    Parameters
+    ----------
+    cases
+        The report's cases (only scenario 3's with noise run).
+    seeds
+        The noise seeds (default :data:`FRESH_SEEDS`).
+    on_stage
+        Called with a description first (None: silent).
+
+    Returns
+    -------
+    FreshSeeds
+    """
     from aiofl.engine.simulation import simulate_batch
 
     chosen = [

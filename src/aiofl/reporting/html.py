@@ -40,6 +40,7 @@ from aiofl.reporting.page import html_table as _html_table
 from aiofl.reporting.page import img as _img
 from aiofl.reporting.page import item_list as _list
 from aiofl.reporting.paper import SCENARIOS
+from aiofl.reporting.rig_rows import RIG_HEADER, RIG_TITLE, rig_notes, rig_rows
 from aiofl.reporting.robust_rows import ROBUST_HEADER, robust_notes, robust_rows
 from aiofl.reporting.sensor_rows import SENSOR_HEADER, SENSOR_TITLE, sensor_notes, sensor_rows
 from aiofl.reporting.summary import (
@@ -107,6 +108,11 @@ def _robust_sections(rep: Reproduction, figures: Mapping[str, bytes]) -> list[st
         body.append(f"<h2>{_e(SENSOR_TITLE)}</h2>")
         body.append(_html_table(SENSOR_HEADER, rows))
         body.append(_details("What these columns are", [_list(sensor_notes(rep), "notes")]))
+    rows = rig_rows(rep)
+    if rows:
+        body.append(f"<h2>{_e(RIG_TITLE)}</h2>")
+        body.append(_html_table(RIG_HEADER, rows))
+        body.append(_details("What these columns are", [_list(rig_notes(rep), "notes")]))
     rows = fresh_rows(rep)
     if rows:
         body.append(f"<h2>{_e(FRESH_TITLE)}</h2>")

@@ -58,6 +58,10 @@ def fit_figure(fit: Any, log: Log | None = None, title: str = "") -> Figure:
         The log (for its units), or None.
     title
         The figure's title (plain text).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     from matplotlib.figure import Figure
 
@@ -110,6 +114,10 @@ def eso_figure(eso: Any, log: Log, title: str = "") -> Figure:
         The log it ran over.
     title
         The figure's title (plain text).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     from matplotlib.figure import Figure
 

@@ -134,7 +134,21 @@ def parse_noise_front(text: str, *, name: str, structure: str, label: str = "") 
     Checks: the columns ``itae:nominal``, ``itae:cvar``, ``isu:nominal <= ...``,
     ``stable_fraction >= ...`` and a last column ``chosen``; the parameters are the columns
     before ``itae:nominal``; every row numeric, finite parameters, ITAE > 0, ISU >= 0, one
-    row chosen."""
+    row chosen.
+
+    Parameters
+    ----------
+    text
+        The file's text.
+    name
+        The file's name, for messages.
+    structure, label
+        The controller structure, and the front's label (default: the structure).
+
+    Returns
+    -------
+    NoiseFront
+    """
     header, body = _rows(text, name)
     if header[-1] != "chosen":
         raise FrontFileError(f"{name}: the last column must be 'chosen', got {header[-1]!r}")
@@ -157,7 +171,22 @@ def parse_noise_front(text: str, *, name: str, structure: str, label: str = "") 
 
 def parse_noise_robust(text: str, front: NoiseFront, *, name: str) -> NoiseFront:
     """Attach a companion robust file (rows matched to the front's by parameter values,
-    relative tolerance 1e-9); raises :class:`FrontFileError`."""
+    relative tolerance 1e-9); raises :class:`FrontFileError`.
+
+    Parameters
+    ----------
+    text
+        The robust file's text.
+    front
+        The front it belongs to.
+    name
+        The file's name, for messages.
+
+    Returns
+    -------
+    NoiseFront
+        ``front`` with the robust statistics.
+    """
     header, body = _rows(text, name)
     k = len(front.names)
     if tuple(header[:k]) != front.names or "itae_q95" not in header[k:]:

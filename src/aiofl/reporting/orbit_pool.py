@@ -144,7 +144,21 @@ def case_verdicts(
 ) -> dict[str, dict[str, Any]]:
     """:func:`closed_loop_verdict` (linearisation and orbit) of each preset, started in the
     order given (the report starts the likely slowest first), on ``workers`` processes as
-    :func:`orbit_verdicts`; preset name → record, in the order of ``presets``."""
+    :func:`orbit_verdicts`; preset name → record, in the order of ``presets``.
+
+    Parameters
+    ----------
+    presets
+        The preset names.
+    ts
+        Sample every design at this sample time [s] (None: as configured).
+    workers
+        The processes (None: the usable cores, at most :data:`MAX_WORKERS`).
+
+    Returns
+    -------
+    dict of str to dict
+    """
     return _pool([(name, ts, None) for name in presets], workers)
 
 

@@ -60,7 +60,23 @@ def html_table(
     header: Sequence[str], rows: Sequence[Sequence[str]], *, cls: str = "", context_rows: int = 0
 ) -> str:
     """An HTML table; the last ``context_rows`` rows are styled as context (not results).
-    A cell that is :class:`Raw` is inserted as HTML."""
+    A cell that is :class:`Raw` is inserted as HTML.
+
+    Parameters
+    ----------
+    header
+        The column headings (plain text).
+    rows
+        The cells (plain text, or :class:`Raw` HTML).
+    cls
+        The table's CSS class.
+    context_rows
+        How many of the last rows are context.
+
+    Returns
+    -------
+    str
+    """
     parts = [f'<table class="{cls}"><thead><tr>']
     parts += [f"<th>{escape(h)}</th>" for h in header]
     parts.append("</tr></thead><tbody>")
@@ -82,7 +98,21 @@ def item_list(items: Sequence[str], cls: str) -> str:
 
 def details(summary: str, body: Sequence[str], *, heading: bool = False) -> str:
     """A collapsed ``<details>`` block; ``summary`` is plain text (an ``<h2>`` when
-    ``heading``), ``body`` HTML."""
+    ``heading``), ``body`` HTML.
+
+    Parameters
+    ----------
+    summary
+        The summary line (plain text).
+    body
+        The content (HTML).
+    heading
+        Show the summary as an ``<h2>``.
+
+    Returns
+    -------
+    str
+    """
     head = f"<h2>{escape(summary)}</h2>" if heading else escape(summary)
     return f"<details><summary>{head}</summary>" + "".join(body) + "</details>"
 
@@ -118,6 +148,22 @@ def page_png(data: bytes, colours: int = PAGE_COLOURS) -> bytes:
 
 
 def img(figures: Mapping[str, bytes], name: str, alt: str) -> list[str]:
+    """An ``<img>`` of ``figures[name]`` inlined as a palette PNG (:func:`page_png`) data URL.
+
+    Parameters
+    ----------
+    figures
+        Figure images (PNG bytes) by name.
+    name
+        The figure's name.
+    alt
+        Its alternative text.
+
+    Returns
+    -------
+    list of str
+        One HTML line, or none.
+    """
     if name not in figures:
         return []
     data = base64.b64encode(page_png(figures[name])).decode("ascii")

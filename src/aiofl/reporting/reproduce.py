@@ -28,6 +28,13 @@ from aiofl.reporting.fronts import FRONT_SCENARIOS, front_figure, fronts_markdow
 from aiofl.reporting.html import html_report
 from aiofl.reporting.noise_front import load_noise_fronts, noise_figure, noise_markdown
 from aiofl.reporting.paper import SCENARIOS
+from aiofl.reporting.rig_rows import (
+    RIG_DESIGNS,
+    RIG_DRAWS_N,
+    compute_rig_table,
+    rig_markdown,
+    with_rig_records,
+)
 from aiofl.reporting.robust_rows import (
     DEFAULT_DRAWS,
     DEFAULT_SEED,
@@ -97,6 +104,7 @@ def _reproduce(
     fronts_dir: str | Path | None,
 ) -> Reproduction:
     stage = on_stage or (lambda _msg: None)
+    available = None if available is None else list(available)
     rep = compute(available=available, on_stage=stage, ts=ts)
     t0 = time.perf_counter()
     table = compute_robustness([r.case for r in rep.runs], draws=draws, seed=seed, on_stage=stage)
@@ -107,20 +115,30 @@ def _reproduce(
     t2 = time.perf_counter()
     fresh = compute_fresh_seeds([r.case for r in rep.runs], on_stage=stage)
     t3 = time.perf_counter()
+    rig = compute_rig_table(
+        [r.case for r in rep.runs],
+        own=ideal,
+        draws=min(draws, RIG_DRAWS_N),
+        extra=[n for n in RIG_DESIGNS if available is None or n in available],
+        on_stage=stage,
+    )
+    t4 = time.perf_counter()
     stage("reading the shipped Pareto fronts")
     rep = replace(
         rep,
         robustness=table,
         sensors=sensors,
-        records=with_sensors(with_robustness(rep.records, table), sensors),
+        records=with_rig_records(with_sensors(with_robustness(rep.records, table), sensors), rig),
         fronts=load_fronts(fronts_dir),
         noise_fronts=load_noise_fronts(fronts_dir),
         fresh=fresh,
+        rig=rig,
         timings={
             **rep.timings,
             "robustness": t1 - t0,
             "sensors": t2 - t1,
             "fresh noise seeds": t3 - t2,
+            "rig": t4 - t3,
         },
         engine={
             "sensors": (
@@ -172,6 +190,7 @@ def _reproduce(
                 tables_markdown(rep),
                 robust_markdown(rep),
                 sensor_markdown(rep),
+                rig_markdown(rep),
                 fresh_markdown(rep),
                 fronts_markdown(rep),
                 noise_markdown(rep),

@@ -131,6 +131,21 @@ def compute_robustness(
     the plant at t > 0, is listed in ``skipped`` with the reason instead of failing the
     report.  The cases run scenario by scenario (designs of different scenarios never
     share an engine call), and ``on_stage`` is called with a description before each.
+
+    Parameters
+    ----------
+    cases
+        The report's cases.
+    draws, seed
+        The draws (0: none, None returned) and their seed.
+    on_stage
+        Called with a description before each scenario's run (None: silent).
+    corners, beta
+        Also run the box corners; measure the β/b0 ranges.
+
+    Returns
+    -------
+    RobustTable or None
     """
     from dataclasses import replace
 

@@ -132,7 +132,22 @@ def compute_sensor_table(
     already made (the report's own runs of the presets, the numbers of ``aiofl
     simulate``): they fill the ideal column of the presets whose shipped measurement *is*
     the ideal one (continuous, no quantum), so those are not run twice; a sampled preset's
-    ideal column is always run."""
+    ideal column is always run.
+
+    Parameters
+    ----------
+    cases
+        The report's cases.
+    ideal
+        Runs already made, by preset (``itae``, ``isu``, ``diverged``, ``stopped_at``); None:
+        none.
+    on_stage
+        Called with a description before each call (None: silent).
+
+    Returns
+    -------
+    SensorTable
+    """
     from aiofl.engine.simulation import simulate_batch
 
     ideal = ideal or {}

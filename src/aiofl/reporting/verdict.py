@@ -79,7 +79,22 @@ def step_text(result: Any, output_unit: str = "") -> str | None:
 
 def command_text(result: Any, t_final: float, input_unit: str = "") -> str | None:
     """Peak |u|, its standard deviation at steady state (how much noise reaches the
-    actuator) and the time at the actuator's limit."""
+    actuator) and the time at the actuator's limit.
+
+    Parameters
+    ----------
+    result
+        The run.
+    t_final
+        The horizon [s].
+    input_unit
+        The plant's input unit.
+
+    Returns
+    -------
+    str or None
+        None without step metrics.
+    """
     r = result.response
     if not r:
         return None

@@ -32,7 +32,22 @@ def clip_to_ceiling(
 ) -> tuple[TuneSettings, tuple[str, ...]]:
     """``settings`` with ``eso.omega0``'s upper bound clipped to the config's ω0 ceiling,
     and the sentence saying so (none when ``omega0_ceiling`` is off).  Raises
-    :class:`aiofl.config.ConfigError` naming ``tune.omega0_ceiling`` when it cannot apply."""
+    :class:`aiofl.config.ConfigError` naming ``tune.omega0_ceiling`` when it cannot apply.
+
+    Parameters
+    ----------
+    cfg
+        The tuned run config.
+    settings
+        Its ``[tune]`` settings.
+    source
+        The config's name, for the message.
+
+    Returns
+    -------
+    settings : TuneSettings
+    notes : tuple of str
+    """
     from aiofl.analysis.observer_bandwidth import config_ceiling
     from aiofl.config import ConfigError
 

@@ -53,6 +53,15 @@ def save_checkpoint(path: Path, fingerprint: str, gens: list[dict[str, Any]]) ->
 
     Each generation is a dict with arrays ``s`` (unit-cube members), ``metrics``,
     ``failed``, ``stopped_at`` and the float ``seconds``; other keys are not stored.
+
+    Parameters
+    ----------
+    path
+        The checkpoint file (``.npz``).
+    fingerprint
+        The run's fingerprint; :func:`load_checkpoint` refuses another run's file.
+    gens
+        The generations so far (above).
     """
     from aiofl.outputs import atomic_write_bytes, ensure_output_dir
 
@@ -136,6 +145,15 @@ def check_replay(stored: dict[str, Any], s: NDArray[np.float64], generation: int
     ``stored`` is generation ``generation`` (counted from 1) as loaded by
     :func:`load_checkpoint`, ``s`` the population the algorithm asks for now (unit cube).
     Raises :class:`aiofl.config.ConfigError` unless they are equal bit for bit.
+
+    Parameters
+    ----------
+    stored
+        The stored generation, as :func:`load_checkpoint` loaded it.
+    s
+        The population the algorithm asks for now (unit cube).
+    generation
+        Its number, from 1 (for the message).
     """
     if stored["s"].shape != s.shape or not np.array_equal(stored["s"], s):
         from aiofl.config import ConfigError

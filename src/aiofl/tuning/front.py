@@ -105,21 +105,37 @@ def choose(F: NDArray[np.float64], rule: str) -> int:
     raise ValueError(f"choose = {rule!r}; allowed: best-first-under-constraints, knee")
 
 
-def front_of_run(prep: Any, gens: list[dict[str, Any]], values: NDArray[np.float64]) -> Any:
+def front_of_run(prep: Any, gens: Sequence[Any], values: NDArray[np.float64]) -> Any:
     """The Pareto front over every evaluated design of a run, and the chosen one.
 
-    ``prep`` is the run's prepared settings (:func:`aiofl.tuning.search.prepare`), ``gens``
-    its generations (dicts with ``F``, ``G``, ``raw`` per candidate), ``values`` (N, d) the
-    parameter values of all N evaluated candidates.
+    Parameters
+    ----------
+    prep
+        The run (:func:`aiofl.tuning.prepared.prepare`).
+    gens
+        Its generations (:class:`aiofl.tuning.problem.Generation`: ``scores.F``,
+        ``scores.G``, ``scores.raw`` per candidate).
+    values
+        The parameter values of all N evaluated candidates, (N, d).
+
+    Returns
+    -------
+    Front
+
+    Raises
+    ------
+    NoFeasibleDesign
+        When no evaluated design is feasible.
     """
-    F = np.concatenate([g["F"] for g in gens])
-    G = np.concatenate([g["G"] for g in gens])
-    raw = np.concatenate([g["raw"] for g in gens])
+    F = np.concatenate([g.scores.F for g in gens])
+    G = np.concatenate([g.scores.G for g in gens])
+    raw = np.concatenate([g.scores.raw for g in gens])
+    objective = prep.objective
     idx = pareto_front(F, G)
     if idx.size == 0:
         raise NoFeasibleDesign(
             f"no design of the {F.shape[0]} evaluated stayed stable on every member and met "
-            f"the constraints {[c.text() for c in prep.constraints]}; loosen them or widen "
+            f"the constraints {[c.text() for c in objective.constraints]}; loosen them or widen "
             "the search"
         )
     # one row per distinct design (a design may be evaluated twice across generations)
@@ -128,10 +144,10 @@ def front_of_run(prep: Any, gens: list[dict[str, Any]], values: NDArray[np.float
     st = prep.settings
     front = Front(
         names=prep.space.names,
-        objectives=tuple(q.text() for q in prep.objectives),
-        constraints=tuple(c.text() for c in prep.constraints),
+        objectives=tuple(q.text() for q in objective.objectives),
+        constraints=tuple(c.text() for c in objective.constraints),
         values=values[idx],
-        F=F[idx] * np.array([q.sign for q in prep.objectives]),  # margins as themselves
+        F=F[idx] * np.array([q.sign for q in objective.objectives]),  # margins as themselves
         raw=raw[idx],
         chosen=choose(F[idx], st.choose),  # minimisation form
         rule=st.choose,
@@ -184,6 +200,23 @@ def front_figure(
     (the y ≡ 0 controller's ISU) is symmetric-log starting at 0, so no negative decades
     are drawn to place it.  Title, notes and axis labels are plain text, never mathtext: a
     ``$`` in a config's path or an error message cannot break the figure.
+
+    Parameters
+    ----------
+    front
+        The front.
+    title
+        The figure's title (plain text).
+    markers
+        ``(label, objective 2, objective 1)`` reference points.
+    isu_floor
+        The exact-tracking ISU floor, drawn as a line (None: not drawn).
+    notes
+        Lines printed under the title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     from matplotlib.figure import Figure
 
@@ -246,7 +279,17 @@ def front_png(
     isu_floor: float | None = None,
     notes: Sequence[str] = (),
 ) -> bytes:
-    """``front.png``: :func:`front_figure` rendered to PNG bytes (Agg, no pyplot state)."""
+    """``front.png``: :func:`front_figure` rendered to PNG bytes (Agg, no pyplot state).
+
+    Parameters
+    ----------
+    front, title, markers, isu_floor, notes
+        As for :func:`front_figure`.
+
+    Returns
+    -------
+    bytes
+    """
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     fig = front_figure(front, title, markers, isu_floor, notes)

@@ -68,7 +68,18 @@ _WORST = {"pm": -math.inf, "gm": -math.inf, "dm": -math.inf, "ms": math.inf}
 
 def design_margins(plant: Any, controller: Any, scenario: Any) -> dict[str, float]:
     """``{"pm", "gm", "dm", "ms"}`` of one design (module docstring); the worst values
-    when the linearised closed loop is not stable or has no operating point."""
+    when the linearised closed loop is not stable or has no operating point.
+
+    Parameters
+    ----------
+    plant, controller, scenario
+        The design.
+
+    Returns
+    -------
+    dict of str to float
+        ``pm`` [deg], ``gm`` [dB], ``dm`` [s], ``ms``.
+    """
     from aiofl.analysis.linearize import linearize_closed_loop
 
     try:
@@ -99,6 +110,10 @@ def candidate_margins(
     skip
         Candidates not to linearise (e.g. diverged in simulation); they get the worst
         values.
+
+    Returns
+    -------
+    dict of str to ndarray
     """
     values = np.atleast_2d(np.asarray(values, dtype=np.float64))
     out = {k: np.full(values.shape[0], _WORST[k]) for k in MARGIN_QUANTITIES}
@@ -131,6 +146,20 @@ def design_warnings(
 
     ``parameters`` are the ``[tune]`` search intervals (objects with ``lo``, ``hi``,
     ``log``), ``values`` the chosen values; ``config`` the chosen design's run config.
+
+    Parameters
+    ----------
+    config
+        The chosen design's run config.
+    parameters
+        The ``[tune]`` search intervals (``lo``, ``hi``, ``log``), by name.
+    values
+        The chosen values, by name.
+
+    Returns
+    -------
+    warnings : list of str
+    margins : dict of str to float or None
     """
     warn = []
     for name, b in parameters.items():

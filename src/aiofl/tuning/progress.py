@@ -31,6 +31,19 @@ class TuneProgress:
     def __init__(
         self, st: TuneSettings, ev: Any, *, enabled: bool, first_objective: str | None = None
     ) -> None:
+        """The progress bar of a tuning run.
+
+        Parameters
+        ----------
+        st
+            The run's settings (algorithm, population, generations).
+        ev
+            The evaluator (its ``description`` says whether it runs on Dask).
+        enabled
+            Show the bar (False: every method does nothing).
+        first_objective
+            The first objective's name, labelled ``lowest NAME`` (None: ``best``).
+        """
         self.enabled = enabled
         self.total = st.generations
         where = getattr(ev, "description", "")
@@ -72,7 +85,17 @@ class TuneProgress:
 
     def update(self, gen: int, best: float, live_n: int, live_s: float) -> None:
         """Show generation ``gen`` done, ``best`` so far, and ``live_n`` candidates simulated
-        in ``live_s`` seconds over the run so far (none: every generation was replayed)."""
+        in ``live_s`` seconds over the run so far (none: every generation was replayed).
+
+        Parameters
+        ----------
+        gen
+            The generations done.
+        best
+            The best objective so far.
+        live_n, live_s
+            Candidates simulated, and the seconds they took, over the run so far.
+        """
         self.fields = {
             "label": self.label,
             "best": f"{best:.6g}" if np.isfinite(best) else "—",

@@ -219,6 +219,19 @@ def best_toml(result: TuneResult, out: str | Path, header: str = "") -> str:
     no longer matches the tuned config (edited during the run), the config is written
     afresh (:func:`aiofl.tuning.space.to_toml`).  ``header`` (default: the run's
     provenance) is prepended as comments.
+
+    Parameters
+    ----------
+    result
+        The tuning run's result.
+    out
+        The output folder ``best.toml`` is written in.
+    header
+        Comment lines to prepend (default: the run's provenance).
+
+    Returns
+    -------
+    str
     """
     import os
     import tomllib

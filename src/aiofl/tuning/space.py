@@ -15,7 +15,7 @@ r"""The ``[tune]`` table: settings, search space, objective, and writing a tuned
     noise_realisations = 1    # K > 1: a noisy measurement scored over K noise realisations
     omega0_ceiling = false    # true: eso.omega0's hi clipped to the rig's omega0 ceiling
                               # (aiofl.tuning.ceiling; aiofl tune --omega0-ceiling)
-    # nsga2 only: objectives (2 or 3) and constraints, see aiofl.tuning.robust
+    # nsga2 only: objectives (2 or 3) and constraints, see aiofl.tuning.objective
     # objectives = ["itae", "isu"]          # METRIC or METRIC:AGGREGATE
     # constraints = ["isu <= 15.5", "stable_fraction >= 1"]
     # choose = "best-first-under-constraints"   # or "knee" (aiofl.tuning.front)
@@ -37,14 +37,8 @@ the configured structure (tuning ``td.R`` of a linear prefilter is rejected).
 The search runs in the unit cube: coordinate :math:`s\in[0,1]` maps to
 :math:`lo + s(hi-lo)`, or to :math:`lo\,(hi/lo)^s` with ``log = true``.
 
-The objective is linear in the engine's metrics, :math:`J = c^T m` with
-:math:`m = (\mathrm{ITAE}, \mathrm{IAE}, \mathrm{ISE}, \mathrm{ISU}, \mathrm{IAU})` over
-the tuning horizon; the OPI of eq. (22) is
-:math:`c = (w_1/N_1, 0, 0, w_2/N_2, w_3/N_3)` with the config's ``[metrics]`` weights.  A
-member that diverges at :math:`t_d` scores
-:math:`P\,(2 - t_d/t_f)` (P = ``divergence_penalty``): finite, worse than any stable
-member with J < P, and better the later it diverges, which steers the search towards
-stability.
+The objective (one, or NSGA-II's objectives and constraints) and its penalty for a member
+that diverges are :mod:`aiofl.tuning.objective`'s.
 
 With a noisy measurement (``[sensor]`` or ``[scenario]`` noise) ``noise_realisations = K``
 scores every candidate over K noise sequences, the same K for every candidate (common
@@ -52,7 +46,7 @@ random numbers; realisation 0 is the config's noise seed, the others
 :func:`aiofl.scenario.realisation_seed`): a candidate's metrics are their mean over the K
 realisations (a candidate that diverges on any is diverged), so the linear objective is the
 mean cost; with ``robust`` every draw gets its K realisations and the robust aggregate
-runs over the draws of these means (:mod:`aiofl.tuning.robust`).
+runs over the draws of these means (:mod:`aiofl.tuning.objective`).
 """
 
 from __future__ import annotations
@@ -70,7 +64,6 @@ from aiofl import layout as L
 from aiofl.limits import DT_MAX, MAX_EVALUATIONS, MAX_POPULATION, T_FINAL_MAX
 
 if TYPE_CHECKING:  # pragma: no cover
-    from aiofl.config import RunConfig
     from aiofl.controller import Controller
 
 __all__ = [
@@ -79,8 +72,6 @@ __all__ = [
     "SearchSpace",
     "TuneSettings",
     "config_with_values",
-    "objective_coefficients",
-    "objective_values",
     "parse_tune_settings",
     "to_toml",
     "update_toml",
@@ -160,7 +151,7 @@ class TuneSettings(_Model):
     @field_validator("objectives")
     @classmethod
     def _objectives(cls, v: list[str] | None) -> list[str] | None:
-        from aiofl.tuning.robust import parse_quantity
+        from aiofl.tuning.objective import parse_quantity
 
         if v is None:
             return v
@@ -177,7 +168,7 @@ class TuneSettings(_Model):
     @field_validator("constraints")
     @classmethod
     def _constraints(cls, v: list[str]) -> list[str]:
-        from aiofl.tuning.robust import parse_constraint
+        from aiofl.tuning.objective import parse_constraint
 
         for c in v:
             parse_constraint(c)
@@ -193,7 +184,7 @@ class TuneSettings(_Model):
                 "the single-objective algorithms use objective)"
             )
         if self.robust is None:
-            from aiofl.tuning.robust import parse_constraint, parse_quantity
+            from aiofl.tuning.objective import parse_constraint, parse_quantity
 
             named = [parse_quantity(q) for q in self.objectives or ()]
             named += [parse_constraint(c).quantity for c in self.constraints]
@@ -305,44 +296,6 @@ def parse_tune_settings(data: Mapping[str, Any] | TuneSettings | None) -> TuneSe
         raise ConfigError("\n".join(lines)) from None
 
 
-# ------------------------------------------------------------------- objective
-def objective_coefficients(settings: TuneSettings, config: RunConfig) -> NDArray[np.float64]:
-    """Coefficients c over :data:`aiofl.layout.METRIC_NAMES` with objective :math:`J = c^T m`."""
-    c = np.zeros(L.N_METRIC)
-    obj = settings.objective
-    if obj == "opi":
-        w = config.weights
-        c[L.M_ITAE] = w.w_itae / w.n_itae
-        c[L.M_ISU] = w.w_isu / w.n_isu
-        c[L.M_IAU] = w.w_iau / w.n_iau
-    elif isinstance(obj, str):
-        c[L.METRIC_NAMES.index(obj)] = 1.0
-    else:
-        for name, weight in obj.items():
-            c[L.METRIC_NAMES.index(name)] = weight
-    return c
-
-
-def objective_values(
-    metrics: NDArray[np.float64],
-    failed: NDArray[np.bool_],
-    stopped_at: NDArray[np.float64],
-    coefficients: NDArray[np.float64],
-    penalty: float,
-    t_final: float,
-) -> NDArray[np.float64]:
-    r"""Objective of each member: :math:`c^T m`, or :math:`P(2 - t_d/t_f)` if it diverged.
-
-    A non-finite :math:`c^T m` also scores :math:`2P`.  Every value is finite.
-    """
-    with np.errstate(all="ignore"):
-        j = metrics[..., : L.N_METRIC] @ coefficients  # the integrals (SCORE_NAMES' first)
-    frac = np.clip(np.nan_to_num(stopped_at / t_final, nan=0.0), 0.0, 1.0)
-    pen = penalty * (2.0 - frac)
-    j = np.where(failed, pen, j)
-    return np.where(np.isfinite(j), j, 2.0 * penalty)
-
-
 # ---------------------------------------------------------------- search space
 class SearchSpace:
     """Unit-cube encoding of the tuned parameters (linear or log per parameter)."""
@@ -426,6 +379,19 @@ def config_with_values(
 
     Vector entries (``sef.k2``, ``eso.alpha3``) are written into their lists, which are
     filled from ``controller``'s current values where the config left them out.
+
+    Parameters
+    ----------
+    raw
+        The config dict.
+    controller
+        Its controller.
+    values
+        The parameter values by engine name (``eso.omega0``, ``sef.k2``, ...).
+
+    Returns
+    -------
+    dict
     """
     out = copy.deepcopy(dict(raw))
     ctrl = out.setdefault("controller", {})
@@ -516,6 +482,21 @@ def update_toml(
     ``config`` (the tuned config dict, see :func:`config_with_values`); a missing table is
     added.  ``header`` lines are prepended as comments.  Parsing the result gives ``config``
     wherever ``source`` and ``config`` agree outside those entries.
+
+    Parameters
+    ----------
+    source
+        The config's TOML text.
+    config
+        The tuned config dict.
+    names
+        The tuned engine columns (``eso.omega0``, ``sef.k2``, ...).
+    header
+        Comment lines to prepend.
+
+    Returns
+    -------
+    str
     """
     import tomlkit
     from tomlkit.items import Array
