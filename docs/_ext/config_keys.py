@@ -167,6 +167,10 @@ KEY_MEANINGS: dict[str, str] = {
     "controller.eso.u0": 'The command held at the start (with ``init = "output"`` or '
     '``"bumpless"``): the extended state starts at ξ̂_{ρ+1} = −b0·u0, so u(t0) = u0 '
     '(bumpless transfer); ``"trim"``: the holding input at the initial output.',
+    "controller.eso.delay": "A known measurement delay [s], a whole number (at most 8) of the "
+    "sampled controller's ts: the ESO is fed the command that many samples older and the "
+    'reference is delayed as much (aligned with the measurement); ``"rig"``: the '
+    "``[rig]``'s ``measurement_delay``.",
     "controller.eso.model": '``"none"``: model-free (eq. 5); ``"nominal"``: '
     "model-assisted, the observer's ρ-th equation carries the plant's nominal α0(x̂) + "
     "β0(x̂)u at x̂ = Φ⁻¹(ξ̂), so ξ̂_{ρ+1} estimates only what the model misses.",
