@@ -32,7 +32,7 @@ working folder set to the case folder, and is classified
 * ``exit2``: refused with one ``aiofl: error:`` message, ``--out`` not created;
 * ``other``: a traceback, another exit status, non-strict JSON, C that fails to compile;
 * ``leftover``: a staging / trash folder, or files in ``--out`` after a refusal (a tune
-  refused after it ran may keep its checkpoint: README, Checkpoint and resume);
+  refused after it ran may keep its checkpoint: docs/guide/tuning.md, Checkpoint and resume);
 * ``code``: the marker reached the C code, or an injected command ran;
 * ``hang``: no answer within ``--timeout`` seconds.
 

@@ -8,9 +8,9 @@
   message names the same field as the config's;
 * a sample of bad TOML files: ``aiofl simulate --check`` exits 2 naming the field, and the
   same value in Python raises naming it too;
-* the README's notebook block runs as a script: its :class:`aiofl.Design` on a plant
-  defined in Python simulates, tunes, runs robustness, analyses and exports C that
-  compiles with ``-std=c99 -Wall -Wextra -Werror``.
+* the manual's notebook block (``docs/guide/simulate.md``) runs as a script: its
+  :class:`aiofl.Design` on a plant defined in Python simulates, tunes, runs robustness,
+  analyses and exports C that compiles with ``-std=c99 -Wall -Wextra -Werror``.
 """
 
 from __future__ import annotations
@@ -401,15 +401,16 @@ def test_a_redefined_python_plant_replaces_the_old_one() -> None:
     assert parse_config(copy.deepcopy(d.config.raw)).plant is second
 
 
-def test_the_readme_notebook_block_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
-    """The README's notebook block, run as a script (a file, as a user's would be: its
-    plant's kernel is cached on disk), and the notebook path it shows on a plant defined in
-    Python: the design simulates, tunes (best.toml), runs robustness over its draws,
-    analyses, and exports C that compiles with ``-std=c99 -Wall -Wextra -Werror``."""
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
-    blocks = re.findall(r"```python\n(.*?)```", readme, flags=re.S)
+def test_the_manual_s_notebook_block_runs(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The manual's notebook block (docs/guide/simulate.md), run as a script (a file, as a
+    user's would be: its plant's kernel is cached on disk), and the notebook path it shows
+    on a plant defined in Python: the design simulates, tunes (best.toml), runs robustness
+    over its draws, analyses, and exports C that compiles with ``-std=c99 -Wall -Wextra
+    -Werror``."""
+    page = Path(__file__).resolve().parents[1] / "docs" / "guide" / "simulate.md"
+    blocks = re.findall(r"```python\n(.*?)```", page.read_text(encoding="utf-8"), flags=re.S)
     block = next(b for b in blocks if "Design(" in b)
-    script = tmp_path / "readme_notebook.py"
+    script = tmp_path / "notebook_block.py"
     script.write_text(block, encoding="utf-8")
     monkeypatch.chdir(tmp_path)
     namespace = runpy.run_path(str(script))

@@ -294,7 +294,7 @@ table_mutations = st.lists(
     max_size=2,
 )
 #: files a tune run refused *after* it ran (no feasible design) keeps: the checkpoint, so
-#: ``--resume --generations N`` can carry on (README, Checkpoint and resume)
+#: ``--resume --generations N`` can carry on (docs/guide/tuning.md, Checkpoint and resume)
 RESUMABLE = frozenset({"checkpoint.npz", ".aiofl-output"})
 
 

@@ -302,18 +302,18 @@ def test_a_plant_without_units_is_noted() -> None:
     assert note is not None and "output_unit" in note and "input_unit" not in note.split(",")[0]
 
 
-def test_the_readme_plant_file_shows_every_key_with_the_units() -> None:
+def test_the_manual_s_plant_file_shows_every_key_with_the_units() -> None:
     """output_unit/input_unit were documented only in a docstring."""
     from aiofl.plants.symbolic import SymbolicPlant
 
-    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text(encoding="utf-8")
-    blocks = re.findall(r"```toml\n(.*?)```", readme, flags=re.S)
+    page = Path(__file__).resolve().parents[1] / "docs" / "guide" / "plants.md"
+    blocks = re.findall(r"```toml\n(.*?)```", page.read_text(encoding="utf-8"), flags=re.S)
     (block,) = [b for b in blocks if re.search(r"^states = ", b, flags=re.M)]
     keys = set(re.findall(r"^#? ?(\w+) = |^\[(\w+)\]$", block, flags=re.M))
     keys = {k for pair in keys for k in pair if k}
     assert set(SymbolicPlant._KEYS) <= keys
     data = tomllib.loads(block)
-    plant = SymbolicPlant.from_dict(data, "README")
+    plant = SymbolicPlant.from_dict(data, "docs/guide/plants.md")
     assert (plant.output_unit, plant.input_unit) == ("rad", "N·m")
 
 

@@ -2,7 +2,7 @@
 
 A config, a command-line override or a ``[tune]`` table that asks for more than these is
 refused with a message naming the field, its value and the limit (exit status 2 on the
-command line).  The numbers are stated in the README's "Limits" paragraph.
+command line).  The numbers are stated in the manual's limits page (``docs/reference/limits.md``).
 
 =============================  ===========================================================
 limit                          what it bounds

@@ -26,7 +26,7 @@
 #include "replay.h"
 #endif
 
-/* the export's API (README, "Sampled controllers and C export"), default prefix and parameters */
+/* the export's API (docs/guide/export.md, "Firmware-ready C"), default prefix and parameters */
 typedef aiofl_signal ctrl_signal;
 #define CTRL_INIT(s, y0) aiofl_init((s), &aiofl_default_params, (y0))
 #define CTRL_STEP(s, r, y) aiofl_step((s), &aiofl_default_params, (r), (y))

@@ -33,7 +33,7 @@ eigenvalue (:func:`frequency_grid`); each crossing bracketed by a sign change on
 :func:`scipy.optimize.brentq` on the exact response, and each local maximum of
 :math:`|S|` by :func:`scipy.optimize.minimize_scalar`; the headline margins are chosen as
 :func:`control.stability_margins` chooses them (the gain margin closest to 0 dB, the
-smallest |phase margin|).  :func:`control.stability_margins` itself is not used on these
+smallest absolute phase margin).  :func:`control.stability_margins` itself is not used on these
 loops: on a state-space model it first converts to a transfer function, whose polynomial
 coefficients for the 10–13 states of a closed loop with :math:`\omega_0 \approx 10^3` span
 40 orders of magnitude; on sampled data it interpolates a spline between grid points,
@@ -370,7 +370,7 @@ def loop_margins(
 def loop_figure(
     loop: Any, margins: LoopMargins, title: str, omega: ArrayLike | None = None
 ) -> Figure:
-    """Bode plot (|L| and |S| in dB, ∠L in degrees) and Nyquist plot of L near −1.
+    """Bode plot (:math:`|L|`, :math:`|S|` in dB, ∠L in degrees) and Nyquist plot of L near −1.
 
     The crossovers of the reported margins are marked; the Nyquist panel shows L(jω) for
     ω > 0 (solid) and its mirror ω < 0 (dashed) within a window around −1, with the circle

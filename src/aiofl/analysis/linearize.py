@@ -214,7 +214,7 @@ class Linearization:
         return float(self.eigenvalues.real.max())
 
     def verdict(self, rtol: float = 1e-6) -> str:
-        """``"stable"``, ``"unstable"`` or ``"marginal"`` (|max Re| ≤ rtol·max|λ|)."""
+        """``"stable"``, ``"unstable"`` or ``"marginal"`` (abs(max Re λ) ≤ rtol·max abs(λ))."""
         return _verdict(self.eigenvalues, rtol)
 
     @property

@@ -240,7 +240,7 @@ def tracking_floquet(
     """Floquet multipliers of the tracking orbit of a sine reference (module docstring,
     step 3): ``{"multipliers": [[re, im], ...], "largest", "period", "closing", "range",
     "passes"}`` (multipliers of the last of ``passes`` periods after ``settle``; "range" the
-    largest |μ| over the passes, "closing" how well the last one closed).
+    largest abs(μ) over the passes, "closing" how well the last one closed).
 
     Parameters
     ----------

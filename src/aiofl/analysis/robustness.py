@@ -249,7 +249,7 @@ class RobustnessResult(_DrawStatistics):
         return int(np.argmax(self.itae))
 
     def influence(self) -> list[tuple[str, float | None]]:
-        """Drawn quantities by decreasing |Spearman correlation| with ITAE."""
+        """Drawn quantities by decreasing absolute Spearman correlation with ITAE."""
         from scipy.stats import spearmanr
 
         ranked = []

@@ -389,7 +389,7 @@ def unit_circle_margins(
     :math:`z = e^{j\omega T_s}`, :math:`\omega` up to the Nyquist frequency :math:`\pi/T_s`:
     crossings bracketed on a log grid (3000 points over six decades), refined by
     :func:`scipy.optimize.brentq`; the headline margins chosen as the continuous ones (the
-    gain margin closest to 0 dB, the smallest |phase margin|), distances at the crossings.
+    gain margin closest to 0 dB, the smallest absolute phase margin), distances at the crossings.
     The delay margin is :math:`\min_i \varphi_i/\omega_{gc,i}` over the gain crossovers
     (:math:`\varphi_i` in :math:`[0, 2\pi)`): the delay :math:`e^{-j\omega\tau}` that puts a
     crossing on −1 (exact for a whole number of samples, :math:`z^{-k}`; a fraction of a

@@ -82,7 +82,7 @@ DELAY_TS = 1e-3
 """Sample time [s] of the sampled delay margin of a config without ``[controller.discrete]``."""
 
 SATURATION_ALLOWANCE = 0.05
-"""Largest extra fraction of the horizon a stable sampled loop may spend at |u| = u_max."""
+"""Largest extra fraction of the horizon a stable sampled loop may spend at abs(u) = u_max."""
 
 CRITERIA = (
     "stable at Ts: (1) the sampled loop linearised at its operating point (ZOH of the "

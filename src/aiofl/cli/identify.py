@@ -115,7 +115,7 @@ def _design_text(first_text: str, plant_ref: str, overrides: dict[str, float], t
         "sef.omega_c": controller.get("sef", {}).get("omega_c"),
     }
     if "tune" not in doc and all(isinstance(v, (int, float)) for v in bands.values()):
-        # a robust search around the starting design (the README's robust-tuning table)
+        # a robust search around the starting design (docs/guide/tuning.md, robust tuning)
         doc["tune"] = {
             "algorithm": "ga",
             "objective": {"itae": 1.0, "isu": 0.1},

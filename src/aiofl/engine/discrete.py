@@ -69,7 +69,7 @@ TD_METHODS = ("fhan", "euler")
 QUANTUM_MIN = 1e-12
 """Smallest non-zero ADC/DAC quantum q: Q(v) = q·floor(v/q + 1/2) needs 1/q and v/q finite
 (q = 5e-324 gives 1/q = inf and NaN at v = 0); 1e-12 is finer than any converter (a 32-bit
-ADC over ±1 has q ≈ 5e-10) and keeps v/q finite for every |v| < 1e296."""
+ADC over ±1 has q ≈ 5e-10) and keeps v/q finite for every abs(v) < 1e296."""
 
 MIN_SAMPLES = 10
 """Fewest controller samples over a run's horizon, t_final/Ts: a sampled controller that

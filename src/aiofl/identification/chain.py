@@ -25,7 +25,7 @@ so its extra parameters buy almost nothing and the criterion refuses them.
 
 **Friction.**  A Coulomb friction force :math:`F_c\operatorname{sign}\dot y` is a
 disturbance a linear chain cannot explain; left out, it biases b0 (a friction of 15 % of
-b0·|u| biased it by +39 % in ``benchmarks/bench_identify.py``).  With ``friction=None``
+b0·abs(u) biased it by +39 % in ``benchmarks/bench_identify.py``).  With ``friction=None``
 (automatic) the orders ρ ≥ 2 are fitted with the term (the sign of ẏ from a
 Savitzky–Golay slope of the log, :func:`~aiofl.identification.chain_fit.velocity_sign`),
 and the chosen order keeps it only when its BIC is lower with it.  For ρ = 1 sign(ẏ) is

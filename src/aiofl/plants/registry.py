@@ -35,7 +35,7 @@ def python_plant_hint(name: str) -> str:
     return (
         f"if {name!r} is a plant defined in Python (aiofl.Plant), it is known only in the "
         "Python process that defined it: for the command line write it as a plant file "
-        "(states, f, g, h and [params] as expressions: README, Symbolic analysis) and set "
+        "(states, f, g, h and [params] as expressions: docs/guide/plants.md) and set "
         'plant = "FILE.toml"; '
         f"in Python call aiofl.register_plant({name!r}, lambda: plant) before loading "
         "the config"

@@ -1,11 +1,12 @@
-"""The README's walk-through and Python quickstart run as written (issue 22).
+"""The manual's walk-through and Python quickstart run as written (issues 22, 38).
 
-A fenced block preceded by ``<!-- test: walkthrough -->`` is a shell session: every line is
-an ``aiofl`` command (``#`` starts a comment, ``> FILE`` captures stdout) run in order in a
-temporary folder; each must exit 0.  To keep the test short, the config the walk-through
-copies is cut to a 2-s horizon (and 4 robust-tuning draws) right after ``aiofl show``; the
-commands themselves are not changed.  The block after ``<!-- test: quickstart -->`` is run
-as Python.
+The blocks live on the getting-started page (``docs/getting-started.md``); the README's
+quickstart is run too.  A fenced block preceded by ``<!-- test: walkthrough -->`` is a
+shell session: every line is an ``aiofl`` command (``#`` starts a comment, ``> FILE``
+captures stdout) run in order in a temporary folder; each must exit 0.  To keep the test
+short, the config the walk-through copies is cut to a 2-s horizon (and 4 robust-tuning
+draws) right after ``aiofl show``; the commands themselves are not changed.  The block
+after ``<!-- test: quickstart -->`` is run as Python.
 """
 
 from __future__ import annotations
@@ -19,14 +20,16 @@ from typer.testing import CliRunner
 
 from aiofl.cli.app import app
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+ROOT = Path(__file__).resolve().parents[1]
+PAGE = ROOT / "docs" / "getting-started.md"
+README = ROOT / "README.md"
 
 
-def _block(tag: str) -> tuple[str, str]:
+def _block(tag: str, page: Path = PAGE) -> tuple[str, str]:
     """The (language, text) of the fenced block right after ``<!-- test: TAG -->``."""
-    text = README.read_text(encoding="utf-8")
+    text = page.read_text(encoding="utf-8")
     m = re.search(rf"<!-- test: {tag} -->\n```(\w+)\n(.*?)\n```", text, re.S)
-    assert m is not None, f"README has no block marked <!-- test: {tag} -->"
+    assert m is not None, f"{page.name} has no block marked <!-- test: {tag} -->"
     return m[1], m[2]
 
 
@@ -83,11 +86,22 @@ def test_the_walkthrough_runs_in_order(tmp_path: Path, monkeypatch: pytest.Monke
     assert (tmp_path / "c" / "aiofl_controller.c").is_file()
 
 
-def test_the_python_quickstart_runs() -> None:
-    lang, code = _block("quickstart")
+@pytest.mark.parametrize("page", [PAGE, README], ids=["getting-started", "README"])
+def test_the_python_quickstart_runs(page: Path) -> None:
+    lang, code = _block("quickstart", page)
     assert lang == "python" and "paper-s1-inleso" not in code
     namespace: dict[str, object] = {}
-    exec(compile(code, "README quickstart", "exec"), namespace)
+    exec(compile(code, f"{page.name} quickstart", "exec"), namespace)
     res = namespace["res"]
     assert not res.failed and res.metrics["itae"] < 0.05  # type: ignore[attr-defined]
     assert not namespace["out"].failed.any()  # type: ignore[attr-defined]
+
+
+def test_the_readme_fits_on_a_screen_and_its_links_reach_pages() -> None:
+    """Issue 38: the README is at most 150 lines and every page it links exists."""
+    text = README.read_text(encoding="utf-8")
+    assert len(text.splitlines()) <= 150
+    links = re.findall(r"\]\(((?:docs|examples)/[^)#]+)\)", text)
+    assert len(links) >= 15, links
+    missing = [link for link in links if not (ROOT / link).is_file()]
+    assert not missing, missing
