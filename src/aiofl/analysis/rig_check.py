@@ -5,10 +5,10 @@ r"""A design on a rig: what a user gets when the design leaves the model for a r
 1 ms actuator lag, 1 % Coulomb friction at the plant's input) and runs it
 
 * on the **nominal plant** with the rig: the figures a user sees on the bench;
-* over **draws** of the design's own ``[uncertainty]`` box (or ±20 % of every plant
-  parameter the box does not name: none, if it has none) *and* of the rig's unmodelled
-  dynamics, :data:`RIG_DRAWS` (the actuator lag and the friction each × U[0.5, 1.5]):
-  what a plant nobody measured exactly does with it.
+* over **draws** of the design's own ``[uncertainty]`` box (for a design without one,
+  ±20 % of every plant parameter; or one ``box`` for every design judged together) *and*
+  of the rig's unmodelled dynamics, :data:`RIG_DRAWS` (the actuator lag and the friction
+  each × U[0.5, 1.5]): what a plant nobody measured exactly does with it.
 
 The design is run **as shipped**: a controller that was not told about the rig's delay
 (``[controller.eso] delay``) is not told now; ``told=True`` tells it (``delay = "rig"``).
@@ -21,8 +21,9 @@ control at all, :math:`y \equiv 0`: :math:`\int_0^{t_f} t\,|r|\,dt`), ``"screams
 plant is held, but at steady state the command is mostly the encoder's quantum,
 :func:`aiofl.engine.response.screaming`), ``"command ×N"`` (held, but its ISU is more
 than :data:`ISU_FACTOR` times the design's own run's: the rig's quantum, delay or lag drive
-the actuator far beyond what the design was judged with), ``"lost in k of N draws"`` (joined by
-"; " when several are true), or the nominal run's own ``"lost at t = …"`` / ``"diverged at t = …"``.
+the actuator far beyond what the design was judged with), ``"lost in k of N draws"``
+(joined by "; " when several are true), or the nominal run's own ``"lost at t = …"`` /
+``"diverged at t = …"``.
 """
 
 from __future__ import annotations
@@ -114,7 +115,8 @@ def rig_config(
     table: dict[str, Any] = {"preset": rig}
     plant_name = data["plant"] if isinstance(data.get("plant"), str) else cfg.plant.name
     state = friction_state or FRICTION_STATES.get(plant_name)
-    has_friction = Rig.from_preset(rig, friction_state="v").has_friction
+    preset = Rig.from_preset(rig, friction_state="v")
+    has_friction = preset.has_friction
     if has_friction:
         if state is None:
             table["coulomb"] = 0.0
@@ -141,14 +143,16 @@ def rig_config(
     params = dict(unc.get("parameters") or {})
     if box is not None:
         params = {name: {"uniform": p} for name, p in box.items()}
+    params = {k: v for k, v in params.items() if not k.startswith("rig_")}  # the new rig's
     if not params:
-        params = {name: {"uniform": DEFAULT_BOX} for name in cfg.plant.param_names}
-    params.update({k: v for k, v in RIG_DRAWS.items() if k != "rig_coulomb" or state})
+        names = [n for n in cfg.plant.param_names if not n.startswith("rig_")]
+        params = {name: {"uniform": DEFAULT_BOX} for name in names}
+    present = {"rig_lag": preset.lag > 0.0, "rig_coulomb": has_friction and state is not None}
+    params.update({k: v for k, v in RIG_DRAWS.items() if present[k]})
     unc["parameters"] = params
     unc["draws"] = draws if draws is not None else int(unc.get("draws", 32))
     unc["seed"] = seed if seed is not None else int(unc.get("seed", 0))
     data["uncertainty"] = unc
-    data.pop("tune", None)
     return parse_config(data, f"{cfg.name} on rig {rig}")
 
 
