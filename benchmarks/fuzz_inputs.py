@@ -43,7 +43,6 @@ from pathlib import Path
 from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
-PRESETS_DIR = ROOT / "src" / "aiofl" / "presets"
 
 #: horizon [s] the presets are shortened to before mutation (events scaled with it)
 SHORT_T_FINAL = 0.4
@@ -237,9 +236,10 @@ def apply_mutation(text: str, m: Mutation) -> str:
 def base_cases() -> dict[str, tuple[str, str | None]]:
     """name -> (run config text, plant file text or None): every preset, shortened, and
     the pendulum plant-file pair (``plant-file`` mutates the plant, ``plant-run`` the run)."""
+    from aiofl.config import list_presets, preset_text
+
     cases: dict[str, tuple[str, str | None]] = {
-        p.stem: (shorten(p.read_text(encoding="utf-8")), None)
-        for p in sorted(PRESETS_DIR.glob("*.toml"))
+        name: (shorten(preset_text(name)), None) for name in list_presets()
     }
     cases["plant-run"] = (PLANT_RUN, PLANT_FILE)
     cases["plant-file"] = (PLANT_RUN, PLANT_FILE)

@@ -33,7 +33,7 @@ FILES = (
 KEYS = {"scenario", "structure", "source", "itae", "isu", "iau", "opi", "status", "failed"}
 KEYS |= {"stopped_at"}
 # what the report measured; "robustness": its rows over model-error draws (conftest: 16)
-COMPUTED_KEYS = KEYS | {"preset", "tracking", "linearisation", "robustness", "sensors"}
+COMPUTED_KEYS = KEYS | {"preset", "tracking", "linearisation", "robustness", "sensors", "rig"}
 COMPUTED_KEYS |= set(L.RESPONSE_NAMES)  # step metrics and the command's figures
 
 
