@@ -195,7 +195,22 @@ class CompiledLoop:
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The plant functions' values (and with ``jac`` their Jacobians) at z's plant
         state and observer state, stacked as :func:`loop_eval` reads them: from the
-        compiled jets once checked (:meth:`check_jets`), else from Python."""
+        compiled jets once checked (:meth:`check_jets`), else from Python.
+
+        Parameters
+        ----------
+        z
+            The loop's state.
+        need_bd
+            Evaluate the disturbance input b_d too.
+        jac
+            Take the Jacobians too.
+
+        Returns
+        -------
+        pv, pj
+            The stacked values (rows) and Jacobians (rows × max(n, ρ)).
+        """
         if self.jets is None or (jac and not self._jets_exact()):
             return self._python_jets(z, need_bd, jac)
         lp, n, rho = self.loop, self.n, self.rho
@@ -296,7 +311,20 @@ class CompiledLoop:
     def rhs(
         self, z: NDArray[np.float64], rd: Any = None, d: Any = None, noise: float = 0.0
     ) -> NDArray[np.float64]:
-        """ż at z (real), compiled."""
+        """ż at z (real), compiled.
+
+        Parameters
+        ----------
+        z
+            The state.
+        rd, d, noise
+            As for :meth:`evaluate`.
+
+        Returns
+        -------
+        ndarray
+            Shape (n_z,).
+        """
         return self.evaluate(z, rd, d, noise)[0][: self.n_z]
 
     def state_jacobian(
