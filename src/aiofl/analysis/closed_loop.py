@@ -63,9 +63,10 @@ from aiofl.components.differentiators import (
     linear_prefilter_rhs,
     linear_prefilter_update,
 )
-from aiofl.components.feedback import fal, inlsef_limit, inlsef_term, linear_sef_gains
+from aiofl.components.fastmath import binomial_power
+from aiofl.components.feedback import fal, inlsef_limit, inlsef_term
 from aiofl.components.model_gains import design_point_jacobian, model_gain
-from aiofl.components.observers import eso_gains, inleso_injection
+from aiofl.components.observers import eso_gain, inleso_injection
 from aiofl.controller import Controller
 from aiofl.plants.base import Plant
 from aiofl.scenario import Reference, Scenario
@@ -172,7 +173,9 @@ class ClosedLoop:
         self.u_min = -self.u_max if math.isnan(u_min) else u_min
         self.derivatives = PlantDerivatives(plant)
         alphas = [c.value(f"eso.alpha{i}") for i in range(1, c.rho + 2)]
-        self.betas = eso_gains(c.value("eso.omega0"), alphas)
+        # the components' formulas run in Python (compiling them cost 1-4 s per process)
+        w0 = c.value("eso.omega0")
+        self.betas = np.array([eso_gain.py_func(a, w0, i + 1) for i, a in enumerate(alphas)])
         if c.eso_model == "nominal" and c.eso_gains == "bandwidth":
             # the engine's gains: placed for the nominal model at Φ(x0) (model_gains)
             x0 = np.asarray(scenario.x0 or np.zeros(plant.n_states), dtype=np.float64)
@@ -181,7 +184,7 @@ class ClosedLoop:
             self.betas = model_gain(jac, alphas, c.value("eso.omega0"))
         wc = c.value("sef.omega_c")
         if c.sef == "linear" or c.law == "iofl":
-            self.lin_k = linear_sef_gains(c.rho, wc)
+            self.lin_k = np.array([binomial_power.py_func(c.rho, i, wc) for i in range(c.rho)])
         else:
             self.lin_k = np.array([c.value(f"sef.k{i}") for i in range(1, c.rho + 1)])
         n = plant.n_states
