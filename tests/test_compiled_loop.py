@@ -213,3 +213,47 @@ def test_a_plant_not_compilable_for_complex_numbers_runs_through_python() -> Non
     assert any("finite differences" in n for n in loop.derivatives.notes)
     assert loop.compiled.jets is None
     _assert_close(a, reference_linear_model(loop, z)[0])
+
+
+def _python_field(loop: Any) -> Any:
+    """The orbit loop's (F, J) from the Python reference: :meth:`OrbitLoop.rhs` and its
+    tangent batch (what the orbit analysis evaluated before the compiled loop)."""
+
+    def field(*, hold: bool = False, d: float | None = None) -> Any:
+        def inputs(t: float) -> tuple[Any, float]:
+            rd = None if hold else loop.inputs_at(t)
+            return rd, loop.disturbance_at(t) if d is None else d
+
+        def f(t: float, z: np.ndarray) -> np.ndarray:
+            rd, dd = inputs(t)
+            return loop.rhs(z, rd=rd, d=dd)[0]
+
+        def jac(t: float, z: np.ndarray) -> np.ndarray:
+            rd, dd = inputs(t)
+            return loop.rhs(loop.tangent_batch(z), rd=rd, d=dd)[0].imag / COMPLEX_STEP
+
+        return f, jac
+
+    return field
+
+
+@pytest.mark.parametrize("preset", ["flexjoint-hub-ladrc", "frontier-s3-ladrc"])
+def test_floquet_multipliers_from_the_compiled_loop_equal_the_references(preset: str) -> None:
+    """The tracking orbit's largest Floquet multiplier (an orbit that closes to 1e-5),
+    integrated with the compiled loop and with the Python reference: equal to 1e-4
+    relative (the integrations run at rtol 1e-6 on step sequences that differ with the
+    last bits of F and J)."""
+    from aiofl.analysis.orbit import tracking_floquet
+    from aiofl.analysis.orbit_loop import OrbitLoop
+
+    cfg = load_config(preset)
+    results = {}
+    for how in ("compiled", "python"):
+        loop = OrbitLoop(cfg.plant, cfg.controller, cfg.scenario, dt=float(cfg.dt))
+        if how == "python":
+            loop.field = _python_field(loop)  # type: ignore[method-assign]
+        results[how] = tracking_floquet(loop)
+    got, ref = results["compiled"], results["python"]
+    assert ref["closing"] < 1e-4 and got["closing"] < 1e-4
+    assert got["largest"] == pytest.approx(ref["largest"], rel=1e-4)
+    assert 0.0 < ref["largest"] < 1.0
