@@ -257,3 +257,24 @@ def test_floquet_multipliers_from_the_compiled_loop_equal_the_references(preset:
     assert ref["closing"] < 1e-4 and got["closing"] < 1e-4
     assert got["largest"] == pytest.approx(ref["largest"], rel=1e-4)
     assert 0.0 < ref["largest"] < 1.0
+
+
+def test_the_rig_friction_far_from_zero_velocity_is_finite_and_exact() -> None:
+    """The rig's friction F_c·tanh(v/ε) at a velocity hundreds of ε away from 0: numba's
+    complex numpy.tanh gives NaN there (its exponentials overflow); the compiled jets use
+    cmath's, so the compiled Jacobian is finite and equals the Python reference's (the
+    tracking orbits of rig-s*-ladrc failed on it with "array must not contain infs or
+    NaNs")."""
+    from aiofl.analysis.orbit_loop import OrbitLoop
+
+    cfg = load_config("rig-s3-ladrc")
+    loop = OrbitLoop(cfg.plant, cfg.controller, cfg.scenario, dt=float(cfg.dt))
+    z = loop.operating_point()
+    iv = cfg.plant.state_names.index(cfg.rig.friction_state)
+    eps = loop.p_true[list(cfg.plant.params).index("rig_eps")]
+    z[iv] = 800.0 * eps  # tanh's argument 800
+    got = loop.jacobian_at(z)
+    assert loop.compiled.jets is not None
+    ref = loop.rhs(loop.tangent_batch(z))[0].imag / COMPLEX_STEP
+    assert np.all(np.isfinite(got))
+    _assert_close(got, ref)

@@ -11,7 +11,7 @@ The plant's functions are compiled for complex numbers from their Python code wi
 names they use re-bound (:func:`complex_function`): ``math`` to a module of :mod:`cmath`'s
 functions, ``abs`` / ``math.fabs`` / ``min`` / ``max`` to their complex-step forms (the
 branch chosen by the real part), numpy's ``empty`` / ``zeros`` / ``ones`` (and ``_like``)
-to complex arrays, and the functions they call (a rig's plant calls the bare plant's
+to complex arrays and its ``tanh`` to :mod:`cmath`'s (numba's overflows to NaN), and the functions they call (a rig's plant calls the bare plant's
 compiled functions, :func:`aiofl.plants.actuated.with_rig`) to their re-bound copies.  A
 plant whose code numba cannot compile so (a name outside these) has no compiled jets:
 :func:`plant_jets` returns None and the loop takes the plant's Jacobians from
@@ -66,6 +66,14 @@ def _ccopysign(x: Any, y: Any) -> Any:
 
 
 @njit(cache=True)
+def _ctanh(z: Any) -> Any:
+    """tanh of a complex number: numba's ``numpy.tanh`` gives NaN beyond |Re z| ≈ 355
+    (its exponentials overflow), :mod:`cmath`'s is ±1 there (a rig's friction
+    tanh(v/ε) with a small ε reaches it)."""
+    return cmath.tanh(z)
+
+
+@njit(cache=True)
 def _cempty(shape: Any) -> Any:
     return np.empty(shape, np.complex128)
 
@@ -103,6 +111,7 @@ _CNUMPY = _module(
         "ones": _cones,
         "empty_like": _czeros_like,
         "zeros_like": _czeros_like,
+        "tanh": _ctanh,
     },
 )
 """``numpy`` for a plant function compiled for complex numbers."""
