@@ -5,20 +5,21 @@ factory, :func:`aiofl.engine.compile.build`, under a fingerprint of the plant's 
 this file), one function that evaluates the plant's h, f, g, b_d, the model's
 :math:`(\alpha, \beta)(\xi)` and the normal form at a real state and, on request, their
 Jacobians by the complex step (:mod:`aiofl.analysis.derivatives`), all in compiled code.
-:class:`aiofl.analysis.loop_kernel.CompiledLoop` reads them.
+:class:`aiofl.analysis.compiled_loop.CompiledLoop` reads them.
 
 The plant's functions are compiled for complex numbers from their Python code with the
 names they use re-bound (:func:`complex_function`): ``math`` to a module of :mod:`cmath`'s
 functions, ``abs`` / ``math.fabs`` / ``min`` / ``max`` to their complex-step forms (the
 branch chosen by the real part), numpy's ``empty`` / ``zeros`` / ``ones`` (and ``_like``)
-to complex arrays and its ``tanh`` to :mod:`cmath`'s (numba's overflows to NaN), and the functions they call (a rig's plant calls the bare plant's
-compiled functions, :func:`aiofl.plants.actuated.with_rig`) to their re-bound copies.  A
+to complex arrays and its ``tanh`` to :mod:`cmath`'s (numba's overflows to NaN), and the
+functions they call (a rig's plant calls the bare plant's compiled functions,
+:func:`aiofl.plants.actuated.with_rig`) to their re-bound copies.  A
 plant whose code numba cannot compile so (a name outside these) has no compiled jets:
 :func:`plant_jets` returns None and the loop takes the plant's Jacobians from
 :class:`~aiofl.analysis.derivatives.PlantDerivatives` in Python.  Jets that compile but
 whose Jacobian differs from the Python complex step (e.g. ``numpy.abs``, the modulus) are
-refused by the loop's first check (:meth:`~aiofl.analysis.loop_kernel.CompiledLoop.
-check_jets`).
+refused by the loop's first check
+(:meth:`~aiofl.analysis.compiled_loop.CompiledLoop.check_jets`).
 """
 
 from __future__ import annotations
