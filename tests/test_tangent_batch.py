@@ -1,13 +1,17 @@
-"""The Jacobian of the orbit loop from one right-hand side call on a tangent batch.
+"""The Jacobian of the orbit loop: the Python tangent batch and the compiled loop.
 
-:meth:`aiofl.analysis.orbit_loop.OrbitLoop.jacobian_at` evaluates the loop once on the n_z
-complex steps :math:`z + ihe_j` as the columns of a batch (the plant's functions by
-:meth:`aiofl.analysis.derivatives.PlantDerivatives.evaluate_columns`, the non-smooth
-elements by their value and slope at the shared real part).  It must equal the complex step
-taken column by column (one scalar right-hand side call per column, the definition) for
-every controller structure, on a plant differentiated by the complex step and on one whose
-complex step falls back to finite differences; so must the describing-function Jacobian,
-the nonlinearities' error rows, and a batch whose columns are at different real points.
+The Python reference (:meth:`aiofl.analysis.orbit_loop.OrbitLoop.rhs`) evaluates the loop
+once on the n_z complex steps :math:`z + ihe_j` as the columns of a batch (the plant's
+functions by :meth:`aiofl.analysis.derivatives.PlantDerivatives.evaluate_columns`, the
+non-smooth elements by their value and slope at the shared real part).  It must equal the
+complex step taken column by column (one scalar right-hand side call per column, the
+definition) to the last bit, for every controller structure, on a plant differentiated by
+the complex step and on one whose complex step falls back to finite differences; so must
+the describing-function Jacobian, the nonlinearities' error rows, and a batch whose columns
+are at different real points.  :meth:`~aiofl.analysis.orbit_loop.OrbitLoop.jacobian_at`,
+compiled (:mod:`aiofl.analysis.compiled_loop`, forward mode), must equal the same
+column-by-column complex step to rounding (:func:`_assert_close`: the sums are formed in
+another order).
 """
 
 from __future__ import annotations
@@ -40,6 +44,23 @@ def _assert_same(a: np.ndarray, b: np.ndarray) -> None:
     retuned-s1-inleso's largest Floquet multiplier from 0.90 to 0.53)."""
     assert a.shape == b.shape
     assert np.array_equal(a, b), float(np.max(np.abs(a - b) / np.maximum(np.abs(b), 1e-300)))
+
+
+def _python_batch(loop: OrbitLoop, z: np.ndarray, rd=None, d=None) -> np.ndarray:
+    """The Python reference's Jacobian: one call on the tangent batch."""
+    return loop.rhs(loop.tangent_batch(z), rd=rd, d=d)[0].imag / COMPLEX_STEP
+
+
+CLOSE = 1e-12
+"""The compiled Jacobian equals the complex step to this, relative to its row's largest
+entry (rounding: both are exact derivatives, summed in another order)."""
+
+
+def _assert_close(a: np.ndarray, b: np.ndarray) -> None:
+    assert a.shape == b.shape
+    scale = np.max(np.abs(b), axis=1, keepdims=True)
+    err = np.abs(a - b)
+    assert np.all(err <= CLOSE * scale + 1e-300), float(np.max(err / np.maximum(scale, 1e-300)))
 
 
 def _loop(preset: str, **change: object) -> OrbitLoop:
@@ -84,8 +105,10 @@ def test_batch_jacobian_equals_the_column_by_column_complex_step(
     loop = _loop(preset, **change)
     for k, z in enumerate(_points(loop)):
         rd, d = loop.inputs_at(0.21 * k), 0.1 * k
-        batch = loop.jacobian_at(z, rd, d)
-        _assert_same(batch, _column_by_column(loop, z, rd, d))
+        batch = _python_batch(loop, z, rd, d)
+        by_column = _column_by_column(loop, z, rd, d)
+        _assert_same(batch, by_column)
+        _assert_close(loop.jacobian_at(z, rd, d), by_column)
         assert np.any(batch != 0.0)
     if "law.u_max" in change:  # every column saturated: u does not move
         assert np.all(np.abs(loop.rhs(z, rd, d)[2]) <= 1e-3)
@@ -98,7 +121,9 @@ def test_describing_jacobian_and_error_rows_equal_column_by_column(preset: str) 
     z = _points(loop, 1)[0]
     loop.describing = tuple(0.5 + 0.1 * i for i in range(len(loop.nonlinearities())))
     try:
-        _assert_same(loop.jacobian_at(z), _column_by_column(loop, z))
+        by_column = _column_by_column(loop, z)
+        _assert_same(_python_batch(loop, z), by_column)
+        _assert_close(loop.jacobian_at(z), by_column)
     finally:
         loop.describing = None
     rows = []
@@ -108,8 +133,12 @@ def test_describing_jacobian_and_error_rows_equal_column_by_column(preset: str) 
         loop._record = []
         loop.rhs(zc)
         rows.append([complex(v).imag / COMPLEX_STEP for v in loop._record])
+    loop._record = []
+    loop.rhs(loop.tangent_batch(z))  # the Python reference's batch
+    batch_rows = [np.asarray(v).imag / COMPLEX_STEP for v in loop._record]
     loop._record = None
-    _assert_same(loop.error_rows(z), np.array(rows).T)
+    _assert_same(np.array(batch_rows).reshape(-1, loop.n_z), np.array(rows).T)
+    _assert_close(loop.error_rows(z), np.array(rows).T)
 
 
 def test_a_batch_at_different_real_points_is_each_columns_value() -> None:
@@ -136,7 +165,9 @@ def test_batch_jacobian_with_the_finite_difference_fallback() -> None:
     assert loops[0].derivatives.method["f"] == "finite difference"
     assert any("ComplexWarning" in n for n in loops[0].derivatives.notes)
     assert loops[0].derivatives.method["g"] == loops[0].derivatives.method["h"] == "complex step"
-    _assert_same(batch, _column_by_column(loops[1], z))
+    assert loops[0].compiled.jets is None  # f not exact: the plant's Jacobians from Python
+    _assert_same(_python_batch(loops[0], z), _column_by_column(loops[1], z))
+    _assert_close(batch, _column_by_column(loops[1], z))
     assert loops[1].derivatives.notes == loops[0].derivatives.notes
     # d/dH of −a√H + 1e-3·erf(H − 1): the finite difference to ~1e-8
     slope = -0.2 / (2 * math.sqrt(z[0])) + 1e-3 * 2 / math.sqrt(math.pi) * math.exp(

@@ -44,6 +44,7 @@ external input while the controller's own output u (which its ESO also sees) is 
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from typing import Any
@@ -52,6 +53,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
+from aiofl.analysis.compiled_loop import CompiledLoop
 from aiofl.analysis.derivatives import COMPLEX_STEP, PlantDerivatives
 from aiofl.components.differentiators import (
     han_td_rhs,
@@ -61,9 +63,10 @@ from aiofl.components.differentiators import (
     linear_prefilter_rhs,
     linear_prefilter_update,
 )
-from aiofl.components.feedback import fal, inlsef_limit, inlsef_term, linear_sef_gains
+from aiofl.components.fastmath import binomial_power
+from aiofl.components.feedback import fal, inlsef_limit, inlsef_term
 from aiofl.components.model_gains import design_point_jacobian, model_gain
-from aiofl.components.observers import eso_gains, inleso_injection
+from aiofl.components.observers import eso_gain, inleso_injection
 from aiofl.controller import Controller
 from aiofl.plants.base import Plant
 from aiofl.scenario import Reference, Scenario
@@ -170,7 +173,9 @@ class ClosedLoop:
         self.u_min = -self.u_max if math.isnan(u_min) else u_min
         self.derivatives = PlantDerivatives(plant)
         alphas = [c.value(f"eso.alpha{i}") for i in range(1, c.rho + 2)]
-        self.betas = eso_gains(c.value("eso.omega0"), alphas)
+        # the components' formulas run in Python (compiling them cost 1-4 s per process)
+        w0 = c.value("eso.omega0")
+        self.betas = np.array([eso_gain.py_func(a, w0, i + 1) for i, a in enumerate(alphas)])
         if c.eso_model == "nominal" and c.eso_gains == "bandwidth":
             # the engine's gains: placed for the nominal model at Φ(x0) (model_gains)
             x0 = np.asarray(scenario.x0 or np.zeros(plant.n_states), dtype=np.float64)
@@ -179,7 +184,7 @@ class ClosedLoop:
             self.betas = model_gain(jac, alphas, c.value("eso.omega0"))
         wc = c.value("sef.omega_c")
         if c.sef == "linear" or c.law == "iofl":
-            self.lin_k = linear_sef_gains(c.rho, wc)
+            self.lin_k = np.array([binomial_power.py_func(c.rho, i, wc) for i in range(c.rho)])
         else:
             self.lin_k = np.array([c.value(f"sef.k{i}") for i in range(1, c.rho + 1)])
         n = plant.n_states
@@ -455,6 +460,16 @@ class ClosedLoop:
         v[0], v[self.n_ref] = self.r_op, self.d_op
         return v
 
+    NL_MODE = 0
+    """How the compiled loop evaluates the non-smooth scalars (:class:`CompiledLoop`)."""
+
+    @functools.cached_property
+    def compiled(self) -> CompiledLoop:
+        """This loop compiled, with its exact Jacobian (:mod:`aiofl.analysis.loop_kernel`)."""
+        if self.mode != "linearise":
+            raise ValueError("the compiled loop needs mode = 'linearise'")
+        return CompiledLoop(self, nl_mode=self.NL_MODE)
+
     def linear_model(
         self, z: NDArray[np.float64], *, broken: bool = False
     ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
@@ -467,38 +482,14 @@ class ClosedLoop:
         u; closing :math:`u_p = u` gives back the closed loop's A
         (:math:`A_{cl} = A + BC` when D = 0).
 
-        Each column is :math:`\operatorname{Im} F(\cdot + ihe_j)/h` with h =
-        :data:`aiofl.analysis.derivatives.COMPLEX_STEP` (module docstring of
-        :mod:`aiofl.analysis.derivatives`).
+        By the compiled loop's forward mode (:meth:`CompiledLoop.linear_model`), the plant's
+        Jacobians by the complex step (:mod:`aiofl.analysis.derivatives`), checked first.
         """
         if self.mode != "linearise":
             raise ValueError("linear_model needs mode = 'linearise'")
         z = np.asarray(z, dtype=np.float64)
         self.verify_derivatives(z)
-        v = self.operating_inputs()
-        u_star = self.rhs(z)[2] if broken else None
-        n_in = 1 if broken else v.size
-        cols: list[NDArray[np.float64]] = []
-        for j in range(self.n_z + n_in):
-            zc = z.astype(np.complex128)
-            vc = v.astype(np.complex128)
-            up: Any = None if u_star is None else complex(u_star)
-            if j < self.n_z:
-                zc[j] += 1j * COMPLEX_STEP
-            elif broken:
-                up += 1j * COMPLEX_STEP
-            else:
-                vc[j - self.n_z] += 1j * COMPLEX_STEP
-            rd, d, noise = self._inputs_split(vc)
-            dz, y, u = self.rhs(zc, rd=rd, d=d, noise=noise, u_plant=up)
-            cols.append(np.concatenate([dz.imag, [np.imag(y), np.imag(u)]]) / COMPLEX_STEP)
-        jac = np.column_stack(cols)
-        nz = self.n_z
-        a, b = jac[:nz, :nz], jac[:nz, nz:]
-        c, d = jac[nz:, :nz], jac[nz:, nz:]
-        if broken:  # output: the controller's u only
-            return a, b, c[1:], d[1:]
-        return a, b, c, d
+        return self.compiled.linear_model(z, broken=broken)
 
     def verify_derivatives(self, z: NDArray[np.float64]) -> None:
         """Check the plant's complex-step derivatives against finite differences at z's
@@ -521,15 +512,13 @@ class ClosedLoop:
         return batch
 
     def jacobian(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
-        r""":math:`A = \partial F/\partial z` at z by the complex step (for the operating-point
-        search; :meth:`linear_model` also checks the plant's derivatives at z first)."""
-        z = np.asarray(z, dtype=np.float64)
-        cols = []
-        for j in range(self.n_z):
-            zc = z.astype(np.complex128)
-            zc[j] += 1j * COMPLEX_STEP
-            cols.append(self.rhs(zc)[0].imag / COMPLEX_STEP)
-        return np.column_stack(cols)
+        r""":math:`A = \partial F/\partial z` at z, compiled (for the operating-point search;
+        :meth:`linear_model` also checks the plant's derivatives at z first)."""
+        return self.compiled.state_jacobian(np.asarray(z, dtype=np.float64))[1][: self.n_z]
+
+    def _value(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
+        """:math:`F(z)` at the operating inputs: compiled in ``"linearise"`` mode."""
+        return self.compiled.rhs(z) if self.mode == "linearise" else self.rhs(z)[0]
 
     # ----------------------------------------------------------- operating point
     def initial_guess(self) -> NDArray[np.float64]:
@@ -562,7 +551,7 @@ class ClosedLoop:
     def _residual(self, z: NDArray[np.float64], typical: NDArray[np.float64]) -> float:
         """Largest residual relative to the size of its equation's terms (see
         :data:`OPERATING_POINT_RTOL`); inf where F is not finite."""
-        f = self.rhs(z)[0]
+        f = self._value(z)
         if not np.all(np.isfinite(f)):
             return math.inf
         terms = np.abs(self.jacobian(z)) @ np.maximum(np.abs(z), typical)
@@ -573,7 +562,7 @@ class ClosedLoop:
         typical magnitudes of the states and t those of the equations."""
         from scipy.optimize import root
 
-        f0, j0 = self.rhs(guess)[0], self.jacobian(guess)
+        f0, j0 = self._value(guess), self.jacobian(guess)
         try:
             newton = guess - np.linalg.lstsq(j0, f0, rcond=None)[0]
         except np.linalg.LinAlgError:
@@ -584,7 +573,7 @@ class ClosedLoop:
 
         def fun(w: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
             zz = s * w
-            return self.rhs(zz)[0] / t, self.jacobian(zz) * s[None, :] / t[:, None]
+            return self._value(zz) / t, self.jacobian(zz) * s[None, :] / t[:, None]
 
         options = {"xtol": 1e-14} if method == "hybr" else {"xtol": 1e-14, "ftol": 1e-14}
         sol = root(fun, guess / s, jac=True, method=method, options=options)
@@ -596,7 +585,7 @@ class ClosedLoop:
         perturbations of it (10 % of the typical magnitudes)."""
         out = [base]
         try:
-            step = np.linalg.lstsq(self.jacobian(base), self.rhs(base)[0], rcond=None)[0]
+            step = np.linalg.lstsq(self.jacobian(base), self._value(base), rcond=None)[0]
             out.append(base - step)
         except (np.linalg.LinAlgError, ValueError, ArithmeticError):
             pass

@@ -42,6 +42,18 @@ from numpy.typing import NDArray
 
 __all__ = ["COMPLEX_STEP", "FD_CACHE_SIZE", "PlantDerivatives", "complex_safe"]
 
+try:
+    from numba.core.errors import NumbaError
+except ImportError:  # pragma: no cover - numba is a dependency
+
+    class NumbaError(Exception):  # type: ignore[no-redef]
+        """Stand-in when numba is absent."""
+
+
+COMPLEX_FAILURES = (TypeError, np.exceptions.ComplexWarning, NumbaError)
+"""What a re-bound function raises when it cannot run on complex numbers (a name outside
+the complex namespace, a cast dropping an imaginary part, a numba-compiled callee)."""
+
 COMPLEX_STEP = 1e-30
 """Imaginary step h of the complex-step derivative (no cancellation, so any tiny h works)."""
 
@@ -125,26 +137,113 @@ _COMPLEX_MATH = _make_math_namespace()
 and raise on a complex argument, which sends the function to the finite difference)."""
 
 
-def complex_safe(fn: Callable[..., Any]) -> Callable[..., Any] | None:
+def _complex_dtype(dtype: Any) -> Any:
+    """complex128 for numpy's default (float) dtype, else ``dtype``."""
+    if dtype is None or dtype is float or np.dtype(dtype) == np.float64:
+        return np.complex128
+    return dtype
+
+
+class _ComplexNumpy:
+    """:mod:`numpy` for a re-bound plant function: ``empty``, ``zeros``, ``ones`` and their
+    ``_like`` forms make complex arrays where numpy would make float ones (a function that
+    fills an ``np.empty(n)`` would drop the complex step's imaginary part); the rest is
+    numpy's."""
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(np, name)
+
+    @staticmethod
+    def empty(shape: Any, dtype: Any = None, **kw: Any) -> Any:
+        return np.empty(shape, dtype=_complex_dtype(dtype), **kw)
+
+    @staticmethod
+    def zeros(shape: Any, dtype: Any = None, **kw: Any) -> Any:
+        return np.zeros(shape, dtype=_complex_dtype(dtype), **kw)
+
+    @staticmethod
+    def ones(shape: Any, dtype: Any = None, **kw: Any) -> Any:
+        return np.ones(shape, dtype=_complex_dtype(dtype), **kw)
+
+    @staticmethod
+    def empty_like(a: Any, dtype: Any = None, **kw: Any) -> Any:
+        return np.empty_like(a, dtype=_complex_dtype(dtype), **kw)
+
+    @staticmethod
+    def zeros_like(a: Any, dtype: Any = None, **kw: Any) -> Any:
+        return np.zeros_like(a, dtype=_complex_dtype(dtype), **kw)
+
+
+_COMPLEX_NUMPY = _ComplexNumpy()
+
+MAX_DEPTH = 4
+"""How deep :func:`complex_safe` follows the functions a function calls (through its
+globals and its closure)."""
+
+
+def _callee(value: Any) -> bool:
+    """Whether ``value`` is a function :func:`complex_safe` re-binds when a function calls
+    it: a numba dispatcher (its ``py_func``) or a plain Python function."""
+    return isinstance(getattr(value, "py_func", value), types.FunctionType)
+
+
+def _names(code: types.CodeType) -> set[str]:
+    """The global names ``code`` and the code nested in it (comprehensions, lambdas) use."""
+    out = set(code.co_names)
+    for const in code.co_consts:
+        if isinstance(const, types.CodeType):
+            out |= _names(const)
+    return out
+
+
+def complex_safe(fn: Callable[..., Any], _depth: int = 0) -> Callable[..., Any] | None:
     """A copy of the Python function ``fn`` whose ``math`` evaluates on complex numbers.
 
-    The copy shares ``fn``'s code and closure; its globals are ``fn``'s with the module
-    :mod:`math`, every function imported from it, and the built-ins ``abs``, ``min``,
-    ``max`` replaced by complex-step versions (module docstring).  A numba dispatcher is
-    re-bound through its ``py_func``.  Returns None when ``fn`` has no Python code.
+    The copy shares ``fn``'s code; its globals are ``fn``'s with the module :mod:`math`,
+    every function imported from it, and the built-ins ``abs``, ``min``, ``max`` replaced
+    by complex-step versions (module docstring), :mod:`numpy` by one whose array
+    constructors make complex arrays, and the functions it calls (numba dispatchers
+    through their ``py_func``, Python functions; in its globals and its closure, to
+    :data:`MAX_DEPTH` levels) by their re-bound copies: a plant wrapping another plant's
+    compiled functions (:func:`aiofl.plants.actuated.with_rig`) is re-bound through them.
+    Returns None when ``fn`` has no Python code.
     """
     py = getattr(fn, "py_func", fn)
     code = getattr(py, "__code__", None)
     if code is None or not isinstance(py, types.FunctionType):
         return None
+    deeper = _depth < MAX_DEPTH
+
+    def rebound(val: Any) -> Any:
+        if deeper and _callee(val) and getattr(val, "py_func", val) is not py:
+            return complex_safe(val, _depth + 1) or val
+        return val
+
     glb = dict(py.__globals__)
+    used = _names(code)
     for key, val in py.__globals__.items():
         if val is math:
             glb[key] = _COMPLEX_MATH
+        elif val is np:
+            glb[key] = _COMPLEX_NUMPY
         elif getattr(val, "__module__", None) == "math" and callable(val):
             glb[key] = getattr(_COMPLEX_MATH, getattr(val, "__name__", key), val)
+        elif key in used:
+            glb[key] = rebound(val)
     glb.update(abs=_abs, min=_min, max=_max)
-    return types.FunctionType(code, glb, py.__name__, py.__defaults__, py.__closure__)
+    closure = py.__closure__
+    if closure:
+        cells = []
+        for cell in closure:
+            try:
+                val = cell.cell_contents
+            except ValueError:  # an empty cell
+                cells.append(cell)
+                continue
+            new = rebound(val)
+            cells.append(cell if new is val else types.CellType(new))
+        closure = tuple(cells)
+    return types.FunctionType(code, glb, py.__name__, py.__defaults__, closure)
 
 
 _DYNAMIC = frozenset({"locals", "vars", "eval", "exec"})
@@ -249,7 +348,7 @@ class PlantDerivatives:
         if self.method[name] == "complex step" and cfn is not None:
             try:
                 return _call_complex(cfn, x, p)
-            except (TypeError, np.exceptions.ComplexWarning) as exc:  # outside the namespace
+            except COMPLEX_FAILURES as exc:  # outside the namespace
                 self._fall_back(name, f"{type(exc).__name__}: {exc}")
         xr = np.ascontiguousarray(x.real)
         jac = self.fd_jacobian(name, xr, p)
@@ -401,7 +500,7 @@ class PlantDerivatives:
                     # h·J's columns times Im x / h (exactly 1 on a step of h)
                     values = self._call_steps(name, steps, p)
                     value, jac, weights = values[:, 0].real, values.imag, ratio
-                except (TypeError, np.exceptions.ComplexWarning) as exc:  # outside the namespace
+                except COMPLEX_FAILURES as exc:  # outside the namespace
                     self._fall_back(name, f"{type(exc).__name__}: {exc}")
             if self.method[name] != "complex step" or self.complex[name] is None:
                 value = self._real(name, x0, p)
@@ -414,6 +513,39 @@ class PlantDerivatives:
             col.imag = jac @ weights
             out.append(col)
         return out
+
+    def jet(
+        self, name: str, x: NDArray[np.float64], p: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Value and Jacobian of function ``name`` at real x: the complex step of the
+        re-bound function (one call per state; one call for a function that does not read
+        x), or for a function sent to the finite difference the real value and
+        :meth:`fd_jacobian`.
+
+        Parameters
+        ----------
+        name
+            The plant function.
+        x
+            The real state (or ξ), shape (n,).
+        p
+            The parameter vector.
+
+        Returns
+        -------
+        value, jacobian
+            Shapes (n_out,) and (n_out, n).
+        """
+        if self.method[name] == "complex step" and self.complex[name] is not None:
+            try:
+                if not self.reads_state[name]:
+                    value = self._real(name, x, p)
+                    return value, np.zeros((value.size, x.size))
+                values = self._call_steps(name, _step_inputs(x, range(x.size)), p)
+                return np.ascontiguousarray(values[:, 0].real), values.imag / COMPLEX_STEP
+            except COMPLEX_FAILURES as exc:  # outside the namespace
+                self._fall_back(name, f"{type(exc).__name__}: {exc}")
+        return self._real(name, x, p), self.fd_jacobian(name, x, p)
 
     def _column_by_column(self, name: str, x: NDArray[Any], p: NDArray[np.float64]) -> NDArray[Any]:
         cols = [self.evaluate(name, np.ascontiguousarray(x[:, k]), p) for k in range(x.shape[1])]
@@ -463,7 +595,7 @@ class PlantDerivatives:
                         f"complex step and finite difference disagree by "
                         f"{float(np.max(np.abs(j_cs - j_fd))):.3g}"
                     )
-            except (TypeError, ValueError, ArithmeticError, np.exceptions.ComplexWarning) as exc:
+            except (ValueError, ArithmeticError, *COMPLEX_FAILURES) as exc:
                 reason = f"{type(exc).__name__}: {exc}"
             if reason:
                 self._fall_back(name, reason)

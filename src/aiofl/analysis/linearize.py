@@ -5,8 +5,8 @@ The closed loop of :mod:`aiofl.engine.continuous` is an ODE
 the same equations in Python (checked against the engine in the tests); this module finds
 the operating point :math:`z^*` with the reference held at a constant :math:`r^*` and the
 disturbance at its final value (:func:`scipy.optimize.root`, scaled), and takes the
-Jacobians exactly, by complex-step differentiation
-(:mod:`aiofl.analysis.derivatives`),
+Jacobians exactly, from the compiled loop (:mod:`aiofl.analysis.compiled_loop`: forward
+mode, the plant's Jacobians by complex-step differentiation, :mod:`aiofl.analysis.derivatives`),
 
 .. math:: A = \frac{\partial F}{\partial z}(z^*),\qquad
           \dot{\delta z} = A\,\delta z + B\,(\delta r, \delta\tau_d, \delta n),\quad

@@ -39,7 +39,6 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl.analysis.budget import BudgetExceeded, time_budget
-from aiofl.analysis.derivatives import COMPLEX_STEP
 from aiofl.analysis.orbit_loop import OrbitLoop
 from aiofl.analysis.variational import (
     OrbitDiverges,
@@ -82,14 +81,12 @@ def _loop(cfg: Any) -> OrbitLoop:
 
 
 def _outputs(loop: OrbitLoop, zs: NDArray[np.float64]) -> tuple[NDArray[Any], NDArray[Any]]:
-    out = [loop.rhs(z)[1:] for z in zs.T]
-    return np.array([o[0] for o in out]), np.array([o[1] for o in out])
+    return loop.compiled.outputs(zs)
 
 
 def _output_row(loop: OrbitLoop, z: NDArray[np.float64]) -> NDArray[np.float64]:
-    """∂y/∂z at z by the complex step (one call on the tangent batch)."""
-    y = loop.rhs(loop.tangent_batch(z))[1]
-    return np.asarray(y).imag / COMPLEX_STEP
+    """∂y/∂z at z (compiled, exact)."""
+    return loop.output_row(z)
 
 
 def equilibrium_limit_cycle(
@@ -294,7 +291,7 @@ def tracking_ftle(loop: OrbitLoop, renorm: float = 0.5) -> dict[str, Any]:
     z[: loop.n] = np.asarray(sc.x0 or np.zeros(loop.n), dtype=np.float64)
     if loop.n_td:
         z[loop.o_td] = float(sc.reference.evaluate(0.0))
-    z[loop.o_eso] = loop.rhs(z)[1]
+    z[loop.o_eso] = loop.compiled.evaluate(z)[0][loop.n_z]
     f, jac = loop.field()
     exps = finite_time_lyapunov(f, jac, z, 0.0, sc.t_final, renorm=renorm)
     return {"largest": float(exps[0]), "exponents": [float(x) for x in exps], "horizon": sc.t_final}

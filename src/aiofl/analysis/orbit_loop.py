@@ -45,7 +45,6 @@ from numba import njit
 from numpy.typing import NDArray
 
 from aiofl.analysis.closed_loop import ClosedLoop, is_complex
-from aiofl.analysis.derivatives import COMPLEX_STEP
 from aiofl.components.differentiators import han_td_rhs
 from aiofl.components.feedback import fal, inlsef_limit, inlsef_term
 from aiofl.components.observers import inleso_injection
@@ -141,6 +140,9 @@ class Nonlinearity:
 class OrbitLoop(ClosedLoop):
     r""":math:`F(t, z)` of one closed loop with the exact nonlinearities, complex-step safe.
 
+    Evaluated compiled (:attr:`ClosedLoop.compiled` with the exact non-smooth functions);
+    :meth:`rhs` is the Python reference.
+
     Parameters
     ----------
     plant, controller, scenario
@@ -148,6 +150,8 @@ class OrbitLoop(ClosedLoop):
     dt
         Step of the RK4 integration of Han's TD (the run's step).
     """
+
+    NL_MODE = 1
 
     def __init__(
         self, plant: Plant, controller: Controller, scenario: Scenario, *, dt: float = 1e-4
@@ -329,7 +333,7 @@ class OrbitLoop(ClosedLoop):
 
         def f(t: float, z: NDArray[np.float64]) -> NDArray[np.float64]:
             rd, dd = inputs(t)
-            return self.rhs(z, rd=rd, d=dd)[0]
+            return self.compiled.rhs(z, rd, dd)
 
         def jac(t: float, z: NDArray[np.float64]) -> NDArray[np.float64]:
             rd, dd = inputs(t)
@@ -349,9 +353,10 @@ class OrbitLoop(ClosedLoop):
     def jacobian_at(
         self, z: NDArray[np.float64], rd: Any = None, d: Any = None
     ) -> NDArray[np.float64]:
-        r""":math:`\partial F/\partial z` at z with the given inputs, by the complex step:
-        one right-hand side call on the tangent batch :math:`Z = z\mathbf 1^T + ihI`
-        (:meth:`ClosedLoop.tangent_batch`), column j :math:`\operatorname{Im}F(z + ihe_j)/h`.
+        r""":math:`\partial F/\partial z` at z with the given inputs, compiled
+        (:meth:`aiofl.analysis.compiled_loop.CompiledLoop.state_jacobian`; with
+        :attr:`describing` set, the describing-function loop's); the first call checks the
+        plant's complex-step derivatives at z (:meth:`tangent_batch`'s check).
 
         Parameters
         ----------
@@ -365,18 +370,25 @@ class OrbitLoop(ClosedLoop):
         ndarray
             Shape (n_z, n_z).
         """
-        return self.rhs(self.tangent_batch(z), rd=rd, d=d)[0].imag / COMPLEX_STEP
+        return self._jacobian_rows(z, rd, d)[: self.n_z]
+
+    def _jacobian_rows(self, z: NDArray[np.float64], rd: Any = None, d: Any = None) -> Any:
+        z = np.asarray(z, dtype=np.float64)
+        if not self._derivatives_checked:
+            self.verify_derivatives(z)
+            self._derivatives_checked = True
+        cl = self.compiled
+        settings = None if self.describing is None else cl.with_describing(self.describing)
+        return cl.state_jacobian(z, rd, d, settings=settings)[1]
 
     def error_rows(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
         """∂e_i/∂z of the nonlinearities' inputs at z (rows in :meth:`nonlinearities`
-        order), by the complex step on the tangent batch with the inputs recorded."""
-        self._record = []
-        try:
-            self.rhs(self.tangent_batch(z))
-            rows = [np.asarray(v).imag / COMPLEX_STEP for v in self._record]
-        finally:
-            self._record = None
-        return np.array(rows, dtype=np.float64).reshape(-1, self.n_z)
+        order), compiled."""
+        return self.compiled.error_rows(self._jacobian_rows(z))
+
+    def output_row(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
+        """∂y/∂z at z, compiled."""
+        return self._jacobian_rows(z)[self.n_z]
 
 
 @njit(cache=False)
