@@ -14,11 +14,8 @@ can agree).  ``tests/test_lanes.py`` asserts the same bound; this prints the fig
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 
-import aiofl
 from aiofl.config import load_config
 from aiofl.engine.simulation import simulate_batch
 
@@ -30,7 +27,9 @@ def _rel(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def main() -> None:
-    presets = sorted(p.stem for p in (Path(aiofl.__file__).parent / "presets").glob("*.toml"))
+    from aiofl.config import list_presets
+
+    presets = list_presets()
     print(f"{'preset':22s} {'lanes vs scalar':>16s}  one-ulp sensitivity of the scalar engine")
     for name in presets:
         rc = load_config(name)

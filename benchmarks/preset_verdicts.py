@@ -32,7 +32,9 @@ def main() -> None:
     import aiofl
 
     presets = Path(aiofl.__file__).parent / "presets"
-    for path in sorted(presets.glob("*.toml")):
+    # every preset set (presets/, paper/, limits/); older checkouts have the first only
+    paths = [p for p in presets.rglob("*.toml") if p.parent.name != "fronts"]
+    for path in sorted(paths, key=lambda p: p.stem):
         t0 = time.perf_counter()
         try:
             cfg = load_config(path.stem)
