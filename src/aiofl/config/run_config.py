@@ -587,7 +587,7 @@ def _presets_dir() -> Any:
 
 
 #: the sets of shipped presets: (key, folder under presets/, title).  A preset's set is a
-#: measured fact (benchmarks/rig_verdicts.py, tests/test_preset_sets.py): "designs" hold on
+#: measured fact (the report's rig table, tests/test_report_rig.py): "designs" hold on
 #: the servo-1khz rig (aiofl.analysis.rig_check), "paper" is the paper's reproduction as
 #: printed (an ideal world: a continuous controller, an exact measurement), "limits" are
 #: designs tuned for an ideal world that a real rig loses or drives beyond its own figures.
