@@ -205,13 +205,14 @@ def rig_notes(rep: Reproduction) -> list[str]:
         "as shipped: only the rig-* designs are told the delay ([controller.eso] delay = "
         f'"rig"). {table.seconds:.1f} s.',
         f"Verdicts say what the plant did: {len(holds)} of {len(table.checks)} designs hold "
-        "on the rig (nominal and every draw kept, the command not screaming, its ISU at "
-        "most 2× its own run's). 'does not track': its ITAE is at least half that of no "
+        "on the rig (nominal and every draw kept, tracking, the command not screaming, its "
+        "ISU at most 2× its own run's). 'does not track': its ITAE is at least half that of no "
         "control at all (y ≡ 0); 'screams': at steady state the command is mostly the "
         "encoder's quantum; 'command ×N': the rig drives the actuator N times harder than "
         "the design's own run; 'lost in k of N draws': that many plants of the box were "
-        "lost (|y − r| beyond the scenario's envelope). Designs that do not hold are "
-        "ideal-world figures: `aiofl presets` lists those apart.",
+        "lost (|y − r| beyond the scenario's envelope). A shipped design that does not "
+        "hold is an ideal-world figure: `aiofl presets` lists those apart (the ideal-world "
+        "limits; the paper's printed designs are a set of their own).",
     ]
     if table.skipped:
         notes.append(
