@@ -165,3 +165,12 @@ def test_preset_sets_are_disjoint_and_listed_apart() -> None:
             assert max(p for p in positions if p < at) == text.index(title)
     with pytest.raises(ConfigError, match="unknown preset"):
         preset_text("paper/paper-s1-leso")
+
+
+def test_a_design_that_cannot_go_on_the_rig_is_skipped_and_said_or_raises() -> None:
+    cfg = parse_config(_data(), "s1")
+    skipped: dict[str, str] = {}
+    assert rig_checks([cfg], "servo", draws=0, skipped=skipped) == []
+    assert skipped == {cfg.name: "rig.preset = 'servo'; allowed: ideal, servo-1khz"}
+    with pytest.raises(ValueError, match=r"rig\.preset = 'servo'"):
+        rig_checks([cfg], "servo", draws=0)

@@ -327,6 +327,7 @@ def rig_checks(
     told: bool = False,
     box: dict[str, float] | None = None,
     own: dict[str, dict[str, Any]] | None = None,
+    skipped: dict[str, str] | None = None,
 ) -> list[RigCheck]:
     """Run designs on a rig, nominal and over draws (module docstring), batched: designs
     of one plant and scenario share each engine call.
@@ -349,11 +350,14 @@ def rig_checks(
     own : dict, optional
         The designs' own runs as shipped by name (``itae``, ``isu``, ``status``,
         ``stopped_at``), when the caller has them; the others are run.
+    skipped : dict, optional
+        Filled with why a design cannot go on the rig (by name), and the design left out;
+        without it such a design raises :class:`~aiofl.config.ConfigError`.
 
     Returns
     -------
     list of RigCheck
-        In the order of ``cfgs``.
+        In the order of ``cfgs`` (those left out by ``skipped`` omitted).
     """
     from aiofl.analysis.robustness import simulate_designs
     from aiofl.engine.response import screaming
@@ -363,12 +367,21 @@ def rig_checks(
         name: {k: rec.get(k) for k in ("itae", "isu", "status", "stopped_at")}
         for name, rec in (own or {}).items()
     }
+    placed = []
+    for c in cfgs:
+        try:
+            placed.append(
+                (c, rig_config(c, rig, told=told, draws=max(draws, 1), seed=seed, box=box))
+            )
+        except ValueError as exc:  # ConfigError included
+            if skipped is None:
+                raise
+            skipped[c.name] = str(exc).strip().splitlines()[-1].strip()
+    cfgs = [c for c, _ in placed]
     missing = [c for c in cfgs if c.name not in own]
     for cfg, (rec, _) in zip(missing, _nominal_runs(_share_plants(missing)), strict=True):
         own[cfg.name] = rec
-    on_rig = _share_plants(
-        [rig_config(c, rig, told=told, draws=max(draws, 1), seed=seed, box=box) for c in cfgs]
-    )
+    on_rig = _share_plants([on for _, on in placed])
     nominal = _nominal_runs(on_rig)
     checks: dict[int, RigCheck] = {}
     by_box: dict[str, list[int]] = {}

@@ -105,8 +105,8 @@ def compute_rig_table(
     -------
     RigTable
     """
-    from aiofl.analysis.rig_check import rig_checks, rig_config
-    from aiofl.config import ConfigError, load_config
+    from aiofl.analysis.rig_check import rig_checks
+    from aiofl.config import load_config
     from aiofl.reporting.cases import scenario_number
 
     stage = on_stage or (lambda _msg: None)
@@ -120,14 +120,9 @@ def compute_rig_table(
     stage(f"rig: {len(cfgs)} designs on {RIG}, nominal and {draws} draws each")
     t0 = time.perf_counter()
     skipped: dict[str, str] = {}
-    runnable = []
-    for name, cfg in cfgs.items():
-        try:
-            rig_config(cfg, RIG, draws=1, box=RIG_BOX)
-            runnable.append(cfg)
-        except (ConfigError, ValueError) as exc:
-            skipped[name] = str(exc).strip().splitlines()[-1].strip()
-    checks = rig_checks(runnable, RIG, draws=draws, seed=0, box=RIG_BOX, own=own)
+    checks = rig_checks(
+        list(cfgs.values()), RIG, draws=draws, seed=0, box=RIG_BOX, own=own, skipped=skipped
+    )
     return RigTable(
         checks={c.name: c for c in checks},
         rows=sorted(rows, key=lambda r: r[0]),  # stable: the cases' order, rig-* last
