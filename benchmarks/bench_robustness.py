@@ -5,7 +5,7 @@ Run ``python benchmarks/bench_robustness.py`` (``--draws 1000``, ``--table-draws
 
 (a) ``aiofl robustness`` on scenario 1 of ``retuned-s1-leso`` (20 s, RK4, dt = 1e-4) with
     ``--draws`` draws of J_l, K_s, R_m, J_h each uniform within ±20 %: wall time of
-    :func:`aiofl.analysis.robustness.run_robustness` after a warm-up (kernel compiled),
+    :func:`aiofl.analysis.robustness_draws.run_robustness` after a warm-up (kernel compiled),
     locally (numba, all cores) and, if asked, on a local Dask cluster.  Goal: 1000 draws
     under 30 s on 2 cores.
 (b) for each design (retuned-s1-inleso, -leso, -ladrc, iofl-s1, and a hand LADRC with exact
@@ -68,7 +68,7 @@ def _fmt(x: float | None) -> str:
 
 
 def main() -> None:
-    from aiofl.analysis.robustness import run_robustness
+    from aiofl.analysis.robustness_draws import run_robustness
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=1000)

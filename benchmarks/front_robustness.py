@@ -5,7 +5,7 @@ Reads ``src/aiofl/presets/fronts/s{N}-{structure}.csv`` (an NSGA-II ``front.csv`
 front design with ISU at most ``--isu-max`` (default: every design; at most ``--max-rows``
 of them, those of lowest ITAE, default 48) over ``--draws`` draws
 (default 64) of J_l, K_s, R_m, J_h each uniform within +-20 % (seed ``--seed``, default 0;
-common random numbers, :func:`aiofl.analysis.robustness.simulate_designs`, one batched
+common random numbers, :func:`aiofl.analysis.robustness_draws.simulate_designs`, one batched
 engine call per chunk of designs), and writes ``s{N}-{structure}-robust.csv`` beside it:
 the front's parameter columns first, then ``itae_q05, itae_q50, itae_q95, itae_max,
 isu_q50, isu_q95, stable_fraction, draws``.  A quantile that falls on a diverged draw
@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from aiofl.analysis.robustness import simulate_designs
+from aiofl.analysis.robustness_draws import simulate_designs
 from aiofl.config import load_config, parse_config
 from aiofl.tuning.space import config_with_values
 from aiofl.uncertainty import UncertaintyModel, sample_draws

@@ -3,12 +3,14 @@
 The import graph of every module under ``src/aiofl`` is read with :mod:`ast` (imports at
 module level, inside functions and under ``TYPE_CHECKING`` alike: a lazy import that goes
 back up is still a circle).  The test fails on any import cycle and on any import from a
-lower layer to a higher one, per :data:`LAYERS`.
+lower layer to a higher one, per :data:`LAYERS`.  One name per concept: no two modules
+(a package is a module) and no two classes under ``src/aiofl`` share a name.
 """
 
 from __future__ import annotations
 
 import ast
+from collections.abc import Iterable
 from pathlib import Path
 
 import pytest
@@ -21,7 +23,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     # the paper's pieces; atomic file output; the bounds on every input size; the disk cache;
     # single-value checks shared by the Python objects and the config schema; user text (one
     # rule where it enters, one escape per output format); one BLAS thread;
-    # numba's helpers keyed by fast-math flags
+    # numba's helpers keyed by fast-math flags; the base of every TOML table's model
     (
         "aiofl.components",
         "aiofl.outputs",
@@ -31,6 +33,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "aiofl.text",
         "aiofl.blas_threads",
         "aiofl.numba_patches",
+        "aiofl.table_model",
     ),
     ("aiofl.layout",),  # the member vocabulary: component kinds, parameter columns
     # plain descriptions of a design, a test and the model error (uncertainty)
@@ -184,3 +187,53 @@ def test_modules_are_read_in_a_sitting() -> None:
         and not m.endswith("_generated")
     }
     assert not long, f"modules over {MAX_LINES} lines (split them along their seams): {long}"
+
+
+# Temporary: the engine-house branch moves engine/discrete.py's kernel templates apart from
+# the discrete controller, which ends the pair of discrete.py modules and of
+# DiscreteController classes; then these two lines go (the tests below fail on a stale one).
+SHARED_MODULE_NAMES = {"discrete": ["aiofl.components.discrete", "aiofl.engine.discrete"]}
+SHARED_CLASS_NAMES = {
+    "DiscreteController": ["aiofl.discrete_controller", "aiofl.engine.standalone"],
+}
+
+
+def _shared(owners: Iterable[tuple[str, str]]) -> dict[str, list[str]]:
+    """The names held by more than one owner, from (name, owner) pairs: {name: owners}."""
+    held: dict[str, list[str]] = {}
+    for name, owner in owners:
+        held.setdefault(name, []).append(owner)
+    return {name: sorted(who) for name, who in sorted(held.items()) if len(who) > 1}
+
+
+def _classes(module: str) -> list[str]:
+    """Every class a module defines, at any depth (a class inside a function too)."""
+    path = MODULES[module]
+    tree = ast.parse(path.read_text(encoding="utf-8"), str(path))
+    return [node.name for node in ast.walk(tree) if isinstance(node, ast.ClassDef)]
+
+
+def test_shared_names_are_found() -> None:
+    """The check sees a shared name (a broken check would pass everything)."""
+    pairs = [("errors", "a.cli.errors"), ("errors", "a.export.errors"), ("tune", "a.cli.tune")]
+    assert _shared(pairs) == {"errors": ["a.cli.errors", "a.export.errors"]}
+    assert "TuneProgress" in _classes("aiofl.tuning.progress")
+    assert "_GreyBoxProblem" in _classes("aiofl.identification.grey_box")  # inside a function
+
+
+def test_one_module_per_name() -> None:
+    """No two modules (``aiofl.export`` the package and ``aiofl.cli.export`` say) share a name;
+    a command's module is ``cli/<command>_command.py``."""
+    shared = _shared((m.rpartition(".")[2], m) for m in MODULES)
+    assert shared == SHARED_MODULE_NAMES, (
+        f"modules sharing a name (rename the less precise one): {shared}; "
+        f"allowed for now: {SHARED_MODULE_NAMES}"
+    )
+
+
+def test_one_class_per_name() -> None:
+    shared = _shared((c, m) for m in MODULES for c in _classes(m))
+    assert shared == SHARED_CLASS_NAMES, (
+        f"classes sharing a name (one concept, one class; else a name that says which): "
+        f"{shared}; allowed for now: {SHARED_CLASS_NAMES}"
+    )

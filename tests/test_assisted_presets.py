@@ -78,7 +78,7 @@ def test_the_nominal_run_gives_the_numbers_its_header_states(name: str) -> None:
 
 @pytest.mark.parametrize(("name", "q95"), [("assisted-s1-ladrc", 2.5), ("assisted-s3-ladrc", 3.0)])
 def test_stable_within_the_robust_target_over_a_few_draws(name: str, q95: float) -> None:
-    from aiofl.analysis.robustness import run_robustness
+    from aiofl.analysis.robustness_draws import run_robustness
 
     res = run_robustness(load_config(name), draws=24, seed=0)
     assert res.stable_fraction == 1.0

@@ -46,7 +46,7 @@ def test_a_budget_that_is_no_time_is_refused(bad: str) -> None:
 
 
 def test_sampling_limits_stop_refining_when_the_budget_is_spent() -> None:
-    from aiofl.analysis.sampling import sampling_limits
+    from aiofl.analysis.sampling_limits import sampling_limits
     from aiofl.config import load_config
 
     cfg = load_config("frontier-s1-ladrc").with_overrides(t_final=1.0)

@@ -8,7 +8,7 @@ import pytest
 from typer.testing import CliRunner
 
 from aiofl.cli.app import app
-from aiofl.cli.export import FORMATS
+from aiofl.cli.export_command import FORMATS
 from aiofl.config import preset_text
 from aiofl.export.c_check import CC
 from aiofl.export.c_text import c_prefix

@@ -95,7 +95,7 @@ def test_frontier_preset_nominal_run_gives_the_numbers_its_header_states(name: s
 
 
 def test_frontier_s1_ladrc_is_stable_over_a_few_draws() -> None:
-    from aiofl.analysis.robustness import run_robustness
+    from aiofl.analysis.robustness_draws import run_robustness
 
     cfg = load_config("frontier-s1-ladrc")
     res = run_robustness(cfg, draws=16, seed=0)

@@ -250,7 +250,7 @@ def test_progress_bar_and_summary_print_the_same_numbers(
 ) -> None:
     """The bar's eval/s was the last generation's (229.7) and the summary's the run's
     (12.2); NSGA-II's bar said "best 0.2027" and the summary "best objective 0.5565"."""
-    from aiofl.cli.tune import summary_text
+    from aiofl.cli.tune_command import summary_text
     from aiofl.config import parse_config
     from aiofl.tuning.search import tune
 
@@ -349,7 +349,7 @@ def _assert_no_tick_labels_overlap(fig: Any) -> None:
 
 
 def _robustness_result(itae: np.ndarray, isu: np.ndarray, name: str = "design") -> Any:
-    from aiofl.analysis.robustness import RobustnessResult
+    from aiofl.analysis.robustness_draws import RobustnessResult
     from aiofl.uncertainty import Draws
 
     k = itae.size
@@ -376,7 +376,7 @@ def _robustness_result(itae: np.ndarray, isu: np.ndarray, name: str = "design") 
 
 
 def test_robustness_figure_tick_labels_do_not_overlap_and_isu_is_plotted() -> None:
-    from aiofl.analysis.robustness import robustness_figure
+    from aiofl.analysis.robustness_draws import robustness_figure
 
     rng = np.random.default_rng(1)
     narrow = 0.0165 + 0.0035 * rng.random(16)  # the reported ECDF: 0.0165..0.020
@@ -391,7 +391,7 @@ def test_robustness_figure_tick_labels_do_not_overlap_and_isu_is_plotted() -> No
 
 
 def test_an_all_diverged_robustness_figure_raises_no_warning() -> None:
-    from aiofl.analysis.robustness import robustness_figure
+    from aiofl.analysis.robustness_draws import robustness_figure
 
     res = _robustness_result(np.full(8, np.inf), np.full(8, np.inf), name=MATHTEXT_BREAKER)
     with warnings.catch_warnings():
@@ -478,7 +478,7 @@ def test_user_text_in_figure_titles_is_plain_text() -> None:
     import control
 
     from aiofl.analysis.frequency import loop_figure, loop_margins
-    from aiofl.analysis.sampling import SamplingLimits, SamplingPoint, sampling_figure
+    from aiofl.analysis.sampling_limits import SamplingLimits, SamplingPoint, sampling_figure
     from aiofl.reporting.figures import result_figure
 
     points = [

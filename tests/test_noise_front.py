@@ -1,7 +1,7 @@
 """Scenario 3's noise fronts (model-free vs model-assisted LADRC) and the fresh noise seeds.
 
 The shipped ``presets/fronts/s3-noise-*.csv`` files parse, every row satisfies its recipe's
-constraints, a robust row is what :func:`aiofl.analysis.robustness.simulate_designs` gives,
+constraints, a robust row is what :func:`aiofl.analysis.robustness_draws.simulate_designs` gives,
 and the report's answer names the observer the files' numbers say is best.  The fresh-seed
 table's entries are ``simulate`` of the preset with that noise seed.
 """
@@ -85,7 +85,7 @@ def test_package_data_globs_ship_the_noise_fronts() -> None:
 
 def test_a_robust_row_is_simulate_designs_over_the_same_draws() -> None:
     """The best nominal design of the model-assisted front, rerun over the 256 draws."""
-    from aiofl.analysis.robustness import simulate_designs
+    from aiofl.analysis.robustness_draws import simulate_designs
     from aiofl.config import load_config, parse_config
     from aiofl.tuning.space import config_with_values
     from aiofl.uncertainty import UncertaintyModel, sample_draws

@@ -446,7 +446,7 @@ def test_stage_progress_on_a_terminal_ticks_each_stage_with_its_seconds() -> Non
 
     from rich.console import Console
 
-    from aiofl.cli.progress import StageProgress
+    from aiofl.cli.stage_progress import StageProgress
 
     buf = io.StringIO()
     with StageProgress(Console(file=buf, force_terminal=True, width=100)) as progress:

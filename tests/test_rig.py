@@ -250,7 +250,7 @@ def s1_rig() -> Any:
 
 
 def test_uncertainty_draws_rig_parameters_and_delays(s1_rig: Any) -> None:
-    from aiofl.analysis.robustness import run_robustness
+    from aiofl.analysis.robustness_draws import run_robustness
 
     raw = copy.deepcopy(s1_rig.raw)
     raw["scenario"]["t_final"] = 2.0

@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from aiofl.analysis.robustness import run_robustness, simulate_draws
+from aiofl.analysis.robustness_draws import run_robustness, simulate_draws
 from aiofl.cli.app import app
 from aiofl.config import ConfigError, parse_config, preset_text
 from aiofl.engine.simulation import simulate, simulate_batch
@@ -240,7 +240,7 @@ def test_the_envelope_table_is_bounded_and_matches_the_trajectories(mixed: tuple
 
 def test_chunked_runs_equal_one_call(mixed: tuple, monkeypatch: pytest.MonkeyPatch) -> None:
     """Splitting the members over several engine calls changes no number."""
-    import aiofl.analysis.robustness as rb
+    import aiofl.analysis.robustness_draws as rb
 
     cfg, res = mixed
     monkeypatch.setattr(rb, "CALL_TRAJECTORY_BYTES", 1)  # one member per call

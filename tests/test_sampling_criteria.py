@@ -12,7 +12,7 @@ import pytest
 from typer.testing import CliRunner
 
 from aiofl.analysis.sampled_loop import SampledLoop
-from aiofl.analysis.sampling import sampling_limits
+from aiofl.analysis.sampling_limits import sampling_limits
 from aiofl.cli.app import app
 from aiofl.config import load_config
 

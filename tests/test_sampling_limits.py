@@ -1,4 +1,4 @@
-"""Sampling limits (aiofl.analysis.sampling, ``aiofl analyze --sampling``): against the
+"""Sampling limits (aiofl.analysis.sampling_limits, ``aiofl analyze --sampling``): against the
 exact eigenvalues of a linear sampled loop, against direct runs, and the command line."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import pytest
 from scipy.linalg import expm
 from typer.testing import CliRunner
 
-from aiofl.analysis.sampling import sampling_figure, sampling_limits, sampling_limits_many
+from aiofl.analysis.sampling_limits import sampling_figure, sampling_limits, sampling_limits_many
 from aiofl.cli.app import app
 from aiofl.config import RunConfig, parse_config
 from aiofl.engine.discrete import Sampling

@@ -184,7 +184,7 @@ def test_every_draw_has_its_own_reproducible_noise_seed() -> None:
 
 
 def test_robustness_draws_run_their_own_noise_and_compose_with_the_sensor() -> None:
-    from aiofl.analysis.robustness import run_robustness
+    from aiofl.analysis.robustness_draws import run_robustness
 
     unc = {"draws": 4, "seed": 1, "noise_variance": [1e-6, 1e-6]}  # one variance: only noise
     data = _short(

@@ -28,7 +28,7 @@ from aiofl.analysis.linearize import linearize_closed_loop
 from aiofl.analysis.numeric_warnings import numeric_warnings, warnings_note
 from aiofl.analysis.sampled_loop import sampled_margins
 from aiofl.cli.app import app
-from aiofl.cli.export import FORMATS, _loop_checks, export_command
+from aiofl.cli.export_command import FORMATS, _loop_checks, export_command
 from aiofl.config import load_config, parse_config, resolve_plant
 from aiofl.plants import get_plant
 from aiofl.plants.base import PlantError

@@ -233,11 +233,11 @@ class Design:
 
     def robustness(self, *, draws: int | None = None, seed: int | None = None) -> Any:
         """The design over the draws of its ``uncertainty`` (``aiofl robustness``): an
-        :class:`aiofl.analysis.robustness.RobustnessResult` (``stable_fraction``,
+        :class:`aiofl.analysis.robustness_draws.RobustnessResult` (``stable_fraction``,
         ``quantiles(itae)``, ``to_dict()``;
-        :func:`~aiofl.analysis.robustness.robustness_figure` draws it).  ``draws`` /
+        :func:`~aiofl.analysis.robustness_draws.robustness_figure` draws it).  ``draws`` /
         ``seed`` override the table's."""
-        from aiofl.analysis.robustness import run_robustness
+        from aiofl.analysis.robustness_draws import run_robustness
 
         if self.config.uncertainty is None:
             raise ValueError(

@@ -63,9 +63,10 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from aiofl.scenario import DELAY_MAX, Scenario, realisation_seed
+from aiofl.table_model import TableModel
 from aiofl.text import normal_keys
 
 __all__ = [
@@ -95,14 +96,10 @@ ABSOLUTE = ("ts", "noise_variance", "output_delay", "input_delay")
 DELAYS = ("output_delay", "input_delay")
 
 
-class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
-
-
 PosFinite = Annotated[float, Field(gt=0, allow_inf_nan=False)]
 
 
-class Distribution(_Model):
+class Distribution(TableModel):
     r"""One parameter's distribution, as a factor :math:`f` on its nominal value.
 
     Exactly one of:
@@ -172,7 +169,7 @@ Pair = Annotated[
 ]
 
 
-class UncertaintyModel(_Model):
+class UncertaintyModel(TableModel):
     """The ``[uncertainty]`` table (see the module docstring)."""
 
     draws: Annotated[int, Field(ge=1, le=MAX_DRAWS)] = 64

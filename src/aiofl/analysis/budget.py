@@ -2,7 +2,7 @@
 
 An analysis that integrates a stiff loop (the reconciled orbit verdict's limit-cycle
 simulation, :mod:`aiofl.analysis.orbit`) or runs a ladder of engine calls (the sampling
-limits, :mod:`aiofl.analysis.sampling`) can take minutes on a hard design.  Wrapped in
+limits, :mod:`aiofl.analysis.sampling_limits`) can take minutes on a hard design.  Wrapped in
 :func:`time_budget`, such a computation stops cleanly once the budget is spent: the places
 that loop call :func:`check_budget` (every right-hand-side evaluation of
 :func:`aiofl.analysis.variational.trajectory`, every round of the sampling ladder), which

@@ -5,13 +5,13 @@ chance that a draw has every factor within 2 % of an edge is :math:`0.1^4`), yet
 extremes of the true plant's high-frequency gain :math:`\beta = L_gL_f^{\rho-1}h` — what
 decides the stability of an ESO-based loop designed for :math:`b_0` — sit there (for
 ``slfjm`` :math:`\beta = K_sK_mK_g/(J_lJ_hR_m)`: J_l, J_h, R_m × 0.8 and K_s × 1.2 give
-β × 2.34).  Three checks complete the draws of :mod:`aiofl.analysis.robustness`:
+β × 2.34).  Three checks complete the draws of :mod:`aiofl.analysis.robustness_draws`:
 
 **Corners.**  :func:`aiofl.uncertainty.corner_draws`: all :math:`2^k` corners of the box of
 ``[uncertainty]`` for :math:`k \le 12` drawn quantities, a resolution-IV two-level
 fractional factorial of :math:`2^{12}` corners beyond (:func:`aiofl.uncertainty.corner_design`).
 They run in the same batched engine call as the draws
-(:func:`aiofl.analysis.robustness.run_robustness` with ``corners``).
+(:func:`aiofl.analysis.robustness_draws.run_robustness` with ``corners``).
 
 **Local worst-case search** (:func:`worst_case_search`): from the worst corner or draw,
 maximise ITAE over the box with ``scipy.optimize.minimize(method="L-BFGS-B")`` on
@@ -81,7 +81,7 @@ BETA_STEPS = 5
 
 # --------------------------------------------------------------------------- corners
 def corner_summary(res: Any, design: str) -> dict[str, Any]:
-    """The ``corners`` record of a :class:`~aiofl.analysis.robustness.RobustnessResult` run
+    """The ``corners`` record of a :class:`~aiofl.analysis.robustness_draws.RobustnessResult` run
     with corners: design, count, ``corners_stable`` (fraction) and ``stable`` (count), the
     diverged corners (index, time, factors) and the worst corner."""
     d: Draws = res.corners
@@ -186,7 +186,7 @@ def worst_case_search(
     r"""Maximise ITAE over the box of ``spec`` from ``start`` (unit coordinates, (k,)).
 
     See the module docstring.  Each evaluation runs the point and its k finite-difference
-    neighbours in one :func:`~aiofl.analysis.robustness.simulate_designs` call; the first
+    neighbours in one :func:`~aiofl.analysis.robustness_draws.simulate_designs` call; the first
     diverged plant ends the search and is returned.  With a noisy measurement every point
     runs the noise realisation ``noise_seed`` (:attr:`aiofl.uncertainty.Draws.noise_seeds`;
     give the start's, so the search compares plants on the start's noise, common random
@@ -211,7 +211,7 @@ def worst_case_search(
     """
     from scipy.optimize import minimize
 
-    from aiofl.analysis.robustness import simulate_designs
+    from aiofl.analysis.robustness_draws import simulate_designs
 
     box = box_bounds(spec, dt=cfg.dt)
     k = len(box)
@@ -400,7 +400,7 @@ def _scaled_members(cfgs: Sequence[Any], scales: Sequence[Mapping[str, float]]) 
     """Divergence of design i on its plant scaled by ``scales[i]`` (one engine call per
     group of designs sharing plant, horizon, step and method; every member has its own
     scenario)."""
-    from aiofl.analysis.robustness import _design_key
+    from aiofl.analysis.robustness_draws import _design_key
     from aiofl.engine.simulation import simulate_batch
 
     out = np.zeros(len(cfgs), dtype=bool)
@@ -567,7 +567,7 @@ def run_box_robustness(
     beta: bool = True,
 ) -> Any:
     """``aiofl robustness``: the draws and the box corners in one batched run
-    (:func:`~aiofl.analysis.robustness.run_robustness`), then the worst-case search from
+    (:func:`~aiofl.analysis.robustness_draws.run_robustness`), then the worst-case search from
     the worst corner or draw and the β/b0 range; their records go into the result's
     ``extra`` (``corners``, ``worst_case``, ``beta_range``).
 
@@ -576,7 +576,7 @@ def run_box_robustness(
     cfg
         The run config; without ``[uncertainty]`` only :func:`run_robustness` runs.
     draws, seed, client, chunks
-        As for :func:`~aiofl.analysis.robustness.run_robustness`: the number of draws and
+        As for :func:`~aiofl.analysis.robustness_draws.run_robustness`: the number of draws and
         their seed (None: the config's), a ``distributed.Client`` (None: this process) and
         its number of tasks (default: one per worker).
     search, beta
@@ -587,7 +587,7 @@ def run_box_robustness(
     RobustnessResult
         The robustness run, the corners, worst case and β range in its ``extra``.
     """
-    from aiofl.analysis.robustness import run_robustness
+    from aiofl.analysis.robustness_draws import run_robustness
     from aiofl.uncertainty import corner_draws
 
     if cfg.uncertainty is None:

@@ -266,7 +266,7 @@ def _record(metrics: Any, status: str, stopped_at: float) -> dict[str, Any]:
 
 def _share_plants(cfgs: list[Any]) -> list[Any]:
     """The configs with one plant object per equal plant (same name, states and
-    parameters), so :func:`~aiofl.analysis.robustness.simulate_designs` and the nominal
+    parameters), so :func:`~aiofl.analysis.robustness_draws.simulate_designs` and the nominal
     runs batch designs of the same plant into one engine call."""
     from dataclasses import replace
 
@@ -359,7 +359,7 @@ def rig_checks(
     list of RigCheck
         In the order of ``cfgs`` (those left out by ``skipped`` omitted).
     """
-    from aiofl.analysis.robustness import simulate_designs
+    from aiofl.analysis.robustness_draws import simulate_designs
     from aiofl.engine.response import screaming
     from aiofl.uncertainty import sample_draws
 

@@ -14,12 +14,12 @@ Commands
     The paper's Tables I–III and Figures 3–5, and a self-contained HTML report.
 ``aiofl tune CONFIG --out DIR`` (or ``--check``)
     Tuning (GA, DE, CMA-ES, or NSGA-II for a Pareto front) from the config's ``[tune]``
-    table (:mod:`aiofl.cli.tune`).
+    table (:mod:`aiofl.cli.tune_command`).
 ``aiofl analyze PLANT|CONFIG [--closed-loop]``
-    Symbolic plant analysis or closed-loop linearisation (:mod:`aiofl.cli.analyze`).
+    Symbolic plant analysis or closed-loop linearisation (:mod:`aiofl.cli.analyze_command`).
 
 Bad input (a malformed or invalid config, an unknown preset, a missing file) prints one
-clear message to stderr and exits with status 2 (:mod:`aiofl.cli.errors`); nothing is
+clear message to stderr and exits with status 2 (:mod:`aiofl.cli.bad_input`); nothing is
 written to ``DIR``.  Heavy modules (numba, matplotlib) are imported inside the commands so
 ``aiofl --help`` is fast.
 """
@@ -35,7 +35,7 @@ from typing import Annotated, Any, Literal
 import typer
 from typer.core import TyperCommand, TyperGroup
 
-from aiofl.cli.errors import (
+from aiofl.cli.bad_input import (
     FORCE_OPTION,
     RIG_OPTION,
     SENSOR_OPTION,
@@ -581,7 +581,7 @@ def reproduce_command(
     """
     import time
 
-    from aiofl.cli.progress import StageProgress
+    from aiofl.cli.stage_progress import StageProgress
     from aiofl.reporting.reproduce import reproduce
 
     t0 = time.perf_counter()
@@ -624,15 +624,15 @@ def register_feature(name: str, target: str) -> None:
 
 
 # --- feature commands ---
-register_feature("tune", "aiofl.cli.tune:tune_command")
-register_feature("analyze", "aiofl.cli.analyze:analyze_command")
-register_feature("export", "aiofl.cli.export:export_command")
-register_feature("robustness", "aiofl.cli.robustness:robustness_command")
-register_feature("trim", "aiofl.cli.trim:trim_command")
-register_feature("design", "aiofl.cli.design:design_command")
-register_feature("report", "aiofl.cli.report:report_command")
-register_feature("excite", "aiofl.cli.excite:excite_command")
-register_feature("identify", "aiofl.cli.identify:identify_command")
+register_feature("tune", "aiofl.cli.tune_command:tune_command")
+register_feature("analyze", "aiofl.cli.analyze_command:analyze_command")
+register_feature("export", "aiofl.cli.export_command:export_command")
+register_feature("robustness", "aiofl.cli.robustness_command:robustness_command")
+register_feature("trim", "aiofl.cli.trim_command:trim_command")
+register_feature("design", "aiofl.cli.design_command:design_command")
+register_feature("report", "aiofl.cli.report_command:report_command")
+register_feature("excite", "aiofl.cli.excite_command:excite_command")
+register_feature("identify", "aiofl.cli.identify_command:identify_command")
 
 
 def _finish_commands() -> None:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from typing import Annotated, Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from aiofl import layout as L
 from aiofl.components.metrics import OPIWeights
@@ -26,6 +26,7 @@ from aiofl.limits import (
 from aiofl.rig import LAG_MAX, RIG_PRESETS, Rig
 from aiofl.scenario import DELAY_MAX, Reference, Scenario
 from aiofl.sensor import SENSOR_PRESETS, Sensor
+from aiofl.table_model import TableModel
 from aiofl.text import MAX_DESCRIPTION_CHARS, MAX_PATH_CHARS, check_text, normal_keys
 from aiofl.uncertainty import UncertaintyModel
 
@@ -54,14 +55,8 @@ class ConfigError(ValueError):
     """A config that cannot be used; the message names the field and the allowed range."""
 
 
-class _Model(BaseModel):
-    # strict: no bool or string coercion into numbers (``true``, ``"50 "`` are refused); a
-    # float field takes a TOML integer or float, an int field only an integer
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
-
-
 # ---------------------------------------------------------------------- scenario
-class ReferenceModel(_Model):
+class ReferenceModel(TableModel):
     kind: Literal["sine", "step", "samples"] = "sine"
     amplitude: Finite = math.pi / 4
     omega: NonNegFloat = 2.0
@@ -78,7 +73,7 @@ class ReferenceModel(_Model):
         return self
 
 
-class ScenarioModel(_Model):
+class ScenarioModel(TableModel):
     name: str = "custom"
     reference: ReferenceModel = Field(default_factory=ReferenceModel)
     t_final: Annotated[float, Field(gt=0, le=T_FINAL_MAX, allow_inf_nan=False)] = 20.0
@@ -197,7 +192,7 @@ def controller_kinds(structure: str | None, chosen: dict[str, str | None]) -> di
     return kinds
 
 
-class ESOModel(_Model):
+class ESOModel(TableModel):
     omega0: PosFloat = 10.0
     alpha: list[NonNegFloat] | Literal["binomial"] = "binomial"
     k_alpha: NonNegFloat = 1.0
@@ -249,7 +244,7 @@ class ESOModel(_Model):
         return self
 
 
-class TDModel(_Model):
+class TDModel(TableModel):
     R: PosFloat = 100.0
     a: Annotated[float, Field(ge=0, lt=1)] = 0.0
     b: PosFloat = 1.0
@@ -258,7 +253,7 @@ class TDModel(_Model):
     omega: PosFloat = 10.0
 
 
-class SEFModel(_Model):
+class SEFModel(TableModel):
     k: list[Finite] | None = None
     kb: list[Finite] | None = None
     alpha: list[Annotated[float, Field(gt=0, le=3)]] | None = None
@@ -268,7 +263,7 @@ class SEFModel(_Model):
     omega_c: PosFloat = 1.0
 
 
-class LawModel(_Model):
+class LawModel(TableModel):
     b0: Finite = 1.0  # non-zero; negative for a plant whose high-frequency gain is negative
     u_max: float = math.inf  # actuator range [u_min, u_max]; u_min omitted: [-u_max, u_max]
     u_min: float | None = None
@@ -297,7 +292,7 @@ class LawModel(_Model):
         return self
 
 
-class DiscreteModel(_Model):
+class DiscreteModel(TableModel):
     """``[controller.discrete]``: run the controller sampled (:mod:`aiofl.engine.discrete`).
 
     ``delay`` is the integer 0 or 1 (``true`` is refused); ``h0`` is bounded by the sample
@@ -328,7 +323,7 @@ class DiscreteModel(_Model):
         return Sampling(**self.model_dump())
 
 
-class ControllerModel(_Model):
+class ControllerModel(TableModel):
     structure: Literal["LESO", "INLESO", "LADRC", "IOFL"] | None = None
     eso_kind: Literal["linear", "improved"] | None = None
     td_kind: Literal["exact", "han", "improved", "linear"] | None = None
@@ -468,7 +463,7 @@ class ControllerModel(_Model):
 
 
 # ------------------------------------------------------------------------ sensor
-class SensorModel(_Model):
+class SensorModel(TableModel):
     """``[sensor]``: the measurement as a user has it (:mod:`aiofl.sensor`).
 
     ``preset`` names a :data:`aiofl.sensor.SENSOR_PRESETS` entry; a key given here
@@ -515,7 +510,7 @@ _Delay = Annotated[float, Field(ge=0, le=DELAY_MAX, allow_inf_nan=False)]
 _Amount = Annotated[float, Field(ge=0, le=1e6, allow_inf_nan=False)]
 
 
-class RigModel(_Model):
+class RigModel(TableModel):
     """``[rig]``: what a real loop adds to the plant (:class:`aiofl.rig.Rig`); a key given
     here overrides the preset's value (None: not set here)."""
 
@@ -569,7 +564,7 @@ class RigModel(_Model):
 
 
 # -------------------------------------------------------------------- the rest
-class SimulationModel(_Model):
+class SimulationModel(TableModel):
     dt: Annotated[float, Field(gt=0, le=DT_MAX, allow_inf_nan=False)] = 1e-4
     method: Literal["rk4", "euler"] = "rk4"
     decimation: Annotated[int, Field(ge=1, le=MAX_STEPS)] = 10
@@ -577,16 +572,16 @@ class SimulationModel(_Model):
     divergence_threshold: Annotated[float, Field(gt=0, le=1e300, allow_inf_nan=False)] = 1e10
 
 
-class MetricsModel(_Model):
-    weights: Annotated[list[NonNegFloat], Field(min_length=3, max_length=3)] = [0.6, 0.2, 0.6]
-    normalisers: Annotated[list[PosFloat], Field(min_length=3, max_length=3)] = [10.0, 2.0, 2.7]
+class MetricsModel(TableModel):
+    weights: list[NonNegFloat] = Field([0.6, 0.2, 0.6], min_length=3, max_length=3)
+    normalisers: list[PosFloat] = Field([10.0, 2.0, 2.7], min_length=3, max_length=3)
 
     def build(self) -> OPIWeights:
         (w1, w2, w3), (n1, n2, n3) = self.weights, self.normalisers
         return OPIWeights(w1, w2, w3, n1, n2, n3)
 
 
-class ConfigModel(_Model):
+class ConfigModel(TableModel):
     name: str = "custom"
     description: str = ""
     plant: str = "slfjm"

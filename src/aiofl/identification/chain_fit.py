@@ -203,7 +203,7 @@ def _lstsq(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64
     return np.asarray(lstsq(a, b, lapack_driver="gelsy", check_finite=False)[0])
 
 
-class _Problem:
+class _ChainResidual:
     """The variable-projection residual of one order on one log (scaled units): θ =
     (a'/scales, τ/T)."""
 
@@ -409,7 +409,7 @@ def fit_chain(
     box = np.array([math.comb(rho, i) * POLE_MAX ** (rho - i) for i in range(rho)])
     # starts: equation-error fits for a few filter bandwidths (each with its best whole-sample
     # delay); the best of them by the output error
-    unit = _Problem(y, u, rho, k0, friction, np.ones(rho))
+    unit = _ChainResidual(y, u, rho, k0, friction, np.ones(rho))
     best: tuple[float, NDArray[np.float64]] | None = None
     delays = np.arange(0, k0, dtype=np.int64)
     for lam in (0.3, 0.1, 0.03, 0.01):
@@ -420,7 +420,7 @@ def fit_chain(
             best = (cost, theta)
     assert best is not None
     scales = _scales(best[1][:rho], n_fit)
-    prob = _Problem(y, u, rho, k0, friction, scales)
+    prob = _ChainResidual(y, u, rho, k0, friction, scales)
     theta0 = np.r_[best[1][:rho] / scales, best[1][rho]]
     lower = np.r_[-box / scales, -1.0 + 1e-6]
     upper = np.r_[box / scales, max(tau_max, 1e-6)]

@@ -402,7 +402,7 @@ def _global_stage(
     start = qmc.LatinHypercube(d=n, seed=np.random.default_rng(seed)).random(population)
     start[0] = obj.space.z(np.clip(obj.nominal[obj.space.index], obj.space.low, obj.space.high))
 
-    class _Problem(Problem):
+    class _GreyBoxProblem(Problem):
         def __init__(self) -> None:
             super().__init__(n_var=n, n_obj=1, xl=0.0, xu=1.0, vtype=float)
 
@@ -411,7 +411,7 @@ def _global_stage(
             out["F"] = np.sum(r * r, axis=1)[:, None]
 
     algorithm = DE(pop_size=population, sampling=start, variant="DE/rand/1/bin", CR=0.7)
-    res = minimize(_Problem(), algorithm, ("n_gen", generations), seed=seed, verbose=False)
+    res = minimize(_GreyBoxProblem(), algorithm, ("n_gen", generations), seed=seed, verbose=False)
     return np.atleast_1d(np.asarray(res.X, dtype=np.float64)), float(np.atleast_1d(res.F)[0])
 
 

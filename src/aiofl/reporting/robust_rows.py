@@ -7,7 +7,7 @@ designs, the ``retuned-*``, ``frontier-*`` and ``iofl-*`` presets) is run over t
 from t = 0, the controller's nominal model unchanged (an ``[uncertainty]`` table,
 :mod:`aiofl.uncertainty`).  The draws depend only on the seed (common random numbers), so
 the rows are paired comparisons; all designs of a scenario run in one batched engine call
-(:func:`aiofl.analysis.robustness.simulate_designs`).
+(:func:`aiofl.analysis.robustness_draws.simulate_designs`).
 
 A row gives the stable fraction and the ITAE quantiles q05/q50/q95 over all N draws, a
 diverged draw counting as :math:`+\infty` (empirical quantiles, ``inverted_cdf``; a quantile
@@ -92,7 +92,7 @@ class RobustTable:
     uncertainty
         The ``[uncertainty]`` table as data (``draws``, ``seed``, ``parameters``).
     results
-        By preset, :meth:`aiofl.analysis.robustness.DesignDraws.to_dict`: ``draws``,
+        By preset, :meth:`aiofl.analysis.robustness_draws.DesignDraws.to_dict`: ``draws``,
         ``seed``, ``stable_fraction``, ``diverged`` (count), ``itae`` and ``isu`` quantiles
         (q05, q50, q95, max; null where the value falls on a diverged draw); with
         ``corners`` (the box corners: ``count``, ``stable``, ``corners_stable``,
@@ -150,7 +150,7 @@ def compute_robustness(
     from dataclasses import replace
 
     from aiofl.analysis.corners import beta_ranges
-    from aiofl.analysis.robustness import simulate_designs
+    from aiofl.analysis.robustness_draws import simulate_designs
 
     if draws == 0:
         return None

@@ -1,10 +1,10 @@
 """The sampling limits in the reproduce report: a ts_max column and what it means.
 
-:func:`case_limits` runs :func:`aiofl.analysis.sampling.sampling_limits_many` on every case
+:func:`case_limits` runs :func:`aiofl.analysis.sampling_limits.sampling_limits_many` on every case
 of a reproduction (batched per plant); :func:`ts_max_cell` formats one case's limit for the
 tables and :func:`sampling_paragraph` writes the paragraph on what the limits mean for the
 paper's printed designs, from the computed numbers only, with the definition of "stable"
-of :mod:`aiofl.analysis.sampling` (linearised sampled loop inside the unit circle, bounded
+of :mod:`aiofl.analysis.sampling_limits` (linearised sampled loop inside the unit circle, bounded
 simulation, no more than 5 % extra time at the saturation).  Kept in its own module so that the
 tables and the HTML page only add one column and one section.
 """
@@ -21,7 +21,7 @@ TS_MAX_HEADER = "ts_max [ms]"
 
 def case_limits(configs: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
     """Sampling limits of each preset's config, by preset (``SamplingLimits.to_dict()``)."""
-    from aiofl.analysis.sampling import sampling_limits_many
+    from aiofl.analysis.sampling_limits import sampling_limits_many
 
     names = list(configs)
     lims = sampling_limits_many([configs[n] for n in names])

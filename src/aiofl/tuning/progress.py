@@ -1,7 +1,7 @@
 """The progress bar of :func:`aiofl.tuning.search.tune` (rich, on stderr).
 
 It prints the numbers ``aiofl tune``'s summary prints at the end
-(:func:`aiofl.cli.tune.summary_text`), so the two never disagree.
+(:func:`aiofl.cli.tune_command.summary_text`), so the two never disagree.
 """
 
 from __future__ import annotations

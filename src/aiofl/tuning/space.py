@@ -58,10 +58,11 @@ from typing import TYPE_CHECKING, Annotated, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import Field, ValidationError, field_validator, model_validator
 
 from aiofl import layout as L
 from aiofl.limits import DT_MAX, MAX_EVALUATIONS, MAX_POPULATION, T_FINAL_MAX
+from aiofl.table_model import TableModel
 
 if TYPE_CHECKING:  # pragma: no cover
     from aiofl.controller import Controller
@@ -85,12 +86,7 @@ MAX_ROBUST_DRAWS = 1000
 MAX_NOISE_REALISATIONS = 256
 
 
-class _Model(BaseModel):
-    # strict, as the rest of the config: no bool or string coercion into numbers
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
-
-
-class ParameterBounds(_Model):
+class ParameterBounds(TableModel):
     """Search interval of one parameter: ``lo <= value <= hi``, optionally log-scaled."""
 
     lo: Annotated[float, Field(allow_inf_nan=False)]
@@ -106,7 +102,7 @@ class ParameterBounds(_Model):
         return self
 
 
-class RobustSettings(_Model):
+class RobustSettings(TableModel):
     """``robust = { draws = K, aggregate = "mean" | "worst" | "cvar", alpha = 0.9,
     corners = false }``.
 
@@ -125,7 +121,7 @@ class RobustSettings(_Model):
     corners: bool = False
 
 
-class TuneSettings(_Model):
+class TuneSettings(TableModel):
     """Validated ``[tune]`` table (see the module docstring for the fields)."""
 
     algorithm: Literal["ga", "de", "cmaes", "nsga2"] = "ga"

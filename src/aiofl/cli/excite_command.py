@@ -14,7 +14,7 @@ from typing import Annotated, Literal
 
 import typer
 
-from aiofl.cli.errors import FORCE_OPTION, bad_input_exits
+from aiofl.cli.bad_input import FORCE_OPTION, bad_input_exits
 
 __all__ = ["excite_command"]
 

@@ -34,7 +34,7 @@ from typing import Annotated, Any, Literal
 import typer
 
 from aiofl import layout as L
-from aiofl.cli.errors import FORCE_OPTION, _check_out, bad_input_exits
+from aiofl.cli.bad_input import FORCE_OPTION, _check_out, bad_input_exits
 
 __all__ = ["FORMATS", "export_command"]
 

@@ -19,7 +19,7 @@ from typing import Annotated, Any
 
 import typer
 
-from aiofl.cli.errors import FORCE_OPTION, RIG_OPTION, SENSOR_OPTION, _check_out, bad_input_exits
+from aiofl.cli.bad_input import FORCE_OPTION, RIG_OPTION, SENSOR_OPTION, _check_out, bad_input_exits
 
 __all__ = ["robustness_command"]
 
@@ -131,7 +131,7 @@ def robustness_command(
     Every draw has its own measurement-noise realisation (seeded from the draw); --sensor
     measures with a sensor preset.  An existing non-empty OUT is refused unless --force."""
     from aiofl.analysis.corners import run_box_robustness
-    from aiofl.analysis.robustness import robustness_figure, run_robustness
+    from aiofl.analysis.robustness_draws import robustness_figure, run_robustness
     from aiofl.cli.configs import load_run_config
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
     from aiofl.uncertainty import MAX_DRAWS, sample_draws

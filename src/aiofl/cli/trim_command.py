@@ -13,7 +13,7 @@ from typing import Annotated
 
 import typer
 
-from aiofl.cli.errors import FORCE_OPTION, bad_input_exits, parse_numbers
+from aiofl.cli.bad_input import FORCE_OPTION, bad_input_exits, parse_numbers
 
 __all__ = ["trim_command"]
 

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from aiofl.cli.errors import FORCE_OPTION, _check_out, bad_input_exits
+from aiofl.cli.bad_input import FORCE_OPTION, _check_out, bad_input_exits
 
 __all__ = ["report_command"]
 

@@ -11,7 +11,7 @@ from typing import Annotated
 
 import typer
 
-from aiofl.cli.errors import FORCE_OPTION, SENSOR_OPTION, bad_input_exits, parse_numbers
+from aiofl.cli.bad_input import FORCE_OPTION, SENSOR_OPTION, bad_input_exits, parse_numbers
 
 __all__ = ["design_command"]
 

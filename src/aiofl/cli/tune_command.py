@@ -1,7 +1,7 @@
 """``aiofl tune CONFIG --out DIR``: tune a controller from the config's ``[tune]`` table.
 
 A thin command over :mod:`aiofl.tuning`: it validates the input (exit status 2 and one
-message on bad input, :mod:`aiofl.cli.errors`), prepares the run once
+message on bad input, :mod:`aiofl.cli.bad_input`), prepares the run once
 (:func:`aiofl.tuning.prepared.prepare`) and runs it with :func:`aiofl.tuning.search.tune` with
 a progress bar, a checkpoint in ``DIR`` and optional Dask evaluation, then writes the
 outputs (:func:`aiofl.tuning.results.write_outputs`: the results first, then the figures;
@@ -17,7 +17,7 @@ from typing import Annotated, Any
 
 import typer
 
-from aiofl.cli.errors import (
+from aiofl.cli.bad_input import (
     FORCE_OPTION,
     RIG_OPTION,
     SENSOR_OPTION,

@@ -6,7 +6,7 @@
   stability verdict (Section III).  ``--latex`` prints LaTeX, ``--json`` JSON.
 * ``aiofl analyze CONFIG.toml|PRESET --sampling``: the largest sample time at which the
   design is stable (linearised sampled loop inside the unit circle, bounded run, off the
-  saturation) and within 10 % of its continuous ITAE (:mod:`aiofl.cli.sampling`).
+  saturation) and within 10 % of its continuous ITAE (:mod:`aiofl.cli.analyze_sampling`).
 * ``aiofl analyze CONFIG.toml|PRESET --closed-loop``: eigenvalues of the closed loop
   linearised at its operating point (exact Jacobian; repeated ones with their
   multiplicity), slowest / fastest modes and a verdict (:mod:`aiofl.analysis.linearize`);
@@ -40,7 +40,7 @@ from typing import Annotated, Any
 import typer
 
 from aiofl.analysis.budget import DEFAULT_BUDGET
-from aiofl.cli.errors import FORCE_OPTION
+from aiofl.cli.bad_input import FORCE_OPTION
 
 __all__ = ["analyze_command"]
 
@@ -83,7 +83,7 @@ def analyze_command(
             help="Largest sample time Ts at which a config's design is stable (the "
             "linearised sampled loop has spectral radius < 1, the run stays bounded and off "
             "the saturation) and within --tolerance of its continuous ITAE (batched runs; "
-            "see aiofl.analysis.sampling).",
+            "see aiofl.analysis.sampling_limits).",
         ),
     ] = False,
     tolerance: Annotated[
@@ -173,14 +173,14 @@ def analyze_command(
 
     from rich.console import Console
 
-    from aiofl.cli.errors import bad_input_exits
+    from aiofl.cli.bad_input import bad_input_exits
     from aiofl.text import terminal_text
 
     if ceiling:
         _print_ceiling(target, u_scale, as_json=as_json, alone=True)
         return
     if sampling:
-        from aiofl.cli.sampling import run_sampling
+        from aiofl.cli.analyze_sampling import run_sampling
 
         with bad_input_exits():
             if closed_loop or latex or r_op is not None or figure is not None:
@@ -416,8 +416,8 @@ def _print_ceiling(target: str, u_scale: float | None, *, as_json: bool, alone: 
     import json
 
     from aiofl.analysis.observer_bandwidth import config_ceiling
+    from aiofl.cli.bad_input import bad_input_exits
     from aiofl.cli.configs import load_run_config
-    from aiofl.cli.errors import bad_input_exits
     from aiofl.text import terminal_text
 
     with bad_input_exits():

@@ -1,10 +1,10 @@
 r"""``aiofl analyze CONFIG --sampling [--json] [--out DIR]``: the largest usable sample time.
 
-Runs :func:`aiofl.analysis.sampling.sampling_limits` (batched engine runs over a ladder of
+Runs :func:`aiofl.analysis.sampling_limits.sampling_limits` (batched engine runs over a ladder of
 sample times, each with the spectral radius of the linearised sampled loop) and prints the
 definitions, ``ts_max`` (stable and within the ITAE tolerance of the continuous design) and
 ``ts_stable`` with :math:`\omega_0T_s`, the sampled and continuous delay margins
-(:mod:`aiofl.analysis.sampling`), and every run (Ts, ω0·Ts, spectral radius, time at
+(:mod:`aiofl.analysis.sampling_limits`), and every run (Ts, ω0·Ts, spectral radius, time at
 the saturation, ITAE, the criteria it fails); a design whose continuous loop is not stable
 gets neither limit; ``--json`` prints ``{"ts_max": ..., "ts_stable": ..., ...}``;
 ``--out DIR`` also writes ``DIR/sampling.json`` and ``DIR/sampling.png`` (ITAE against Ts).
@@ -18,7 +18,7 @@ from typing import Any
 
 import typer
 
-from aiofl.cli.errors import _check_out, bad_input_exits
+from aiofl.cli.bad_input import _check_out, bad_input_exits
 
 __all__ = ["run_sampling"]
 
@@ -80,14 +80,14 @@ def run_sampling(
     out
         A folder to write the report into (None: none).
     tolerance
-        The ITAE allowance (> 0) of :func:`aiofl.analysis.sampling.sampling_limits`.
+        The ITAE allowance (> 0) of :func:`aiofl.analysis.sampling_limits.sampling_limits`.
     force
         Replace ``out``.
     budget
         Seconds for the refining rounds (None: no limit).
     """
     from aiofl.analysis.budget import time_budget
-    from aiofl.analysis.sampling import sampling_figure, sampling_limits
+    from aiofl.analysis.sampling_limits import sampling_figure, sampling_limits
     from aiofl.cli.configs import load_run_config
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 

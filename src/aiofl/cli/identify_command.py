@@ -33,7 +33,7 @@ from typing import Annotated, Any
 
 import typer
 
-from aiofl.cli.errors import FORCE_OPTION, _check_out, bad_input_exits
+from aiofl.cli.bad_input import FORCE_OPTION, _check_out, bad_input_exits
 
 __all__ = ["identify_command", "parse_bounds", "parse_free"]
 
@@ -358,7 +358,7 @@ def _write(
     from aiofl.identification.records import identification_record, record_json
     from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
     from aiofl.reporting.figures import figure_png
-    from aiofl.reporting.identification import candidates_figure, eso_figure, fit_figure
+    from aiofl.reporting.identification_figures import candidates_figure, eso_figure, fit_figure
 
     name = Path(str(data.source)).name
     fit = res.get("fit")
