@@ -341,3 +341,12 @@ def test_analyze_resolves_a_run_configs_plant_file_from_the_configs_folder(tmp_p
     res = CliRunner().invoke(app, ["analyze", "sub/run.toml", "--json"])
     assert res.exit_code == 0, res.output
     assert '"pend_sub"' in res.stdout and '"rho": 2' in res.stdout
+
+
+def test_plant_source_is_the_plant_key_as_written():
+    """What the C export and the design report name as the plant: the config's ``plant`` key
+    as written (a built-in name here), and the plant's own name when no key is given."""
+    cfg = load_config("paper-s1-leso")
+    assert cfg.plant_source == "slfjm" == cfg.raw["plant"]
+    raw = {k: v for k, v in cfg.raw.items() if k != "plant"}
+    assert cfg.__class__(**{**cfg.__dict__, "raw": raw}).plant_source == cfg.plant.name

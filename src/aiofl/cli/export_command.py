@@ -51,7 +51,7 @@ def _c_files(cfg: Any, sampling: Any, config: str, opts: dict[str, Any]) -> dict
             title=cfg.name,
             notes=[f"Config: {config}", *([cfg.description] if cfg.description else [])],
             plant=cfg.plant,  # a model-assisted controller's nominal model
-            plant_source=str(cfg.raw.get("plant", cfg.plant.name)),
+            plant_source=cfg.plant_source,
             x0=cfg.scenario.x0,
             params_only=opts.get("params_only"),
         )

@@ -151,6 +151,11 @@ class RunConfig:
     rig: Rig | None = None  # [rig] (aiofl.rig): actuator, friction, delays; None: none
     defaults: tuple[str, ...] = ()  # "KEY = default" for documented defaults it relies on
 
+    @property
+    def plant_source(self) -> str:
+        """Its ``plant`` key as written (a built-in name or a plant file), else the name."""
+        return str(self.raw.get("plant", self.plant.name))
+
     def simulate(self, *, store: bool = True) -> Any:
         """Run this config once (see :func:`aiofl.engine.simulation.simulate`)."""
         from aiofl.engine.simulation import simulate
@@ -587,10 +592,9 @@ def _presets_dir() -> Any:
 
 
 #: the sets of shipped presets: (key, folder under presets/, title).  A preset's set is a
-#: measured fact (the report's rig table, tests/test_report_rig.py): "designs" hold on
-#: the servo-1khz rig (aiofl.analysis.rig_check), "paper" is the paper's reproduction as
-#: printed (an ideal world: a continuous controller, an exact measurement), "limits" are
-#: designs tuned for an ideal world that a real rig loses or drives beyond its own figures.
+#: measured fact (the rig table, tests/test_report_rig.py): "designs" hold on the servo-1khz
+#: rig (analysis.rig_check), "paper" is the paper as printed (an ideal world: a continuous
+#: controller, an exact measurement), "limits" are tuned for an ideal world a rig defeats.
 PRESET_SETS: tuple[tuple[str, str, str], ...] = (
     ("designs", "", "Designs for a rig (hold on the servo-1khz rig)"),
     ("paper", "paper", "The paper's designs (the reproduction: an ideal world)"),

@@ -644,6 +644,6 @@ def export_fmu_for_config(
         notes=[f"Config: {config}", *([cfg.description] if cfg.description else [])],
         stop_time=cfg.scenario.t_final,
         plant=cfg.plant,
-        plant_source=str(cfg.raw.get("plant", cfg.plant.name)),
+        plant_source=cfg.plant_source,
         x0=cfg.scenario.x0,
     )

@@ -182,7 +182,7 @@ def _export_check(cfg: Any) -> tuple[list[tuple[str, str]], list[str]]:
                     precision=prec,
                     title=cfg.name,
                     plant=cfg.plant,
-                    plant_source=str(cfg.raw.get("plant", cfg.plant.name)),
+                    plant_source=cfg.plant_source,
                     x0=cfg.scenario.x0,
                 )
             )
