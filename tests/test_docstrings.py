@@ -91,14 +91,6 @@ ALLOWED: dict[str, str] = {
     + "cfg, sampling, precision, prefix as export_fmu's; config: the name shown",
     "aiofl.plants.symbolic:SymbolicPlant.from_strings": _CAP
     + "its prose documents the keys; they are a plant file's",
-    "aiofl.reporting.fronts:checked_rows": _CAP
-    + "a front file's row checks, described in its prose",
-    "aiofl.reporting.fronts:front_figure": _CAP
-    + "the report's ITAE/ISU figure (rep, scenario, isu_floor)",
-    "aiofl.reporting.fronts:parse_front": _CAP
-    + "reads a shipped front.csv (text, name, scenario, structure)",
-    "aiofl.reporting.fronts:parse_robust": _CAP
-    + "attaches a robust companion file (text, front, name)",
 }
 
 

@@ -19,7 +19,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from aiofl.reporting.fronts import FrontFileError
+from aiofl.reporting.front_files import FrontFileError
 from aiofl.reporting.noise_front import (
     NOISE_BUDGET,
     NOISE_FRONTS,

@@ -344,7 +344,8 @@ def test_figure_axes_are_in_the_plants_units() -> None:
 def test_front_figure_axes_carry_the_metrics_units(rep) -> None:
     from dataclasses import replace
 
-    from aiofl.reporting.fronts import front_figure, load_fronts
+    from aiofl.reporting.front_files import load_fronts
+    from aiofl.reporting.fronts import front_figure
 
     (ax,) = front_figure(replace(rep, fronts=load_fronts()), 1, None).axes
     assert ax.get_xlabel() == "ISU = ∫ u² dt [V²·s]"

@@ -21,7 +21,7 @@ import pytest
 from aiofl.config import load_config
 from aiofl.engine.simulation import simulate_batch
 from aiofl.reporting.cases import Case
-from aiofl.reporting.fronts import FrontFileError, load_fronts, parse_front, parse_robust
+from aiofl.reporting.front_files import FrontFileError, load_fronts, parse_front, parse_robust
 from aiofl.reporting.robust_rows import (
     DEFAULT_DRAWS,
     ROBUST_PARAMETERS,

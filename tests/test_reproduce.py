@@ -199,7 +199,7 @@ def test_an_extra_preset_becomes_an_extra_row_everywhere(monkeypatch) -> None:
     import aiofl.reporting.cases as rp
     from aiofl.reporting.figures import scenario_figure
     from aiofl.reporting.findings import findings
-    from aiofl.reporting.tables import tables_markdown
+    from aiofl.reporting.tables import PaperTablesSection
 
     real = rp.load_config
     # pretend a re-tuned preset is shipped: the printed INLESO set under another name
@@ -218,7 +218,7 @@ def test_an_extra_preset_becomes_an_extra_row_everywhere(monkeypatch) -> None:
     assert (extra["scenario"], extra["structure"]) == (1, "INLESO")
     assert extra["itae"] == printed["itae"]
     assert len(rep.records) == 13
-    md = tables_markdown(rep)
+    md = PaperTablesSection(rep).markdown()
     assert "| INLESO (retuned) | retuned-s1-inleso |" in md
     assert any("retuned-s1-inleso" in f for f in findings(rep))
     # one row of three panels (output, tracking error, control) per run

@@ -38,7 +38,7 @@ from hypothesis import strategies as st
 from aiofl.cli.app import _column_labels, _csv_text
 from aiofl.export.fmu import _model_description
 from aiofl.plants.base import unit_label
-from aiofl.reporting.html import _e
+from aiofl.reporting.page import escape as _e
 from aiofl.text import one_line, terminal_text, xml_text
 
 SPECIAL = [

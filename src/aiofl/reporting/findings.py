@@ -22,13 +22,16 @@ At most :data:`MAX_FINDINGS` findings, in this order:
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from aiofl.reporting.cases import CaseRun, Reproduction, controller_access
+from aiofl.reporting.page import details, item_list
 from aiofl.reporting.paper import PAPER_TABLES
-from aiofl.reporting.tables import _join, fmt
+from aiofl.reporting.section import Section
+from aiofl.reporting.tables import fmt, word_list
 
-__all__ = ["MAX_FINDINGS", "findings"]
+__all__ = ["MAX_FINDINGS", "FindingsSection", "findings"]
 
 MAX_FINDINGS = 8
 
@@ -52,7 +55,7 @@ def _printed_divergence(rep: Reproduction, recs: dict[str, dict[str, Any]]) -> s
     ]
     return (
         f"With the paper's printed parameters {len(div)} of the {len(printed)} paper cases "
-        f"fail (the plant lost, or the numbers diverged): {_join(times)}."
+        f"fail (the plant lost, or the numbers diverged): {word_list(times)}."
     )
 
 
@@ -226,7 +229,7 @@ def _not_analysed(rep: Reproduction, recs: dict[str, dict[str, Any]]) -> str | N
     if not missing:
         return None
     return (
-        f"The closed-loop linearisation gave no verdict for {_join(missing)} (no operating "
+        f"The closed-loop linearisation gave no verdict for {word_list(missing)} (no operating "
         "point found or the analysis failed; the reason is in the verdict table)."
     )
 
@@ -250,3 +253,19 @@ def findings(rep: Reproduction) -> list[str]:
     )
     out = [text for make in makers if (text := make(rep, recs))]
     return out[:MAX_FINDINGS]
+
+
+@dataclass
+class FindingsSection(Section):
+    """The report's "What we found" list (:func:`findings`)."""
+
+    rep: Reproduction
+    title = "What we found"
+
+    def markdown(self) -> str:
+        """``## title`` and the findings as a list."""
+        return f"## {self.title}\n\n" + "".join(f"- {f}\n" for f in findings(self.rep))
+
+    def html(self) -> list[str]:
+        """The list, folded under an ``<h2>``."""
+        return [details(self.title, [item_list(findings(self.rep), "findings")], heading=True)]

@@ -20,6 +20,7 @@ import numpy as np
 
 from aiofl import layout as L
 from aiofl.reporting.cases import Case, Reproduction
+from aiofl.reporting.section import TableSection
 from aiofl.reporting.tables import DASH, fmt
 
 __all__ = [
@@ -28,8 +29,8 @@ __all__ = [
     "FRESH_SEEDS",
     "FRESH_TITLE",
     "FreshSeeds",
+    "FreshSeedsSection",
     "compute_fresh_seeds",
-    "fresh_markdown",
     "fresh_notes",
     "fresh_rows",
     "seed_config",
@@ -215,13 +216,19 @@ def fresh_notes(rep: Reproduction) -> list[str]:
     ]
 
 
-def fresh_markdown(rep: Reproduction) -> str:
-    """The fresh-seed section of ``tables.md``."""
-    from aiofl.reporting.tables import _md_table
+@dataclass
+class FreshSeedsSection(TableSection):
+    """The fresh-seed table of the report: :func:`fresh_rows` and :func:`fresh_notes`."""
 
-    rows = fresh_rows(rep)
-    if not rows:
-        return ""
-    out = [f"## {FRESH_TITLE}", "", _md_table(FRESH_HEADER, rows), ""]
-    out += [f"- {n}" for n in fresh_notes(rep)]
-    return "\n".join(out) + "\n"
+    rep: Reproduction
+    title = FRESH_TITLE
+    header = FRESH_HEADER
+    notes_summary = "How these rows were computed"
+
+    def rows(self) -> list[list[str]]:
+        """:func:`fresh_rows`."""
+        return fresh_rows(self.rep)
+
+    def notes(self) -> list[str]:
+        """:func:`fresh_notes`."""
+        return fresh_notes(self.rep)

@@ -1,285 +1,50 @@
 r"""The shipped Pareto fronts in ``aiofl reproduce``: ITAE against ISU per structure.
 
-The fronts are *read*, not recomputed: ``aiofl/presets/fronts/s{N}-{structure}.csv`` (N in
-:data:`FRONT_SCENARIOS`, structure ``leso``, ``inleso`` or ``ladrc``) in the format of an
-NSGA-II ``front.csv`` of ``aiofl tune`` (:func:`aiofl.tuning.front.front_csv`): a header of
-the tuned parameters, the objectives (e.g. ``itae``, ``isu``), the constraints (``isu <=
-15.5``) and ``chosen``, then one row per front design.  An optional companion
-``s{N}-{structure}-robust.csv`` holds the same parameter columns first, then per design its
-statistics over model-error draws (e.g. ``itae_q50``, ``itae_q95``, ``stable_fraction``,
-optionally ``isu``); its rows are matched to the front's by their parameter values.
+The fronts are *read*, not recomputed (:mod:`aiofl.reporting.front_files`):
+``aiofl/presets/fronts/s{N}-{structure}.csv`` (N in :data:`FRONT_SCENARIOS`, structure
+``leso``, ``inleso`` or ``ladrc``), each with an optional companion
+``s{N}-{structure}-robust.csv`` of statistics over model-error draws.
 
 :func:`answer` states, from these numbers and this run's robustness rows of the
 ``frontier-*`` presets, which structure tracks best at equal control energy
-(:data:`ISU_BUDGET`), nominally and under model error.  A missing file is reported as
-missing; a malformed one raises :class:`FrontFileError` naming the file, the line and what
-is wrong.
+(:data:`ISU_BUDGET`), nominally and under model error; :class:`FrontsSection` is the
+report's section of them, :func:`front_figure` their figure.
 """
 
 from __future__ import annotations
 
-import csv
-import io
 import math
-import re
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
-from pathlib import Path
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
 
 from aiofl.reporting.cases import Reproduction
+from aiofl.reporting.front_files import (
+    FRONT_SCENARIOS,
+    STRUCTURES,
+    ShippedFront,
+    ShippedFronts,
+)
+from aiofl.reporting.page import details, escape, html_table, img, item_list
+from aiofl.reporting.section import Section, md_table
 from aiofl.reporting.tables import fmt, metric_units
 
 __all__ = [
-    "FRONT_SCENARIOS",
     "ISU_BUDGET",
-    "STRUCTURES",
-    "FrontFileError",
-    "ShippedFront",
-    "ShippedFronts",
+    "FrontsSection",
     "answer",
     "front_figure",
     "front_header",
     "front_notes",
     "front_rows",
     "front_scenarios",
-    "fronts_markdown",
     "has_front_content",
-    "load_fronts",
-    "parse_front",
-    "parse_robust",
 ]
 
-#: the scenarios whose fronts the report shows
-FRONT_SCENARIOS = (1, 3)
-#: structures, as in the file names
-STRUCTURES = ("leso", "inleso", "ladrc")
 #: the control-energy budget at which the structures are compared, per scenario
 ISU_BUDGET: dict[int, float] = {1: 15.5, 3: 20.0}
-#: column names that are objectives (a metric, optionally ``:aggregate``)
-_OBJECTIVE = re.compile(r"^(itae|iae|ise|isu|iau|stable_fraction)(?::(mean|worst|cvar|nominal))?$")
-
-
-class FrontFileError(ValueError):
-    """A shipped front file that cannot be read (the message names the file and line)."""
-
-
-@dataclass(frozen=True)
-class ShippedFront:
-    """One structure's front in one scenario, as read from its file(s).
-
-    ``itae``/``isu`` are the nominal objectives of the front's designs (columns ``itae`` or
-    ``itae:nominal``, ``isu`` or ``isu:nominal``); ``robust`` holds the companion file's
-    columns (aligned with the front's rows, NaN where a design has no robust row).
-    """
-
-    scenario: int
-    structure: str
-    path: str
-    names: tuple[str, ...]
-    values: NDArray[np.float64]
-    itae: NDArray[np.float64]
-    isu: NDArray[np.float64]
-    chosen: int
-    robust: dict[str, NDArray[np.float64]] = field(default_factory=dict)
-    robust_path: str | None = None
-
-
-@dataclass(frozen=True)
-class ShippedFronts:
-    """Every front found (by (scenario, structure)) and the files that were missing."""
-
-    fronts: dict[tuple[int, str], ShippedFront]
-    missing: list[str]
-    folder: str
-    errors: dict[str, str] = field(default_factory=dict)  # file -> why it was not read
-
-
-def _float(text: str, where: str, col: str) -> float:
-    if text.strip() == "":
-        return math.nan
-    try:
-        return float(text)
-    except ValueError:
-        raise FrontFileError(f"{where}: column {col!r} holds {text!r}, not a number") from None
-
-
-def _rows(text: str, name: str) -> tuple[list[str], list[tuple[int, list[str]]]]:
-    lines = list(csv.reader(io.StringIO(text)))
-    numbered = [(i + 1, r) for i, r in enumerate(lines) if r and any(c.strip() for c in r)]
-    if not numbered:
-        raise FrontFileError(f"{name}: empty file; expected a header line and front rows")
-    (_, header), body = numbered[0], numbered[1:]
-    header = [h.strip() for h in header]
-    for n, row in body:
-        if len(row) != len(header):
-            raise FrontFileError(
-                f"{name}, line {n}: {len(row)} fields, the header has {len(header)}"
-            )
-    if not body:
-        raise FrontFileError(f"{name}: no design rows under the header")
-    return header, body
-
-
-def _pick(header: Sequence[str], metric: str, name: str) -> int:
-    for cand in (metric, f"{metric}:nominal"):
-        if cand in header:
-            return header.index(cand)
-    raise FrontFileError(
-        f"{name}: no {metric!r} column (nor {metric + ':nominal'!r}); header is "
-        f"{', '.join(header)}; expected the format of aiofl tune's front.csv with "
-        "objectives = ['itae', 'isu']"
-    )
-
-
-def parse_front(text: str, *, name: str, scenario: int, structure: str) -> ShippedFront:
-    """Read a ``front.csv`` text (see the module docstring); raises :class:`FrontFileError`.
-
-    Checks: a header ending in ``chosen``; parameter columns, then objective columns
-    (metrics such as ``itae``, ``isu``), then constraint columns (``... <= x``); every row
-    with as many fields as the header, numbers everywhere, a finite positive ``itae`` and a
-    finite non-negative ``isu``, ``chosen`` 0 or 1 with exactly one 1.
-    """
-    header, body = _rows(text, name)
-    if header[-1] != "chosen":
-        raise FrontFileError(f"{name}: the last column must be 'chosen', got {header[-1]!r}")
-    kinds = [
-        "objective" if _OBJECTIVE.match(h) else "constraint" if ("<=" in h or ">=" in h) else "p"
-        for h in header[:-1]
-    ]
-    n_par = kinds.index("objective") if "objective" in kinds else len(kinds)
-    order = kinds[n_par:]
-    if (
-        n_par == 0
-        or "objective" not in kinds
-        or "p" in order
-        or ("constraint" in order and "objective" in order[order.index("constraint") :])
-    ):
-        raise FrontFileError(
-            f"{name}: header {', '.join(header)} is not parameters, then objectives "
-            "(itae, isu, ...), then constraints ('isu <= 15.5'), then chosen"
-        )
-    i_itae, i_isu = _pick(header, "itae", name), _pick(header, "isu", name)
-    values, cols, chosen = checked_rows(header, body, name, n_par, {"itae": i_itae, "isu": i_isu})
-    return ShippedFront(
-        scenario=scenario,
-        structure=structure,
-        path=name,
-        names=tuple(header[:n_par]),
-        values=values,
-        itae=cols["itae"],
-        isu=cols["isu"],
-        chosen=chosen,
-    )
-
-
-def checked_rows(
-    header: list[str],
-    body: list[tuple[int, list[str]]],
-    name: str,
-    n_par: int,
-    columns: dict[str, int],
-) -> tuple[NDArray[np.float64], dict[str, NDArray[np.float64]], int]:
-    """A front file's checked rows: parameters (first ``n_par`` columns, finite), the named
-    ``columns`` (``itae`` > 0, ``isu`` >= 0, finite) and the one row with ``chosen`` = 1;
-    raises :class:`FrontFileError` naming the line."""
-    i_itae, i_isu = columns["itae"], columns["isu"]
-    values, chosen = [], []
-    cols: dict[str, list[float]] = {k: [] for k in columns}
-    for n, row in body:
-        where = f"{name}, line {n}"
-        nums = [_float(c, where, h) for c, h in zip(row[:-1], header[:-1], strict=True)]
-        if not all(math.isfinite(v) for v in nums[:n_par]):
-            raise FrontFileError(f"{where}: a parameter value is missing or not finite")
-        if not (math.isfinite(nums[i_itae]) and nums[i_itae] > 0):
-            raise FrontFileError(f"{where}: ITAE {row[i_itae]!r} is not a finite number > 0")
-        if not (math.isfinite(nums[i_isu]) and nums[i_isu] >= 0):
-            raise FrontFileError(f"{where}: ISU {row[i_isu]!r} is not a finite number >= 0")
-        if row[-1].strip() not in ("0", "1"):
-            raise FrontFileError(f"{where}: chosen is {row[-1]!r}; allowed: 0 or 1")
-        values.append(nums[:n_par])
-        for k, i in columns.items():
-            cols[k].append(nums[i])
-        chosen.append(row[-1].strip() == "1")
-    if sum(chosen) != 1:
-        raise FrontFileError(f"{name}: {sum(chosen)} rows have chosen = 1; expected exactly 1")
-    arrays = {k: np.array(v) for k, v in cols.items()}
-    return np.array(values, dtype=np.float64), arrays, chosen.index(True)
-
-
-def parse_robust(text: str, front: ShippedFront, *, name: str) -> ShippedFront:
-    """Attach a companion robust file to ``front`` (rows matched by parameter values,
-    relative tolerance 1e-9); raises :class:`FrontFileError` for a malformed file or one
-    whose first columns are not the front's parameters."""
-    header, body = _rows(text, name)
-    k = len(front.names)
-    if tuple(header[:k]) != front.names or len(header) == k:
-        raise FrontFileError(
-            f"{name}: the header must start with the front's parameters "
-            f"({', '.join(front.names)}) and add statistics such as itae_q50, itae_q95, "
-            f"stable_fraction; got {', '.join(header)}"
-        )
-    stats = _match_rows(header, body, k, front.values, name)
-    return replace(front, robust=stats, robust_path=name)
-
-
-def _match_rows(
-    header: list[str], body: list[tuple[int, list[str]]], k: int, values: Any, name: str
-) -> dict[str, Any]:
-    """A companion file's statistics (columns after the first ``k``, the parameters) per
-    front row, matched by parameter values (relative tolerance 1e-9); NaN where no row
-    matches.  Shared by the ITAE/ISU fronts and the noise fronts
-    (:mod:`aiofl.reporting.noise_front`)."""
-    stats = {h: np.full(len(values), np.nan) for h in header[k:]}
-    for n, row in body:
-        nums = [_float(c, f"{name}, line {n}", h) for c, h in zip(row, header, strict=True)]
-        par = np.array(nums[:k])
-        hit = np.flatnonzero(np.isclose(values, par, rtol=1e-9, atol=0.0).all(axis=1))
-        for i in hit:
-            for h, v in zip(header[k:], nums[k:], strict=True):
-                stats[h][i] = v
-    return stats
-
-
-def load_fronts(folder: str | Path | None = None) -> ShippedFronts:
-    """Read every ``s{N}-{structure}.csv`` (and ``-robust.csv``) in ``folder`` (default:
-    the package's ``presets/fronts``).  Missing files are listed in ``missing``; a malformed
-    one (:class:`FrontFileError`) is left out and its message kept in ``errors``, so the
-    report states it instead of failing."""
-    if folder is None:
-        from importlib import resources
-
-        base: Any = resources.files("aiofl") / "presets" / "fronts"
-        shown = "aiofl/presets/fronts"
-    else:
-        base = Path(folder)
-        shown = str(folder)
-    fronts: dict[tuple[int, str], ShippedFront] = {}
-    missing: list[str] = []
-    errors: dict[str, str] = {}
-    for s in FRONT_SCENARIOS:
-        for st in STRUCTURES:
-            f = base / f"s{s}-{st}.csv"
-            if not f.is_file():
-                missing.append(f"s{s}-{st}.csv")
-                continue
-            try:
-                text = f.read_text(encoding="utf-8")
-                front = parse_front(text, name=f.name, scenario=s, structure=st)
-            except (FrontFileError, UnicodeDecodeError) as exc:
-                errors[f.name] = str(exc)
-                continue
-            r = base / f"s{s}-{st}-robust.csv"
-            if r.is_file():
-                try:
-                    front = parse_robust(r.read_text(encoding="utf-8"), front, name=r.name)
-                except (FrontFileError, UnicodeDecodeError) as exc:
-                    errors[r.name] = str(exc)
-            fronts[(s, st)] = front
-    return ShippedFronts(fronts=fronts, missing=missing, folder=shown, errors=errors)
 
 
 # --------------------------------------------------------------------------- answers
@@ -510,7 +275,21 @@ def front_figure(rep: Reproduction, scenario: int, isu_floor: float | None) -> A
     """ITAE against ISU (log axes, in the metrics' units from the scenario's plant): one
     colour per structure's front, its chosen design ringed; this run's printed paper
     designs (squares) and frontier presets (stars); the exact-tracking ISU floor (dashed)
-    and the budget (dotted).  A matplotlib ``Figure``."""
+    and the budget (dotted).
+
+    Parameters
+    ----------
+    rep
+        The reproduction (its fronts and runs).
+    scenario
+        The scenario of :data:`FRONT_SCENARIOS`.
+    isu_floor
+        The exact-tracking ISU floor (None: not drawn).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     from matplotlib.figure import Figure
 
     sf: ShippedFronts | None = rep.fronts
@@ -636,15 +415,37 @@ def front_scenarios(rep: Reproduction) -> Mapping[int, list[str]]:
     return {s: answer(rep, s) for s in FRONT_SCENARIOS}
 
 
-def fronts_markdown(rep: Reproduction) -> str:
-    """The Pareto-front section of ``tables.md`` (the figures are ``fronts-s{N}.png``)."""
-    from aiofl.reporting.tables import _md_table
+@dataclass
+class FrontsSection(Section):
+    """The Pareto-front section of the report: :func:`front_notes`, then per scenario of
+    :data:`FRONT_SCENARIOS` its table (:func:`front_rows`, when it has a front or a
+    frontier preset), its answers (:func:`answer`) and, in the page, ``fronts-s{N}.png``."""
 
-    out = ["## Pareto fronts: which structure tracks best at equal control energy?", ""]
-    out += [f"- {n}" for n in front_notes(rep)]
-    for s, sentences in front_scenarios(rep).items():
-        out += ["", f"### Scenario {s} (ISU ≤ {ISU_BUDGET[s]:g})", ""]
-        if has_front_content(rep, s):
-            out += [_md_table(front_header(s), front_rows(rep, s)), ""]
-        out += [f"- {t}" for t in sentences]
-    return "\n".join(out) + "\n"
+    rep: Reproduction
+    figures: Mapping[str, bytes] = field(default_factory=dict)
+    title = "Pareto fronts: which structure tracks best at equal control energy?"
+
+    def markdown(self) -> str:
+        """The notes as a list, then a ``###`` part per scenario."""
+        rep = self.rep
+        out = [f"## {self.title}", ""]
+        out += [f"- {n}" for n in front_notes(rep)]
+        for s, sentences in front_scenarios(rep).items():
+            out += ["", f"### Scenario {s} (ISU ≤ {ISU_BUDGET[s]:g})", ""]
+            if has_front_content(rep, s):
+                out += [md_table(front_header(s), front_rows(rep, s)), ""]
+            out += [f"- {t}" for t in sentences]
+        return "\n".join(out) + "\n"
+
+    def html(self) -> list[str]:
+        """The folded notes, then an ``<h3>`` part per scenario with its figure."""
+        rep = self.rep
+        body = [f"<h2>{escape(self.title)}</h2>"]
+        body.append(details("Where the fronts come from", [item_list(front_notes(rep), "notes")]))
+        for s, sentences in front_scenarios(rep).items():
+            body.append(f"<h3>Scenario {s} (ISU ≤ {ISU_BUDGET[s]:g})</h3>")
+            if has_front_content(rep, s):
+                body.append(html_table(front_header(s), front_rows(rep, s), cls="settings"))
+            body.append(item_list(sentences, "answers"))
+            body += img(self.figures, f"fronts-s{s}.png", f"Pareto fronts, scenario {s}")
+        return body

@@ -24,7 +24,7 @@ missing file is reported as missing; a malformed one is left out with its messag
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
@@ -33,7 +33,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl.reporting.cases import Reproduction
-from aiofl.reporting.fronts import FrontFileError, _match_rows, _rows, checked_rows
+from aiofl.reporting.front_files import (
+    FrontFile,
+    FrontFileError,
+    checked_rows,
+    front_folder,
+    match_rows,
+    read_rows,
+)
+from aiofl.reporting.section import TableSection
 from aiofl.reporting.tables import DASH, fmt, metric_units
 
 __all__ = [
@@ -43,13 +51,13 @@ __all__ = [
     "NOISE_SCENARIO",
     "NOISE_TITLE",
     "NoiseFront",
+    "NoiseFrontSection",
     "NoiseFronts",
     "best_nominal",
     "load_noise_fronts",
     "lowest_q95",
     "noise_answer",
     "noise_figure",
-    "noise_markdown",
     "noise_markers",
     "noise_notes",
     "noise_rows",
@@ -70,28 +78,17 @@ NOISE_TITLE = f"Noise: nominal against robust ITAE at ISU ≤ {NOISE_BUDGET:g} (
 _COLORS = {"ladrc": "C2", "assisted": "C3"}
 
 
-@dataclass(frozen=True)
-class NoiseFront:
-    """One observer's noise front, as read from its file(s).
-
-    ``itae`` and ``cvar`` are the objectives (nominal ITAE, CVaR of ITAE over the tuner's
-    draws), ``isu`` the nominal ISU and ``stable`` the tuner's stable fraction (the
-    constraint columns); ``robust`` holds the companion file's columns aligned with the
-    rows (NaN where a design has no robust row).
+@dataclass(frozen=True, kw_only=True)
+class NoiseFront(FrontFile):
+    """One observer's noise front, as read from its file(s) (:class:`~aiofl.reporting.
+    front_files.FrontFile`): ``itae`` and ``cvar`` are the objectives (nominal ITAE, CVaR
+    of ITAE over the tuner's draws), ``isu`` the nominal ISU and ``stable`` the tuner's
+    stable fraction (the constraint columns); ``label`` names the observer.
     """
 
-    structure: str
     label: str
-    path: str
-    names: tuple[str, ...]
-    values: NDArray[np.float64]
-    itae: NDArray[np.float64]
     cvar: NDArray[np.float64]
-    isu: NDArray[np.float64]
     stable: NDArray[np.float64]
-    chosen: int
-    robust: dict[str, NDArray[np.float64]] = field(default_factory=dict)
-    robust_path: str | None = None
 
     @property
     def q95(self) -> NDArray[np.float64]:
@@ -149,7 +146,7 @@ def parse_noise_front(text: str, *, name: str, structure: str, label: str = "") 
     -------
     NoiseFront
     """
-    header, body = _rows(text, name)
+    header, body = read_rows(text, name)
     if header[-1] != "chosen":
         raise FrontFileError(f"{name}: the last column must be 'chosen', got {header[-1]!r}")
     i_itae, i_cvar = _col(header, "itae:nominal", name), _col(header, "itae:cvar", name)
@@ -187,14 +184,14 @@ def parse_noise_robust(text: str, front: NoiseFront, *, name: str) -> NoiseFront
     NoiseFront
         ``front`` with the robust statistics.
     """
-    header, body = _rows(text, name)
+    header, body = read_rows(text, name)
     k = len(front.names)
     if tuple(header[:k]) != front.names or "itae_q95" not in header[k:]:
         raise FrontFileError(
             f"{name}: the header must start with the front's parameters "
             f"({', '.join(front.names)}) and hold itae_q95; got {', '.join(header)}"
         )
-    stats = _match_rows(header, body, k, front.values, name)
+    stats = match_rows(header, body, k, front.values, name)
     return replace(front, robust=stats, robust_path=name)
 
 
@@ -202,13 +199,7 @@ def load_noise_fronts(folder: str | Path | None = None) -> NoiseFronts:
     """Read every ``s3-noise-{structure}.csv`` (and ``-robust.csv``) in ``folder``
     (default: the package's ``presets/fronts``); missing files are listed, malformed ones
     left out with their message."""
-    if folder is None:
-        from importlib import resources
-
-        base: Any = resources.files("aiofl") / "presets" / "fronts"
-        shown = "aiofl/presets/fronts"
-    else:
-        base, shown = Path(folder), str(folder)
+    base, shown = front_folder(folder)
     fronts: dict[str, NoiseFront] = {}
     missing: list[str] = []
     errors: dict[str, str] = {}
@@ -486,12 +477,29 @@ def noise_notes(rep: Reproduction) -> list[str]:
     return notes
 
 
-def noise_markdown(rep: Reproduction) -> str:
-    """The noise-front section of ``tables.md`` (the figure is ``noise-front-s3.png``)."""
-    from aiofl.reporting.tables import _md_table
+@dataclass
+class NoiseFrontSection(TableSection):
+    """The noise-front section of the report: the answer (:func:`noise_answer`), the table
+    (:func:`noise_rows`), the notes (:func:`noise_notes`) and, in the page,
+    ``noise-front-s3.png``."""
 
-    out = [f"## {NOISE_TITLE}", ""]
-    out += [f"- {t}" for t in noise_answer(getattr(rep, "noise_fronts", None))]
-    out += ["", _md_table(NOISE_HEADER, noise_rows(rep)), ""]
-    out += [f"- {n}" for n in noise_notes(rep)]
-    return "\n".join(out) + "\n"
+    rep: Reproduction
+    figures: Mapping[str, bytes] = field(default_factory=dict)
+    title = NOISE_TITLE
+    header = NOISE_HEADER
+    notes_summary = "Where the noise fronts come from"
+    shown_without_rows = True
+    table_class = "settings"
+    figure = ("noise-front-s3.png", "Noise fronts, scenario 3")
+
+    def lead(self) -> list[str]:
+        """:func:`noise_answer`."""
+        return noise_answer(getattr(self.rep, "noise_fronts", None))
+
+    def rows(self) -> list[list[str]]:
+        """:func:`noise_rows`."""
+        return noise_rows(self.rep)
+
+    def notes(self) -> list[str]:
+        """:func:`noise_notes`."""
+        return noise_notes(self.rep)

@@ -1,6 +1,6 @@
 """The pieces every aiofl HTML page is built from: its style, tables, folded blocks,
 embedded figures and the page itself (one self-contained file: inline CSS, figures as
-base64 palette PNG).  ``aiofl reproduce``'s report (:mod:`aiofl.reporting.html`) and a
+base64 palette PNG).  ``aiofl reproduce``'s report (:mod:`aiofl.reporting.reproduction_report`) and a
 design's report (:mod:`aiofl.reporting.design_report`) are made of them.
 """
 

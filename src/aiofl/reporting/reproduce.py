@@ -8,7 +8,8 @@ shipped Pareto fronts (:mod:`aiofl.reporting.fronts`) and writes ``metrics.json`
 fronts are shipped), ``noise-front-s3.png`` (scenario 3's noise fronts,
 :mod:`aiofl.reporting.noise_front`; with scenario 3's designs on fresh noise seeds,
 :mod:`aiofl.reporting.fresh_seeds`) and a self-contained ``report.html`` into an output directory,
-all-or-nothing.
+all-or-nothing; ``tables.md`` and ``report.html`` are the sections of
+:mod:`aiofl.reporting.reproduction_report`.
 """
 
 from __future__ import annotations
@@ -23,28 +24,20 @@ from aiofl.blas_threads import one_blas_thread
 from aiofl.outputs import atomic_output_dir, atomic_write_bytes, atomic_write_text
 from aiofl.reporting.cases import Reproduction, compute
 from aiofl.reporting.figures import figure_png, scenario_figure
-from aiofl.reporting.fresh_seeds import compute_fresh_seeds, fresh_markdown
-from aiofl.reporting.fronts import FRONT_SCENARIOS, front_figure, fronts_markdown, load_fronts
-from aiofl.reporting.html import html_report
-from aiofl.reporting.noise_front import load_noise_fronts, noise_figure, noise_markdown
+from aiofl.reporting.fresh_seeds import compute_fresh_seeds
+from aiofl.reporting.front_files import FRONT_SCENARIOS, load_fronts
+from aiofl.reporting.fronts import front_figure
+from aiofl.reporting.noise_front import load_noise_fronts, noise_figure
 from aiofl.reporting.paper import SCENARIOS
-from aiofl.reporting.rig_rows import (
-    RIG_DESIGNS,
-    RIG_DRAWS_N,
-    compute_rig_table,
-    rig_markdown,
-    with_rig_records,
-)
+from aiofl.reporting.reproduction_report import html_report, report_markdown
+from aiofl.reporting.rig_rows import RIG_DESIGNS, RIG_DRAWS_N, compute_rig_table, with_rig_records
 from aiofl.reporting.robust_rows import (
     DEFAULT_DRAWS,
     DEFAULT_SEED,
     compute_robustness,
-    robust_markdown,
     with_robustness,
 )
-from aiofl.reporting.sensor_rows import compute_sensor_table, sensor_markdown, with_sensors
-from aiofl.reporting.summary import summary_markdown
-from aiofl.reporting.tables import tables_markdown
+from aiofl.reporting.sensor_rows import compute_sensor_table, with_sensors
 from aiofl.uncertainty import MAX_DRAWS
 
 __all__ = ["reproduce"]
@@ -184,18 +177,6 @@ def _reproduce(
         t1 = time.perf_counter()
         rep = replace(rep, timings={**rep.timings, "figures": t1 - t0})
         stage("writing tables and report")
-        md = "\n".join(
-            [
-                summary_markdown(rep),
-                tables_markdown(rep),
-                robust_markdown(rep),
-                sensor_markdown(rep),
-                rig_markdown(rep),
-                fresh_markdown(rep),
-                fronts_markdown(rep),
-                noise_markdown(rep),
-            ]
-        )
-        atomic_write_text(stage_dir / "tables.md", md)
+        atomic_write_text(stage_dir / "tables.md", report_markdown(rep))
         atomic_write_text(stage_dir / "report.html", html_report(rep, figures))
     return rep

@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from aiofl.reporting.cases import Case, Reproduction
+from aiofl.reporting.section import TableSection
 from aiofl.reporting.tables import DASH, fmt
 
 __all__ = [
@@ -30,9 +31,9 @@ __all__ = [
     "RIG_DRAWS_N",
     "RIG_HEADER",
     "RIG_TITLE",
+    "RigSection",
     "RigTable",
     "compute_rig_table",
-    "rig_markdown",
     "rig_notes",
     "rig_rows",
     "with_rig_records",
@@ -216,13 +217,18 @@ def rig_notes(rep: Reproduction) -> list[str]:
     return notes
 
 
-def rig_markdown(rep: Reproduction) -> str:
-    """The rig section of ``tables.md``."""
-    from aiofl.reporting.tables import _md_table
+@dataclass
+class RigSection(TableSection):
+    """The rig table of the report: :func:`rig_rows` and :func:`rig_notes`."""
 
-    rows = rig_rows(rep)
-    if not rows:
-        return ""
-    out = [f"## {RIG_TITLE}", "", _md_table(RIG_HEADER, rows), ""]
-    out += [f"- {n}" for n in rig_notes(rep)]
-    return "\n".join(out) + "\n"
+    rep: Reproduction
+    title = RIG_TITLE
+    header = RIG_HEADER
+
+    def rows(self) -> list[list[str]]:
+        """:func:`rig_rows`."""
+        return rig_rows(self.rep)
+
+    def notes(self) -> list[str]:
+        """:func:`rig_notes`."""
+        return rig_notes(self.rep)

@@ -30,6 +30,7 @@ import numpy as np
 
 from aiofl import layout as L
 from aiofl.reporting.cases import Case, Reproduction, controller_access
+from aiofl.reporting.section import TableSection
 from aiofl.reporting.tables import DASH, fmt
 from aiofl.uncertainty import UncertaintyModel, corner_draws, sample_draws
 
@@ -39,9 +40,10 @@ __all__ = [
     "ROBUST_HEADER",
     "ROBUST_PARAMETERS",
     "ROBUST_SPREAD",
+    "ROBUST_TITLE",
+    "RobustSection",
     "RobustTable",
     "compute_robustness",
-    "robust_markdown",
     "robust_notes",
     "robust_rows",
     "robust_spec",
@@ -385,13 +387,24 @@ def robust_notes(rep: Reproduction) -> list[str]:
     return notes
 
 
-def robust_markdown(rep: Reproduction) -> str:
-    """The robustness section of ``tables.md``."""
-    from aiofl.reporting.tables import _md_table
+ROBUST_TITLE = "Robustness: every design over the same ±20 % model errors"
 
-    out = ["## Robustness: every design over the same ±20 % model errors", ""]
-    rows = robust_rows(rep)
-    if rows:
-        out += [_md_table(ROBUST_HEADER, rows), ""]
-    out += [f"- {n}" for n in robust_notes(rep)]
-    return "\n".join(out) + "\n"
+
+@dataclass
+class RobustSection(TableSection):
+    """The robustness table of the report: :func:`robust_rows` and :func:`robust_notes`
+    (shown without rows too: its notes say the draws were skipped)."""
+
+    rep: Reproduction
+    title = ROBUST_TITLE
+    header = ROBUST_HEADER
+    notes_summary = "How these rows were computed, per scenario"
+    shown_without_rows = True
+
+    def rows(self) -> list[list[str]]:
+        """:func:`robust_rows`."""
+        return robust_rows(self.rep)
+
+    def notes(self) -> list[str]:
+        """:func:`robust_notes`."""
+        return robust_notes(self.rep)

@@ -29,14 +29,16 @@ import numpy as np
 
 from aiofl import layout as L
 from aiofl.reporting.cases import Case, Reproduction
+from aiofl.reporting.section import TableSection
 from aiofl.reporting.tables import DASH, fmt
 
 __all__ = [
     "SENSOR_COLUMNS",
     "SENSOR_HEADER",
+    "SENSOR_TITLE",
+    "SensorSection",
     "SensorTable",
     "compute_sensor_table",
-    "sensor_markdown",
     "sensor_notes",
     "sensor_rows",
     "survives",
@@ -324,13 +326,18 @@ def sensor_notes(rep: Reproduction) -> list[str]:
 SENSOR_TITLE = "What a user gets: the ideal sensor beside 16-bit and 12-bit encoders"
 
 
-def sensor_markdown(rep: Reproduction) -> str:
-    """The sensor section of ``tables.md``."""
-    from aiofl.reporting.tables import _md_table
+@dataclass
+class SensorSection(TableSection):
+    """The sensor table of the report: :func:`sensor_rows` and :func:`sensor_notes`."""
 
-    rows = sensor_rows(rep)
-    if not rows:
-        return ""
-    out = [f"## {SENSOR_TITLE}", "", _md_table(SENSOR_HEADER, rows), ""]
-    out += [f"- {n}" for n in sensor_notes(rep)]
-    return "\n".join(out) + "\n"
+    rep: Reproduction
+    title = SENSOR_TITLE
+    header = SENSOR_HEADER
+
+    def rows(self) -> list[list[str]]:
+        """:func:`sensor_rows`."""
+        return sensor_rows(self.rep)
+
+    def notes(self) -> list[str]:
+        """:func:`sensor_notes`."""
+        return sensor_notes(self.rep)

@@ -17,16 +17,19 @@ and, per structure and scenario, the best design of that structure (:func:`struc
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from aiofl.reporting.cases import CaseRun, Reproduction, controller_access
+from aiofl.reporting.page import escape, html_table
 from aiofl.reporting.paper import PAPER_TABLES, SCENARIOS
-from aiofl.reporting.tables import fmt
+from aiofl.reporting.section import Section, md_table
+from aiofl.reporting.tables import fmt, metric_units
 
 __all__ = [
     "CRITERION",
     "ROBUST_CRITERION",
+    "SummarySection",
     "best_design",
     "claim_text",
     "most_robust",
@@ -35,7 +38,6 @@ __all__ = [
     "structure_rows",
     "summary_header",
     "summary_intro",
-    "summary_markdown",
     "summary_rows",
 ]
 
@@ -300,20 +302,35 @@ def summary_intro(rep: Reproduction) -> str:
 
 
 def _itae_unit(rep: Reproduction) -> str:
-    from aiofl.reporting.tables import metric_units
-
     unit = metric_units(rep.runs[0].case.config.plant)["itae"] if rep.runs else ""
     return unit or "the plant's units"
 
 
-def summary_markdown(rep: Reproduction) -> str:
-    """The summary that opens ``tables.md`` (a level-1 heading, the sentence, two tables)."""
-    from aiofl.reporting.tables import _md_table
+@dataclass
+class SummarySection(Section):
+    """The one-screen summary that leads the report: :func:`summary_intro`, the scenarios'
+    rows (:func:`summary_rows`) and the structures' (:func:`structure_rows`)."""
 
-    def table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
-        return [_md_table(header, rows), ""]
+    rep: Reproduction
+    title = "Summary"
 
-    out = ["# Summary", "", summary_intro(rep), ""]
-    out += table(summary_header(rep), summary_rows(rep))
-    out += table(structure_header(rep), structure_rows(rep))
-    return "\n".join(out)
+    def markdown(self) -> str:
+        """A level-1 heading, the sentence, two tables."""
+        rep = self.rep
+        out = [f"# {self.title}", "", summary_intro(rep), ""]
+        out += [md_table(summary_header(rep), summary_rows(rep)), ""]
+        out += [md_table(structure_header(rep), structure_rows(rep)), ""]
+        return "\n".join(out)
+
+    def html(self) -> list[str]:
+        """A boxed ``<section>``: the sentence, two tables, where to read on."""
+        rep = self.rep
+        return [
+            f'<section class="summary"><h2 id="summary">{escape(self.title)}</h2>',
+            f"<p>{escape(summary_intro(rep))}</p>",
+            html_table(summary_header(rep), summary_rows(rep), cls="summary"),
+            html_table(structure_header(rep), structure_rows(rep), cls="summary"),
+            '<p class="muted">Below: Tables I–III, robustness, Pareto fronts and the '
+            "linearisation; the notes on each case, Figures 3–5 and the long explanations are "
+            "folded (click a ▸ line to open it).</p></section>",
+        ]

@@ -1,15 +1,19 @@
-"""Markdown tables and notes of ``aiofl reproduce``: Tables I–III, the verdicts, the settings.
+"""Tables I–III of ``aiofl reproduce`` and their notes, the sample-time paragraph and every
+case's closed-loop verdict beside its simulation, with the number formatting the report uses.
 
 Every number here is generated from the computed :class:`aiofl.reporting.cases.Reproduction`
 (and the paper's values in :data:`aiofl.reporting.paper.PAPER_TABLES`).  Units are the
-plant's own (:attr:`aiofl.plants.base.Plant.output_unit`, ``input_unit``).  The HTML page
-(:mod:`aiofl.reporting.html`) renders the same rows.
+plant's own (:attr:`aiofl.plants.base.Plant.output_unit`, ``input_unit``).  The report's
+sections of them (:class:`PaperTablesSection`, :class:`SamplingSection`,
+:class:`VerdictSection`; :mod:`aiofl.reporting.section`) render the same rows as Markdown and
+as HTML.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -26,22 +30,29 @@ from aiofl.reporting.cases import (
     observer_roots,
     output_ratio,
 )
+from aiofl.reporting.page import Raw, details, escape, html_table, img, item_list
 from aiofl.reporting.paper import PAPER_TABLES, SCENARIOS
 from aiofl.reporting.sampling_note import sampling_paragraph, ts_max_cell
+from aiofl.reporting.section import Section, md_table
 
 __all__ = [
     "CONTEXT_ROWS",
     "DASH",
     "VERDICT_HEADER",
+    "VERDICT_INTRO",
+    "PaperTablesSection",
+    "SamplingSection",
+    "VerdictSection",
     "case_label",
     "fmt",
     "metric_units",
-    "open_settings",
+    "sampling_text",
     "scenario_notes",
     "table_header",
     "table_rows",
-    "tables_markdown",
+    "verdict_notes",
     "verdict_rows",
+    "word_list",
 ]
 
 DASH = "—"
@@ -101,7 +112,7 @@ def _roots_text(roots: np.ndarray) -> str:
     return ", ".join(parts)
 
 
-def _join(items: Sequence[str]) -> str:
+def word_list(items: Sequence[str]) -> str:
     """``a``, ``a and b``, ``a, b and c``."""
     return items[0] if len(items) == 1 else ", ".join(items[:-1]) + " and " + items[-1]
 
@@ -302,7 +313,7 @@ def scenario_notes(rep: Reproduction, scenario: int) -> list[str]:
             recipes.setdefault((how, what), []).append(f"{run.case.label} [{run.case.preset}]")
     for (how, what), rows in recipes.items():
         verb = "was" if len(rows) == 1 else "were"
-        notes.append(f"{_join(rows)} {verb} {what} with {how}.")
+        notes.append(f"{word_list(rows)} {verb} {what} with {how}.")
     return notes
 
 
@@ -373,37 +384,137 @@ def verdict_notes(rep: Reproduction) -> list[tuple[str, str]]:
     return out
 
 
-# ------------------------------------------------------------------------ Markdown
-def _md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
-    lines += ["| " + " | ".join(c.replace("|", "\\|") for c in row) + " |" for row in rows]
-    return "\n".join(lines)
+# ------------------------------------------------------------------------- sections
+MARKDOWN_INTRO = (
+    "ITAE = ∫ t|y − r| dt and ISU = ∫ u² dt over the horizon (eq. 22); IAU = ∫ |u| dt and "
+    "OPI (eq. 22, printed weights) are computed here only (the paper gives none). "
+    "'paper' columns are the printed Tables I–III; 'computed' columns come from "
+    "simulating the paper's printed parameters (presets `paper-s*-*`). Metrics of a run "
+    "that diverged are not defined; the divergence time is given instead. The row "
+    "y ≡ 0 is the trivial controller that never moves the output, for context."
+)
+"""What the columns of Tables I–III are, in ``tables.md``."""
+
+HTML_INTRO = (
+    "<p>Each table puts the paper's printed ITAE and ISU beside what this code computes "
+    "from the paper's printed parameters (presets <code>paper-s*-*</code>, shown with "
+    "<code>aiofl show NAME</code>). A run that diverged has no metrics; its divergence "
+    "time is shown. The row <em>y ≡ 0</em> is the trivial controller that never moves "
+    "the output, for context. The ESO-based designs (LESO, INLESO, LADRC) see only the "
+    "measured output, ρ and b0; an IOFL row says what the model-based law is given. "
+    "The run-level numbers (metrics, divergence times, tracking errors, verdicts) are "
+    "those of <code>metrics.json</code>.</p>"
+)
+"""What the columns of Tables I–III are, in the page (HTML)."""
 
 
-def tables_markdown(rep: Reproduction) -> str:
-    """``tables.md``: Tables I–III, paper vs computed, with notes; verdicts beside runs."""
-    out = [
-        "# Tables I–III: paper vs this code",
-        "",
-        "ITAE = ∫ t|y − r| dt and ISU = ∫ u² dt over the horizon (eq. 22); IAU = ∫ |u| dt and "
-        "OPI (eq. 22, printed weights) are computed here only (the paper gives none). "
-        "'paper' columns are the printed Tables I–III; 'computed' columns come from "
-        "simulating the paper's printed parameters (presets `paper-s*-*`). Metrics of a run "
-        "that diverged are not defined; the divergence time is given instead. The row "
-        "y ≡ 0 is the trivial controller that never moves the output, for context.",
-        "",
-    ]
-    for s, info in SCENARIOS.items():
-        out += [f"## Table {info.table}: scenario {s}, {info.title}", ""]
-        out += [_md_table(table_header(rep, s), table_rows(rep, s)), ""]
-        out += [f"- {n}" for n in scenario_notes(rep, s)]
-        out += [""]
-    para = sampling_text(rep)
-    if para:
-        out += ["## What the sample-time limits mean", "", para, ""]
-    out += ["## Closed-loop linearisation beside the simulation", "", VERDICT_INTRO, ""]
-    out += [_md_table(VERDICT_HEADER, verdict_rows(rep)), ""]
-    return "\n".join(out)
+@dataclass
+class PaperTablesSection(Section):
+    """Tables I–III, paper vs computed (:func:`table_rows`), each with its notes
+    (:func:`scenario_notes`) and, in the page, its figure (``fig3.png`` ...)."""
+
+    rep: Reproduction
+    figures: Mapping[str, bytes] = field(default_factory=dict)
+    title = "Tables I–III: paper vs this code"
+
+    def markdown(self) -> str:
+        """A level-1 heading, what the columns are, then each table and its notes."""
+        rep = self.rep
+        out = [f"# {self.title}", "", MARKDOWN_INTRO, ""]
+        for s, info in SCENARIOS.items():
+            out += [f"## Table {info.table}: scenario {s}, {info.title}", ""]
+            out += [md_table(table_header(rep, s), table_rows(rep, s)), ""]
+            out += [f"- {n}" for n in scenario_notes(rep, s)]
+            out += [""]
+        return "\n".join(out)
+
+    def html(self) -> list[str]:
+        """What the columns are, then each table with its notes and figure folded."""
+        rep = self.rep
+        body = [HTML_INTRO]
+        for s, info in SCENARIOS.items():
+            body.append(f"<h2>Table {info.table}: scenario {s}, {escape(info.title)}</h2>")
+            rows = table_rows(rep, s)
+            body.append(html_table(table_header(rep, s), rows, context_rows=len(CONTEXT_ROWS)))
+            notes = scenario_notes(rep, s)
+            what = f"Notes on the rows of Table {info.table} ({len(notes)})"
+            body.append(details(what, [item_list(notes, "notes")]))
+            name = f"fig{info.figure}.png"
+            figure = img(self.figures, name, f"Figure {info.figure}: scenario {s}")
+            if figure:
+                n = len(rep.scenario_runs(s))
+                what = f"Figure {info.figure} (reproduced): output, tracking error and control of "
+                body.append(details(what + f"the {n} designs ({name})", figure))
+        return body
+
+
+@dataclass
+class SamplingSection(Section):
+    """The paragraph on the designs' sample-time limits (:func:`sampling_text`; left out
+    when none were computed)."""
+
+    rep: Reproduction
+    title = "What the sample-time limits mean"
+
+    def markdown(self) -> str:
+        """``## title`` and the paragraph."""
+        para = sampling_text(self.rep)
+        return f"## {self.title}\n\n{para}\n" if para else ""
+
+    def html(self) -> list[str]:
+        """The paragraph, folded under an ``<h2>``."""
+        para = sampling_text(self.rep)
+        return [details(self.title, [f"<p>{escape(para)}</p>"], heading=True)] if para else []
+
+
+@dataclass
+class VerdictSection(Section):
+    """Every case's closed-loop verdict beside what its simulation did
+    (:func:`verdict_rows`), and how each loop was linearised (:func:`verdict_notes`, the
+    page only)."""
+
+    rep: Reproduction
+    title = "Closed-loop linearisation beside the simulation"
+
+    def markdown(self) -> str:
+        """``## title``, what the columns mean, the table."""
+        table = md_table(VERDICT_HEADER, verdict_rows(self.rep))
+        return f"## {self.title}\n\n{VERDICT_INTRO}\n\n{table}\n"
+
+    def html(self) -> list[str]:
+        """The table, its long sentences folded under a short summary per row."""
+        rep = self.rep
+        body = [
+            f"<h2>{escape(self.title)}</h2>",
+            details("What the columns mean", [f"<p>{escape(VERDICT_INTRO)}</p>"]),
+        ]
+        rows: list[list[str]] = verdict_rows(rep)
+        for run, row in zip(rep.runs, rows, strict=True):
+            row[-1] = _verdict_cell(run, row[-1])
+        header = [*VERDICT_HEADER[:-1], "The simulation (open a row for the sentence)"]
+        body.append(html_table(header, rows, cls="verdicts"))
+        how = verdict_notes(rep)
+        if how:
+            table = html_table(["Case", "Linearisation notes"], how, cls="settings")
+            body.append(
+                details("How each loop was linearised (non-smooth elements, ε sweep)", [table])
+            )
+        return body
+
+
+def _verdict_cell(run: CaseRun, sentence: str) -> Raw:
+    """The long linearisation-vs-simulation sentence folded under a short summary: what the
+    run did and whether the two agree."""
+    kind = run.behaviour.kind
+    verb = {"diverged": "diverges", "lost": "loses the plant"}
+    did = (
+        f"{verb[kind]} at t = {run.behaviour.stopped_at:.2f} s"
+        if kind in verb and run.behaviour.stopped_at is not None
+        else kind
+    )
+    tail = sentence.rsplit(" — ", 1)[1] if " — " in sentence else ""
+    short = did + (f"; {tail.split(':')[0].rstrip('.')}" if tail else "")
+    return Raw(details(short, [escape(sentence)]))
 
 
 def sampling_text(rep: Reproduction) -> str:
@@ -427,104 +538,3 @@ VERDICT_INTRO = (
     "measured from its trajectory over its last seconds (e = y − r, in the plant's output "
     "unit), and whether the two agree."
 )
-
-
-# -------------------------------------------------------------------------- settings
-def open_settings(rep: Reproduction) -> list[tuple[str, str, str]]:
-    """(setting, what the paper says, the choice made) for everything the paper leaves open.
-
-    Values are read from the configs of this run where they are data.
-    """
-    s1 = rep.config("paper-s1-leso")
-    s1i = rep.config("paper-s1-inleso")
-    s2 = rep.config("paper-s2-leso")
-    s3 = rep.config("paper-s3-leso")
-    s3i = rep.config("paper-s3-inleso")
-    ref = s1.scenario.reference
-    sc2, sc3 = s2.scenario, s3.scenario
-    w = s1.weights
-    c1 = s1.controller
-    y_unit, d_unit = s1.plant.output_unit, s1.plant.disturbance_unit
-
-    def same_td_sef(a: Any, b: Any) -> bool:
-        keys = [k for k in set(a.values) | set(b.values) if k.startswith(("td.", "sef."))]
-        return all(a.value(k) == b.value(k) for k in keys)
-
-    kept = all(same_td_sef(a.controller, b.controller) for a, b in ((s1, s3), (s1i, s3i)))
-    x0 = "zero" if not s1.scenario.x0 else str(list(s1.scenario.x0))
-    scale = ", ".join(f"{k} × {v:g}" for k, v in sc2.plant_scale.items()) or "none"
-    return [
-        (
-            "Reference",
-            "“a sinusoidal signal with frequency 2 rad/sec and amplitude of 45”",
-            f"r = {math.degrees(ref.amplitude):.4g}° = {ref.amplitude:.6g} {y_unit} · "
-            f"sin({ref.omega:g} t): the 45 read as degrees, in {y_unit} because y is an angle",
-        ),
-        (
-            "Horizons",
-            "20 s simulations; GA tuning with t_f = 6 s",
-            f"simulation horizon {fmt(s1.scenario.t_final, 4)} s; tuning horizon 6 s "
-            "(`aiofl tune`)",
-        ),
-        (
-            "Initial state",
-            "not stated",
-            f"plant state {x0}; observer and differentiator states zero",
-        ),
-        (
-            "Scenario 2 disturbance",
-            "“step at t = 10 sec with amplitude 0.5 N.m and an increase 40 % in the load inertia”",
-            f"τ_d = {sc2.disturbance_amplitude:g} {d_unit} from t = {sc2.disturbance_time:g} s "
-            f"through b_d of eq. (15); {scale} in the true plant only (the controller is not "
-            f"told) from t = {sc2.parameter_change_time:g} s",
-        ),
-        (
-            "Scenario 3 noise",
-            "Gaussian, mean 0, variance 0.0001, at the output",
-            f"variance {sc3.noise_variance:g} {y_unit}², held constant over "
-            f"{1e3 * sc3.noise_hold:g} ms, seed {sc3.noise_seed} (numpy default_rng); only the "
-            "ESO's input is noisy; metrics use the true output",
-        ),
-        (
-            "Scenario 3 TD and SEF",
-            "only the re-tuned ESO parameters are printed",
-            "TD and SEF keep the scenario-1 values"
-            + (" (checked: identical in the presets)" if kept else " (NOT identical: see presets)"),
-        ),
-        (
-            "Solver",
-            "MATLAB ode45 (adaptive)",
-            f"fixed-step {s1.method.upper()}, dt = {s1.dt:g} s, compiled: an adaptive solver "
-            "on a loop with sign() and |e|^α (α < 1) chatters and crawls "
-            "(benchmarks/bench_engine.py times scipy's RK45 against the engine on these "
-            "loops); rerun a preset with "
-            "`aiofl simulate NAME --dt 5e-5` to check convergence in dt",
-        ),
-        (
-            "OPI weights",
-            "w = (0.6, 0.2, 0.6) (sum 1.4, although the text requires 1), N = (10, 2, 2.7)",
-            f"as printed: w = ({w.w_itae:g}, {w.w_isu:g}, {w.w_iau:g}), "
-            f"N = ({w.n_itae:g}, {w.n_isu:g}, {w.n_iau:g}); configurable in [metrics]",
-        ),
-        (
-            "fal (17)",
-            "inner branch e/δ^(α−1), discontinuous at |e| = δ",
-            "erratum corrected: e/δ^(1−α), continuous",
-        ),
-        (
-            "Han's TD (18)",
-            "switching term r2|r2|/(2r)",
-            "erratum corrected: r2|r2|/(2R)",
-        ),
-        (
-            "NLSEF gains",
-            "v = fal(e1, α1, δ1) + fal(e2, α2, δ2)",
-            f"unit gains k = ({c1.value('sef.k1'):g}, {c1.value('sef.k2'):g}); "
-            f"{c1.n_feedback} estimated states fed back, as in the text",
-        ),
-        (
-            "ITAE error signal",
-            "ITAE = ∫ t|y − r| dt",
-            "raw reference r, not the differentiator's profile r1; true output y",
-        ),
-    ]
