@@ -14,6 +14,7 @@ from PIL import Image
 from aiofl.reporting.design_report import DesignReport, design_html, design_markdown
 from aiofl.reporting.front_files import FrontFile, ShippedFront
 from aiofl.reporting.noise_front import NoiseFront
+from aiofl.reporting.page import escape
 from aiofl.reporting.section import TableSection, html_parts, markdown_text, md_table
 
 
@@ -164,5 +165,5 @@ def test_tables_md_and_report_html_are_the_reports_sections(reproduced) -> None:
     at = [md.index(f"# {sections[k].title}\n") for k in MARKDOWN_SECTIONS if sections[k].markdown()]
     assert len(at) >= 9 and at == sorted(at)
     shown = [k for k in HTML_SECTIONS if k != "tables" and sections[k].html()]
-    at = [page.index(f">{sections[k].title}</h2>") for k in shown]
+    at = [page.index(f">{escape(sections[k].title)}</h2>") for k in shown]
     assert len(at) >= 11 and at == sorted(at)

@@ -80,10 +80,11 @@ _COLORS = {"ladrc": "C2", "assisted": "C3"}
 
 @dataclass(frozen=True, kw_only=True)
 class NoiseFront(FrontFile):
-    """One observer's noise front, as read from its file(s) (:class:`~aiofl.reporting.
-    front_files.FrontFile`): ``itae`` and ``cvar`` are the objectives (nominal ITAE, CVaR
-    of ITAE over the tuner's draws), ``isu`` the nominal ISU and ``stable`` the tuner's
-    stable fraction (the constraint columns); ``label`` names the observer.
+    """One observer's noise front, as read from its file(s)
+    (:class:`~aiofl.reporting.front_files.FrontFile`): ``itae`` and ``cvar`` are the
+    objectives (nominal ITAE, CVaR of ITAE over the tuner's draws), ``isu`` the nominal ISU
+    and ``stable`` the tuner's stable fraction (the constraint columns); ``label`` names the
+    observer.
     """
 
     label: str
