@@ -1,7 +1,9 @@
 """The pieces every aiofl HTML page is built from: its style, tables, folded blocks,
 embedded figures and the page itself (one self-contained file: inline CSS, figures as
-base64 palette PNG).  ``aiofl reproduce``'s report (:mod:`aiofl.reporting.reproduction_report`) and a
-design's report (:mod:`aiofl.reporting.design_report`) are made of them.
+base64 palette PNG).  ``aiofl reproduce``'s report
+(:mod:`aiofl.reporting.reproduction_report`) and a design's report
+(:mod:`aiofl.reporting.design_report`) are made of them, section by section
+(:mod:`aiofl.reporting.section`).
 """
 
 from __future__ import annotations
