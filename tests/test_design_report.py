@@ -50,6 +50,9 @@ def test_report_of_a_users_design(tmp_path):
     assert data["margins"]["continuous loop: verdict"] == "stable"
     assert data["operating_point"]["open_loop_unstable"] is True
     assert (out / "figure.png").read_bytes()[:4] == b"\x89PNG"
+    md = (out / "report.md").read_text()  # the same sections, in Markdown
+    assert md.startswith("# Design report: ") and "What the plant did" in md
+    assert "Operating point" in md and "UNSTABLE" in md and "figure.png" in md
     assert data["export"] == {}  # a continuous design: no Ts to export at, said in a note
     assert any(n.startswith("export not checked: a continuous design") for n in data["notes"])
     # an existing OUT is refused without --force, as by every command

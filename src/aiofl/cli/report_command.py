@@ -21,7 +21,7 @@ def report_command(
     ] = None,
     force: Annotated[bool, FORCE_OPTION] = False,
 ) -> None:
-    """Report one design: report.html, report.json and figure.png in OUT.
+    """Report one design: report.html, report.md, report.json and figure.png in OUT.
 
     What the plant did (ok, lost or diverged), the step metrics and the command's noise,
     the operating point, the margins of the continuous and (sampled) the sampled loop,
@@ -38,14 +38,15 @@ def report_command(
         if draws is not None and not 1 <= draws <= MAX_DRAWS:
             raise ValueError(f"--draws = {draws}; allowed: 1 <= draws <= {MAX_DRAWS}")
         cfg = load_run_config(config)
-    from aiofl.reporting.design_report import design_html, design_report
+    from aiofl.reporting.design_report import design_html, design_markdown, design_report
 
     with bad_input_exits(run=True), atomic_output_dir(out) as stage:
         rep = design_report(cfg, config, draws=draws)
         atomic_write_text(stage / "report.json", json.dumps(rep.to_dict(), indent=2) + "\n")
         atomic_write_bytes(stage / "figure.png", rep.figure)
         atomic_write_text(stage / "report.html", design_html(rep, cfg.description))
+        atomic_write_text(stage / "report.md", design_markdown(rep, cfg.description))
     typer.echo(f"{config}: {rep.verdict}")
     for line in rep.lines:
         typer.echo(line)
-    typer.echo(f"wrote {out}/report.html, report.json, figure.png")
+    typer.echo(f"wrote {out}/report.html, report.md, report.json, figure.png")
