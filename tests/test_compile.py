@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from aiofl.cache import CacheWarning
-from aiofl.engine import compile, instances, plant_table, standalone
+from aiofl.engine import compile, controller_update, instances, plant_table
 from aiofl.plants import get_plant
 from reachable import reachable_compiled
 
@@ -37,8 +37,8 @@ def _recipes() -> dict[str, compile.Recipe]:
         "scalar": rec(plant, 1, variant="scalar"),
         "sampled scalar": rec(plant, 1, sampled_data=True, variant="scalar"),
         "guarded": rec(plant, 1, variant="guarded"),
-        "discrete controller": standalone.standalone_recipe(),
-        "model-assisted discrete controller": standalone.standalone_recipe(plant),
+        "discrete controller": controller_update.update_recipe(),
+        "model-assisted discrete controller": controller_update.update_recipe(plant),
         "plant table, lanes": plant_table.table_recipe(plant, "lanes"),
         "plant table, scalar": plant_table.table_recipe(plant, "scalar"),
     }
@@ -567,7 +567,7 @@ def test_the_prepared_discrete_controller_is_the_one_a_command_loads(tmp_path, m
         "import numpy as np\n"
         "from aiofl.config import load_config\n"
         "from aiofl.engine.discrete import Sampling\n"
-        "from aiofl.engine.standalone import DiscreteController\n"
+        "from aiofl.discrete_controller import DiscreteController\n"
         "dc = DiscreteController(load_config('retuned-s1-leso').controller, Sampling(1e-3))\n"
         "dc.init(0.1); dc.step([0.2, 0.0], 0.1); dc.run(3, 0.2, 0.1)\n"
         "dc.step_each(np.repeat(dc.state[None, :], 2, axis=0), 0.2, np.array([0.1, 0.2]))\n"

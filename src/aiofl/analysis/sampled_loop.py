@@ -18,7 +18,7 @@ exact-or-nearly pieces:
   (one matrix exponential of the augmented matrix :math:`[[A_p, B_p], [0, 0]]T_s`; Franklin,
   Powell & Workman, *Digital Control of Dynamic Systems*, 3rd ed., §4.3.3);
 * **the controller**: the engine's own one-sample update
-  (:class:`aiofl.engine.standalone.DiscreteController`, the coefficients of
+  (:class:`aiofl.discrete_controller.DiscreteController`, the coefficients of
   :func:`aiofl.engine.discrete.sampling_rows`), linearised by central finite differences
   in its state and in the measurement,
   :math:`\delta c_{k+1} = J_{cc}\delta c_k + J_{cy}\delta y_k`,
@@ -136,7 +136,7 @@ class SampledLoop:
         return bool(np.all(eig.real < -1e-9 * max(1.0, float(np.max(np.abs(eig))))))
 
     def _controller(self, ts: float) -> Any:
-        from aiofl.engine.standalone import DiscreteController
+        from aiofl.discrete_controller import DiscreteController
 
         cfg = self.config
         c = cfg.controller

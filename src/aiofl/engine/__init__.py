@@ -9,7 +9,8 @@
   (each formula over the lanes of a group) and :mod:`~aiofl.engine.views` (array views);
 - :mod:`~aiofl.engine.continuous` and :mod:`~aiofl.engine.sampled`: the controller as it
   plugs into the loop (its blocks in the stage right-hand side; its discrete update at the
-  samples, and :class:`~aiofl.engine.standalone.DiscreteController`), with
+  samples, compiled without a plant for :class:`aiofl.DiscreteController` by
+  :mod:`~aiofl.engine.controller_update`), with
   :mod:`~aiofl.engine.member` (per-member constants and the law, written once) and
   :mod:`~aiofl.engine.discrete` (the discrete controller's coefficient rows);
 - :mod:`~aiofl.engine.bindings`, :mod:`~aiofl.engine.instances`, :mod:`~aiofl.engine.compile`:

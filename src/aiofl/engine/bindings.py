@@ -32,6 +32,7 @@ from aiofl.plants.base import Plant
 
 __all__ = [
     "PlantFailure",
+    "bind_discrete",
     "bind_private",
     "component_functions",
     "engine_sources",
@@ -214,6 +215,28 @@ def bind_private(ns: dict[str, Any], variant: str = "scalar") -> None:
             ns[name] = private[obj.__name__.rsplit(".", 1)[1]]
         elif isinstance(obj, Dispatcher) and obj.py_func.__module__ == member.__name__:
             ns[name] = compile_.rejit(obj, ns)
+
+
+def bind_discrete(ns: dict[str, Any], cd: Any = None) -> None:
+    """Add what the discrete controller's templates (:mod:`aiofl.engine.sampled`) read to
+    ``ns``: the layout constants of the discrete coefficient row
+    (:mod:`aiofl.engine.discrete`) and of the controller state (``C_*``, ``N_CS``), and the
+    discrete component functions of ``cd`` (default :mod:`aiofl.components.discrete`; the
+    kernels pass the private copies, :func:`private_components`)."""
+    from aiofl.engine import discrete, sampled
+
+    if cd is None:
+        from aiofl.components import discrete as cd
+
+    ns.update({k: v for k, v in vars(discrete).items() if k.isupper() and isinstance(v, int)})
+    ns.update({k: v for k, v in vars(sampled).items() if k.startswith("C_") or k == "N_CS"})
+    ns.update(
+        _FHAN_TD=cd.fhan_td_step,
+        _OBS_INNOVATION=cd.observer_innovation,
+        _OBS_CORRECT=cd.observer_correct,
+        _OBS_PREDICT=cd.observer_predict,
+        _LIN_UPDATE=cd.linear_discrete_update,
+    )
 
 
 def guarded(fn: Any, index: int, n: int, n_p: int) -> Any:

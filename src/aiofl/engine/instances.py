@@ -284,7 +284,7 @@ def recipe(
         # the controller's update, compiled as the blocks are, in the members' namespace
         ns_ctrl = dict(ns_member)
         ns_ctrl["_PAB"] = plant_fns["_PAB"]
-        sampled._bind(ns_ctrl, bindings.private_components(private)["discrete"])
+        bindings.bind_discrete(ns_ctrl, bindings.private_components(private)["discrete"])
         ns_ctrl["_DELAY_REFERENCE"] = compile_.instantiate(
             sampled._tpl_delay_reference, ns_ctrl, tag, **opts
         )

@@ -18,8 +18,9 @@ disabled nothing is started.
 ``python -m aiofl.engine.prepare PLANT SPEC...`` is that process: ``PLANT`` a registered
 plant's name or a plant file, each ``SPEC`` an instance as ``c1``, ``c32``, ``s1``, ``s32``
 (continuous or sampled, lane width), or ``dc``: the discrete controller's update compiled
-without a plant (:class:`aiofl.engine.standalone.DiscreteController`, which the sampled loop's
-linearisation and the exports step).  ``PLANT`` may also be ``--states=N``: the
+without a plant (:mod:`aiofl.engine.controller_update`: what
+:class:`aiofl.discrete_controller.DiscreteController`, the sampled loop's linearisation and
+the exports' checks step).  ``PLANT`` may also be ``--states=N``: the
 plant-independent instances (``c1``, ``s1``) of every N-state plant, compiled without
 one.
 
@@ -49,6 +50,7 @@ from aiofl.cache import cache_enabled, subdir
 from aiofl.engine import compile as compile_
 from aiofl.engine import loop
 from aiofl.engine.batch import Batch, Outputs
+from aiofl.engine.controller_update import compile_ahead
 from aiofl.engine.discrete import N_DISC
 from aiofl.engine.instances import (
     instance_for,
@@ -127,24 +129,6 @@ CONTROLLER = "dc"
 """The spec of the discrete controller's update compiled without a plant."""
 
 
-def prepare_controller() -> None:
-    """Compile (or load) :class:`~aiofl.engine.standalone.DiscreteController`'s entries (setup,
-    start, step, n steps, one step from each of several states) by stepping a plain LADRC
-    once through each: the argument types are those of every controller without a plant
-    model."""
-    from aiofl.controller import Controller
-    from aiofl.engine.discrete import Sampling
-    from aiofl.engine.standalone import DiscreteController
-
-    values = {"eso.omega0": 10.0, "sef.omega_c": 2.0, "td.omega": 5.0, "law.b0": 1.0}
-    ladrc = Controller.from_structure("LADRC", rho=1, values=values)
-    dc = DiscreteController(ladrc, Sampling(1e-3))
-    dc.init(0.0)
-    dc.step(0.0, 0.0)
-    dc.run(1, 0.0, 0.0)
-    dc.step_each(dc.state[None, :], 0.0, np.zeros(1))
-
-
 def prepare(plant: Plant, specs: Sequence[tuple[int, bool]], *, controller: bool = False) -> None:
     """Compile (or load) the discrete controller's update (``controller``, first) and the
     instances ``specs`` (lane width, sampled) of ``plant``.
@@ -159,7 +143,7 @@ def prepare(plant: Plant, specs: Sequence[tuple[int, bool]], *, controller: bool
         Also the discrete controller's update.
     """
     if controller:
-        prepare_controller()
+        compile_ahead()
     groups, batch, out = probe(plant)
     for width, sampled_data in specs:
         run(plant, width, groups, batch, out, sampled_data=sampled_data, compile_only=True)

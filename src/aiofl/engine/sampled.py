@@ -34,14 +34,9 @@ true state at :math:`t_k` and the nominal model, but has no :class:`DiscreteCont
 
 from __future__ import annotations
 
-import sys
-from typing import Any
-
 import numpy as np
 
 from aiofl import layout as L
-from aiofl.engine import bindings, plant_table
-from aiofl.engine import discrete as DS
 from aiofl.engine.discrete import (
     D_DELAY,
     D_GAM,
@@ -405,35 +400,3 @@ def _tpl_store_controller(which, j, rho, ntd, exact, l, z, iq, rrs, ctrl):  # pr
     if j < ntd:
         return cs[C_PROF + j]
     return 0.0
-
-
-# ------------------------------------------------------------------------------ building
-def _bind(ns: dict[str, Any], cd: Any = None) -> None:
-    """Add this module's layout constants and the discrete component functions to ``ns``
-    (those of ``cd``, default :mod:`aiofl.components.discrete`; the lane kernel passes its
-    private copies, see :func:`aiofl.engine.bindings.private_components`)."""
-    if cd is None:
-        from aiofl.components import discrete as cd
-
-    ns.update({k: v for k, v in vars(DS).items() if k.isupper() and isinstance(v, int)})
-    ns.update({k: v for k, v in globals().items() if k.startswith("C_") or k == "N_CS"})
-    ns.update(
-        _FHAN_TD=cd.fhan_td_step,
-        _OBS_INNOVATION=cd.observer_innovation,
-        _OBS_CORRECT=cd.observer_correct,
-        _OBS_PREDICT=cd.observer_predict,
-        _LIN_UPDATE=cd.linear_discrete_update,
-    )
-
-
-def _opts() -> dict[str, Any]:
-    from aiofl.components.fastmath import FASTMATH
-
-    return {"fastmath": FASTMATH, "error_model": "numpy"}
-
-
-def _sources() -> tuple[str, ...]:
-    """Every kernel's sources, this module's, the plant table's (its α, β binding) and the
-    discrete coefficient rows'."""
-    here = sys.modules[__name__].__file__
-    return (*bindings.engine_sources(), here, plant_table.__file__, DS.__file__)
