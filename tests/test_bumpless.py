@@ -14,7 +14,7 @@ import pytest
 import aiofl
 from aiofl.config import load_config
 from aiofl.discrete_controller import DiscreteController
-from aiofl.engine.discrete import Sampling, sample_steps
+from aiofl.engine.discrete_rows import Sampling, sample_steps
 from aiofl.engine.reference import reference_simulate
 from aiofl.engine.simulation import simulate, simulate_batch
 from aiofl.scenario import Reference

@@ -22,13 +22,13 @@ from pathlib import Path
 import pytest
 
 from aiofl import cache
-from aiofl.engine import compile
+from aiofl.engine.build import compile
 
 # ----------------------------------------------------------------- kernel cache files
 _PROBE = """\
 import json, sys
 import aiofl
-from aiofl.engine import controller_update
+from aiofl.engine.build import controller_update
 ctrl = aiofl.DiscreteController.from_config("frontier-s1-ladrc", ts=1e-3)
 ctrl.reset(0.0)
 us = [ctrl.step(1.0, 0.01 * k) for k in range(5)]

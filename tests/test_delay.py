@@ -12,7 +12,7 @@ import pytest
 from aiofl.config import ConfigError, parse_config
 from aiofl.controller import Controller
 from aiofl.discrete_controller import DiscreteController
-from aiofl.engine.discrete import Sampling, sample_steps
+from aiofl.engine.discrete_rows import Sampling, sample_steps
 from aiofl.engine.reference_sampled import reference_sampled_simulate
 from aiofl.engine.simulation import simulate
 from aiofl.plants import get_plant

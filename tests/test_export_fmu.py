@@ -21,7 +21,7 @@ from aiofl.cli.app import app
 from aiofl.config import load_config
 from aiofl.controller import Controller
 from aiofl.discrete_controller import DiscreteController
-from aiofl.engine.discrete import Sampling
+from aiofl.engine.discrete_rows import Sampling
 from aiofl.export.fmu import export_fmu_for_config, find_compiler
 
 fmpy = pytest.importorskip("fmpy")

@@ -23,7 +23,7 @@ from typer.testing import CliRunner
 from aiofl.cli.app import app
 from aiofl.config import load_config
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine.discrete import D_L, Sampling, sampling_rows
+from aiofl.engine.discrete_rows import D_L, Sampling, sampling_rows
 from aiofl.engine.observer_gains import model_jacobians
 from aiofl.export import HEADER, PARAMS, SOURCE, ExportError, export_c
 from aiofl.export.c_code import MODEL

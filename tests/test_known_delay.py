@@ -18,7 +18,7 @@ import pytest
 from aiofl.config import load_config
 from aiofl.controller import Controller
 from aiofl.discrete_controller import DiscreteController
-from aiofl.engine.discrete import Sampling
+from aiofl.engine.discrete_rows import Sampling
 from aiofl.engine.simulation import simulate
 from aiofl.export import export_c
 from aiofl.export.c_check import CC, STRICT_FLOAT, CController, build, loop

@@ -22,7 +22,7 @@ from aiofl.config import ConfigError
 from aiofl.config.objects import controller_table
 from aiofl.controller import Controller
 from aiofl.discrete_controller import DiscreteController
-from aiofl.engine.discrete import Sampling
+from aiofl.engine.discrete_rows import Sampling
 from aiofl.engine.reference import reference_simulate
 from aiofl.engine.simulation import simulate
 from aiofl.export import export_c

@@ -16,7 +16,7 @@ from aiofl.cli.app import app
 from aiofl.config import ConfigError, load_config, parse_config
 from aiofl.controller import Controller
 from aiofl.discrete_controller import DiscreteController
-from aiofl.engine.discrete import D_L, Sampling, sample_steps
+from aiofl.engine.discrete_rows import D_L, Sampling, sample_steps
 from aiofl.engine.simulation import simulate, simulate_batch
 from aiofl.plants import get_plant
 from aiofl.plants.base import Plant

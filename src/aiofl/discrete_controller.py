@@ -1,8 +1,8 @@
 r"""The controller object for test rigs and hardware in the loop: ``u = ctrl.step(r, y)``.
 
 :class:`DiscreteController` is the engine's discrete controller stepped from Python: the
-compiled update ``aiofl simulate --ts`` runs (:mod:`aiofl.engine.sampled`), compiled
-without a plant (:mod:`aiofl.engine.controller_update`), what the exported C is checked
+compiled update ``aiofl simulate --ts`` runs (:mod:`aiofl.engine.kernel.sampled`), compiled
+without a plant (:mod:`aiofl.engine.build.controller_update`), what the exported C is checked
 against and what the sampled loop's linearisation steps, with a constructor from a
 config::
 
@@ -37,13 +37,13 @@ from aiofl import layout as L
 from aiofl.checks import check_number
 from aiofl.config import RunConfig, load_config
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine import member
-from aiofl.engine.controller_update import NO_TABLE, compiled_update, member_constants
-from aiofl.engine.discrete import Sampling
-from aiofl.engine.member import IQ_EINIT
+from aiofl.engine.build.controller_update import NO_TABLE, compiled_update, member_constants
+from aiofl.engine.discrete_rows import Sampling
+from aiofl.engine.kernel import member
+from aiofl.engine.kernel.member import IQ_EINIT
+from aiofl.engine.kernel.sampled import C_RPREV, C_TD, C_X, N_CS
 from aiofl.engine.observer_gains import model_jacobians
 from aiofl.engine.sample_time import SIGNAL_MAX, TS_MAX, TS_MIN, check_ts, discrete_row
-from aiofl.engine.sampled import C_RPREV, C_TD, C_X, N_CS
 
 __all__ = ["DiscreteController"]
 
@@ -83,9 +83,9 @@ class DiscreteController:
     r"""The engine's discrete controller, stepped from Python one sample at a time.
 
     The same compiled update the sampled engine runs
-    (:func:`aiofl.engine.sampled._tpl_ctrl_step`, compiled without a plant by
-    :mod:`aiofl.engine.controller_update`), with the coefficients of
-    :func:`aiofl.engine.discrete.sampling_rows`.  One call per sample: :meth:`init` with
+    (:func:`aiofl.engine.kernel.sampled._tpl_ctrl_step`, compiled without a plant by
+    :mod:`aiofl.engine.build.controller_update`), with the coefficients of
+    :func:`aiofl.engine.discrete_rows.sampling_rows`.  One call per sample: :meth:`init` with
     the first measurement (or :meth:`reset`, a bumpless start), then :meth:`step` with the
     reference (and its derivatives) and the measurement, returning u.
 
@@ -106,7 +106,7 @@ class DiscreteController:
         An AIOFL controller (LESO, INLESO, LADRC, ...); the IOFL law needs the plant state
         and is refused.
     sampling
-        Sample time and discretisation (:class:`aiofl.engine.discrete.Sampling`); ``ts``
+        Sample time and discretisation (:class:`aiofl.engine.discrete_rows.Sampling`); ``ts``
         must be a number in [1e-9, 1] s at which the design can be discretised.
     plant
         The plant whose nominal model a model-assisted observer (``eso.model =

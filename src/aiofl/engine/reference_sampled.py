@@ -7,7 +7,7 @@ around the controller is written here independently of the engine's time loop, e
 event: the ADC reading the plant's output (with a sensor delay) plus the held noise, the
 controller's update, the DAC holding the command (with a computation or an actuator delay),
 the disturbance and the parameter change.  The controller is the engine's discrete update,
-compiled without a plant (:mod:`aiofl.engine.controller_update`), whose numbers the tests
+compiled without a plant (:mod:`aiofl.engine.build.controller_update`), whose numbers the tests
 check separately.  Slow; for cross-checks in tests only.
 """
 
@@ -20,11 +20,11 @@ from numpy.typing import NDArray
 from scipy.integrate import solve_ivp
 
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine.controller_update import NO_TABLE, compiled_update, member_constants
+from aiofl.engine.build.controller_update import NO_TABLE, compiled_update, member_constants
+from aiofl.engine.kernel.sampled import N_CS
 from aiofl.engine.observer_gains import model_jacobians
 from aiofl.engine.reference import _reference_derivatives
 from aiofl.engine.sample_time import discrete_row
-from aiofl.engine.sampled import N_CS
 from aiofl.layout import RHO_MAX
 from aiofl.plants.base import Plant
 from aiofl.scenario import Scenario, noise_sequence
@@ -67,7 +67,7 @@ def reference_sampled_simulate(
     r"""The sampled loop with its transport delays, event by event (slow; for cross-checks).
 
     The controller is the engine's discrete update stepped from Python as compiled without
-    a plant (:mod:`aiofl.engine.controller_update`, the update
+    a plant (:mod:`aiofl.engine.build.controller_update`, the update
     :class:`aiofl.discrete_controller.DiscreteController` steps, which the tests check
     separately); everything around it is written here independently of the time loop: the
     plant integrated by ``solve_ivp`` between events, the ADC reading

@@ -295,7 +295,7 @@ def float_holds(cfg: Any, sampling: Any, files: dict[str, dict[str, str]]) -> st
     cfg
         The run config.
     sampling
-        Its sampling (:class:`aiofl.engine.discrete.Sampling`).
+        Its sampling (:class:`aiofl.engine.discrete_rows.Sampling`).
     files
         The C files by precision, ``{"double": ..., "float": ...}``.
 

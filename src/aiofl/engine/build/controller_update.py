@@ -1,7 +1,7 @@
 r"""The discrete controller's update compiled without a plant: what
 :class:`aiofl.discrete_controller.DiscreteController` steps from Python.
 
-The sampled engine's controller update (:func:`aiofl.engine.sampled._tpl_ctrl_step`, its
+The sampled engine's controller update (:func:`aiofl.engine.kernel.sampled._tpl_ctrl_step`, its
 start, its per-member setup and its n-step and each-state variants) compiled without the
 plant's dynamics (:func:`update_recipe`), built once per process and plant
 (:func:`compiled_update`; loaded from the disk cache when it was compiled before).  A
@@ -10,11 +10,11 @@ model-assisted observer (``eso.model = "nominal"``) binds the plant's nominal
 
 The compiled functions take the controller's packed constants (:func:`member_constants`),
 its discrete coefficient row (:func:`aiofl.engine.sample_time.discrete_row`), its state
-``cs`` (:data:`aiofl.engine.sampled.N_CS` values) and a scratch row, the measurement, the
+``cs`` (:data:`aiofl.engine.kernel.sampled.N_CS` values) and a scratch row, the measurement, the
 reference row ``rr`` (r, r', ..., one row of ``RHO_MAX + 2``) and the nominal parameters;
 the plant table argument is unread (:data:`NO_TABLE`).  :func:`compile_ahead` compiles (or
 loads) every entry for the argument types of every controller without a plant model
-(``python -m aiofl.engine.prepare PLANT dc``).
+(``python -m aiofl.engine.build.prepare PLANT dc``).
 """
 
 from __future__ import annotations
@@ -30,17 +30,20 @@ from numpy.typing import NDArray
 from aiofl import layout as L
 from aiofl.cache import cache_enabled
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine import bindings, discrete, member, plant_table, sampled
-from aiofl.engine import compile as compile_
-from aiofl.engine.member import N_IQ, N_Q
-from aiofl.engine.sampled import N_CS
+from aiofl.engine import discrete_rows
+from aiofl.engine.build import bindings, plant_table
+from aiofl.engine.kernel import member, plant_calls, sampled
+from aiofl.engine.build import compile as compile_
+from aiofl.engine.kernel.member import N_IQ, N_Q
+from aiofl.engine.kernel.plant_calls import N_TABLE
+from aiofl.engine.kernel.sampled import N_CS
 
 __all__ = ["NO_TABLE", "compile_ahead", "compiled_update", "member_constants", "update_recipe"]
 
 _LOCK = threading.Lock()
 _COMPILED: dict[int, tuple[Any, SimpleNamespace]] = {}
 
-NO_TABLE = np.zeros(plant_table.N_TABLE, dtype=np.int64)
+NO_TABLE = np.zeros(N_TABLE, dtype=np.int64)
 """The plant table the update is passed: unread (its α, β are called directly)."""
 
 
@@ -90,13 +93,14 @@ def update_recipe(plant: Any = None) -> compile_.Recipe:
             tpl("_CTRL_STEP_EACH", sampled._tpl_ctrl_step_each, opts),
         ),
         entry=tpl("_CTRL_STEP", sampled._tpl_ctrl_step, opts),
-        # every kernel's sources, the templates', the plant table's (its α, β binding), the
+        # every kernel's sources, the templates', the plant calls' (its α, β binding), the
         # discrete coefficient rows' and this recipe's
         sources=(
             *bindings.engine_sources(),
             sampled.__file__,
+            plant_calls.__file__,
             plant_table.__file__,
-            discrete.__file__,
+            discrete_rows.__file__,
             here,
         ),
         also_cached=("_SETUP", "_CTRL_INIT", "_CTRL_RUN", "_CTRL_STEP_EACH"),
@@ -136,7 +140,7 @@ def member_constants(
     update: SimpleNamespace, controller: Controller
 ) -> tuple[NDArray[np.float64], NDArray[np.int64]]:
     """``controller``'s packed constants ``(q, iq)`` as the update reads them (the
-    per-member setup of :mod:`aiofl.engine.member`, run by ``update.setup``).
+    per-member setup of :mod:`aiofl.engine.kernel.member`, run by ``update.setup``).
 
     Parameters
     ----------
@@ -160,7 +164,7 @@ def compile_ahead() -> None:
     """Compile (or load) every entry of the update without a plant (setup, start, step, n
     steps, one step from each of several states) by stepping a plain LADRC once through
     each: the argument types are those of every controller without a plant model."""
-    from aiofl.engine.discrete import Sampling, sampling_rows
+    from aiofl.engine.discrete_rows import Sampling, sampling_rows
 
     values = {"eso.omega0": 10.0, "sef.omega_c": 2.0, "td.omega": 5.0, "law.b0": 1.0}
     ladrc = Controller.from_structure("LADRC", rho=1, values=values)

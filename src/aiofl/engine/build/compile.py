@@ -15,8 +15,9 @@ width; the one-member kernels; the diagnostic kernel) is described by a :class:`
 
 :func:`build` compiles a recipe.  The entry is cached under a **fingerprint** of everything
 the compiled code depends on (:func:`fingerprint`: Python, numba and llvmlite versions, the
-recipe's kind, every template's options, the text of every source file, and the plant's
-functions by their code and the values they read, :mod:`aiofl.engine.code_fingerprint`),
+recipe's kind, every template's options, the path in the package and the text of every
+source file, and the plant's functions by their code and the values they read,
+:mod:`aiofl.engine.build.code_fingerprint`),
 in ``<cache root>/kernels`` (:mod:`aiofl.cache`): numba's index and data files of a kernel
 carry the plant's key and the fingerprint in their name, and the fingerprint is also
 numba's freshness stamp of the entry, so a kernel is loaded only if it was compiled from
@@ -28,7 +29,7 @@ file edited on disk after this process loaded it would make the fingerprint desc
 numba is not compiling, so such a kernel is not cached either (:func:`sources_changed`).
 
 Every cache file of a kernel is sealed (size and SHA-256 header) and a damaged entry is
-removed and compiled again with one warning (:mod:`aiofl.engine.kernel_cache`).
+removed and compiled again with one warning (:mod:`aiofl.engine.build.kernel_cache`).
 
 :func:`rejit` is the one helper that re-compiles a compiled function's Python code with
 other globals or options (private, uncached copies of the component functions; the plant
@@ -48,9 +49,9 @@ from pathlib import Path
 from typing import Any
 
 from aiofl.cache import subdir
-from aiofl.engine import kernel_cache
-from aiofl.engine.code_fingerprint import file_digest, function_fingerprint, source_digest
-from aiofl.engine.kernel_cache import CheckedCacheFile, DamagedEntry, KernelCache
+from aiofl.engine.build import kernel_cache
+from aiofl.engine.build.code_fingerprint import file_digest, function_fingerprint, source_digest
+from aiofl.engine.build.kernel_cache import CheckedCacheFile, DamagedEntry, KernelCache
 from aiofl.numba_patches import key_helpers_by_fastmath, patch_source
 from aiofl.plants.base import Plant
 
@@ -222,6 +223,21 @@ def _canonical_repr(value: Any) -> str:
     return repr(value)
 
 
+_PACKAGE_ROOT = Path(__file__).resolve().parents[2]
+"""The aiofl package's folder (``src/aiofl``)."""
+
+
+def _source_name(path: str) -> str:
+    """A source file as the fingerprint names it: its path inside the aiofl package
+    (``engine/kernel/loop.py``: a template moved to another folder makes new kernels, as
+    numba's cached code names its module by it), else its file name; the same in every
+    checkout, so checkouts of one code share the cache."""
+    try:
+        return Path(path).resolve().relative_to(_PACKAGE_ROOT).as_posix()
+    except ValueError:
+        return os.path.basename(path)
+
+
 def fingerprint(recipe: Recipe) -> str | None:
     """A digest of everything ``recipe``'s compiled code depends on (see the module
     notes), or None if a plant function cannot be fingerprinted."""
@@ -236,7 +252,7 @@ def fingerprint(recipe: Recipe) -> str | None:
     for tpl in (*recipe.templates, recipe.entry):
         opts = sorted((k, _canonical_repr(v)) for k, v in tpl.options.items())
         parts.append(f"{tpl.name}:{tpl.function.__name__}:{opts}")
-    parts += [f"{os.path.basename(p)}={source_digest(p)}" for p in recipe.sources]
+    parts += [f"{_source_name(p)}={source_digest(p)}" for p in recipe.sources]
     parts += plant_parts
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:20]
 
@@ -300,7 +316,7 @@ def rejit(fn: Any, space: dict[str, Any] | None = None, **override: Any) -> Any:
     with the globals ``space`` (default its own) and its numba options updated by
     ``override``.  numba keys a function's disk cache on its own file only, so a kernel
     never links a cached function (whose callees might be stale); see
-    :func:`aiofl.engine.bindings.private_components`.
+    :func:`aiofl.engine.build.bindings.private_components`.
 
     Parameters
     ----------
@@ -358,7 +374,7 @@ _INLINE_COPY_OLD = """\
             new_block = copy.deepcopy(the_ir.blocks[block_label])
 """
 _INLINE_COPY_NEW = """\
-        memo = {}  # one memo for the whole IR (aiofl.engine.compile)
+        memo = {}  # one memo for the whole IR (aiofl.engine.build.compile)
         for block_label, block in the_ir.blocks.items():
             new_block = copy.deepcopy(the_ir.blocks[block_label], memo)
 """
