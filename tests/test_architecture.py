@@ -10,6 +10,7 @@ lower layer to a higher one, per :data:`LAYERS`.  One name per concept: no two m
 from __future__ import annotations
 
 import ast
+import re
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -248,3 +249,62 @@ def test_one_class_per_name() -> None:
     """No two classes share a name: one concept, one class; else names that say which."""
     shared = _shared((c, m) for m in MODULES for c in _classes(m))
     _check_shared("classes", shared, SHARED_CLASS_NAMES)
+
+
+KERNEL = PACKAGE / "engine" / "kernel"
+FILLER = re.compile(r"aiofl/engine/build/(\w+)\.py:(\w+)")
+
+
+def _placeholder_blocks(tree: ast.Module, text: str) -> tuple[set[str], list[str]]:
+    """The names a template module's ``# Placeholders`` blocks assign, and the blocks' text."""
+    lines = text.splitlines()
+    starts = [i for i, ln in enumerate(lines) if ln.startswith("# Placeholders")]
+    blocks, names = [], set()
+    for start in starts:
+        end = next(i for i in range(start, len(lines)) if not lines[i].strip())
+        blocks.append("\n".join(lines[start:end]))
+        for node in tree.body:
+            if isinstance(node, ast.Assign) and start < node.lineno <= end:
+                for target in node.targets:
+                    names |= {n.id for n in ast.walk(target) if isinstance(n, ast.Name)}
+    return names - {"PLACEHOLDERS"}, blocks
+
+
+@pytest.mark.parametrize("path", sorted(KERNEL.glob("[a-z]*.py")), ids=lambda p: p.stem)
+def test_a_templates_placeholders_say_what_fills_them(path: Path) -> None:
+    """A template module's placeholders (the globals the compile factory binds per kernel)
+    are declared in its placeholder blocks, listed in its PLACEHOLDERS (what the factory
+    checks a recipe binds), each read by a template, and each block names the recipe
+    function that fills them, one that exists in engine/build/."""
+    text = path.read_text(encoding="utf-8")
+    tree = ast.parse(text)
+    templates = [
+        f
+        for f in tree.body
+        if isinstance(f, ast.FunctionDef) and f.name.startswith(("_tpl_", "_blk_"))
+    ]
+    if not templates:  # no template (views: intrinsics the recipes bind)
+        assert "# Placeholders" not in text
+        return
+    names, blocks = _placeholder_blocks(tree, text)
+    declared = next(
+        (
+            n.value
+            for n in tree.body
+            if isinstance(n, ast.Assign)
+            and "PLACEHOLDERS" in {t.id for t in n.targets if isinstance(t, ast.Name)}
+        ),
+        None,
+    )
+    assert declared is not None, f"{path.name}: no PLACEHOLDERS"
+    # PLACEHOLDERS = tuple("""names""".split())
+    listed = set(ast.literal_eval(declared.args[0].func.value).split())
+    assert blocks and listed == names, f"{path.name}: PLACEHOLDERS {listed ^ names} differ"
+    read = {n.id for f in templates for n in ast.walk(f) if isinstance(n, ast.Name)}
+    assert names <= read, f"{path.name}: placeholders no template reads: {names - read}"
+    for block in blocks:
+        fillers = FILLER.findall(block)
+        assert fillers, f"{path.name}: a placeholder block names no aiofl/engine/build/X.py:fn"
+        for module, function in fillers:
+            build = (PACKAGE / "engine" / "build" / f"{module}.py").read_text(encoding="utf-8")
+            assert f"def {function}(" in build, f"{path.name}: {module}.py has no {function}"

@@ -128,6 +128,27 @@ def test_kind_plant_and_options_are_part_of_the_fingerprint():
     assert compile.fingerprint(other) != fps["lanes w32"]
 
 
+def test_every_placeholder_a_template_reads_is_bound_or_the_recipe_is_refused():
+    """Every recipe binds each placeholder its templates read (the factory checks, with
+    nothing compiled); one that leaves one unbound is refused naming it and its template
+    (it used to compile against the module's stand-in ``None`` and fail in numba's
+    typing), and so is a template instantiated on its own."""
+    for recipe in _recipes().values():
+        compile.build(recipe, cache=False)  # lazy: no compile
+    rec = _recipes()["sampled lanes w32"]
+    for name, template in (("_W", "_blk_"), ("_PFG", "_blk_plant"), ("_CTRL_STEP", "_tpl_sample")):
+        space = {k: v for k, v in rec.bindings.items() if k != name}
+        with pytest.raises(
+            ValueError, match=rf"template {template}\w* .* placeholder\(s\) {name},"
+        ):
+            compile.build(dataclasses.replace(rec, bindings=space), cache=False)
+    from aiofl.engine.kernel import member
+
+    with pytest.raises(ValueError, match="_ESO_GAIN"):
+        compile.instantiate(member._tpl_setup, compile.template_globals(member), "t")
+    assert compile.unbound_placeholders(member._tpl_setup, vars(member)) == []
+
+
 def _defined(source: str, name: str = "f", **space: object) -> object:
     """Function ``name`` of ``source`` executed with the globals ``space`` (no source file,
     as in a notebook cell)."""

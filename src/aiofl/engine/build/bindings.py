@@ -26,9 +26,9 @@ from typing import Any
 
 from aiofl import layout as L
 from aiofl.engine import batch
-from aiofl.engine.kernel import member, views
 from aiofl.engine.build import compile as compile_
 from aiofl.engine.build.compile import PLANT_FUNCTIONS
+from aiofl.engine.kernel import member, views
 from aiofl.plants.base import Plant
 
 __all__ = [
@@ -204,9 +204,10 @@ def vector_math_globals(space: dict[str, Any]) -> dict[str, Any]:
 
 def bind_private(ns: dict[str, Any], variant: str = "scalar") -> None:
     """Point the component modules ``ns`` names (``_fb``, ``_law``) at the private copies of
-    :func:`private_components`, and re-compile :mod:`aiofl.engine.kernel.member`'s compiled functions
-    (``_aiofl_command``, ``_iofl_command``, inlined where called) with ``ns`` as globals, so
-    nothing a kernel compiled from ``ns`` calls comes from numba's per-function disk cache.
+    :func:`private_components`, and re-compile :mod:`aiofl.engine.kernel.member`'s compiled
+    functions (``_aiofl_command``, ``_iofl_command``, inlined where called) with ``ns`` as
+    globals, so nothing a kernel compiled from ``ns`` calls comes from numba's per-function
+    disk cache.
     ``variant`` as for :func:`private_components`."""
     from numba.core.dispatcher import Dispatcher
 

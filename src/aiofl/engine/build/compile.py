@@ -74,6 +74,8 @@ __all__ = [
     "share_scope_when_inlining",
     "source_digest",
     "sources_changed",
+    "template_globals",
+    "unbound_placeholders",
 ]
 
 NO_PLANT_KEY = "noplant"
@@ -284,12 +286,87 @@ def copy_function(
     py = types.FunctionType(fn.__code__, space, name, fn.__defaults__, fn.__closure__)
     py.__qualname__ = qualname or fn.__qualname__
     py.__doc__ = fn.__doc__
+    if "__name__" not in space:  # still the template of its module (its PLACEHOLDERS)
+        py.__module__ = fn.__module__
     return py
 
 
-def instantiate(tpl: Callable[..., Any], ns: dict[str, Any], suffix: str, **options: Any) -> Any:
+def _names_read(code: types.CodeType) -> set[str]:
+    """The global (and attribute) names ``code`` and the code objects nested in it read."""
+    names: set[str] = set()
+    stack = [code]
+    while stack:
+        c = stack.pop()
+        names.update(c.co_names)
+        stack += [k for k in c.co_consts if isinstance(k, types.CodeType)]
+    return names
+
+
+def template_globals(*modules: types.ModuleType) -> dict[str, Any]:
+    """The globals of template modules (later ones over earlier ones) without their
+    placeholders' stand-ins: what a recipe starts from and binds the placeholders into.
+
+    Parameters
+    ----------
+    *modules
+        The template modules (:mod:`aiofl.engine.kernel`).
+
+    Returns
+    -------
+    dict
+    """
+    out: dict[str, Any] = {}
+    for mod in modules:
+        out.update(vars(mod))
+    for mod in modules:
+        for name in getattr(mod, "PLACEHOLDERS", ()):
+            out.pop(name, None)
+    return out
+
+
+def unbound_placeholders(tpl: Callable[..., Any], space: Mapping[str, Any]) -> list[str]:
+    """The placeholders of ``tpl``'s module (its ``PLACEHOLDERS``, see
+    :mod:`aiofl.engine.kernel`) that the template reads and ``space`` does not bind.
+
+    Parameters
+    ----------
+    tpl
+        The template (a Python function).
+    space
+        The globals it is to be compiled with.
+
+    Returns
+    -------
+    list of str
+    """
+    declared = getattr(sys.modules.get(tpl.__module__ or ""), "PLACEHOLDERS", ())
+    read = _names_read(tpl.__code__)
+    return sorted(n for n in declared if n in read and n not in space)
+
+
+def _refuse_unbound(tpl: Callable[..., Any], space: Mapping[str, Any], what: str) -> None:
+    """Raise ValueError if ``tpl`` reads a placeholder ``space`` does not bind."""
+    missing = unbound_placeholders(tpl, space)
+    if missing:
+        raise ValueError(
+            f"{what}: template {tpl.__name__} of {tpl.__module__} reads the placeholder(s) "
+            f"{', '.join(missing)}, which its recipe does not bind (that module's placeholder "
+            "block says what fills them)"
+        )
+
+
+def instantiate(
+    tpl: Callable[..., Any],
+    ns: dict[str, Any],
+    suffix: str,
+    *,
+    check_placeholders: bool = True,
+    **options: Any,
+) -> Any:
     """Template ``tpl`` as a numba function (compiled lazily) with the globals ``ns``; its
     qualified name carries ``suffix`` (the instance's kind, plant key and fingerprint).
+    A placeholder of its module that it reads and ``ns`` does not bind is a ValueError
+    naming it (:func:`unbound_placeholders`).
 
     Parameters
     ----------
@@ -299,6 +376,9 @@ def instantiate(tpl: Callable[..., Any], ns: dict[str, Any], suffix: str, **opti
         Its globals.
     suffix
         Appended to its qualified name.
+    check_placeholders
+        Refuse a template that reads a placeholder ``ns`` does not bind (False: the
+        caller checks, :func:`build`).
     **options
         numba's ``njit`` options.
 
@@ -308,6 +388,8 @@ def instantiate(tpl: Callable[..., Any], ns: dict[str, Any], suffix: str, **opti
     """
     from numba import njit
 
+    if check_placeholders:
+        _refuse_unbound(tpl, ns, f"{tpl.__name__}_{suffix}")
     return njit(**options)(copy_function(tpl, ns, f"{tpl.__name__}_{suffix}"))
 
 
@@ -354,9 +436,17 @@ def build(recipe: Recipe, *, cache: bool = True) -> Instance:
     if unknown:
         raise ValueError(f"also_cached names no template of the recipe: {sorted(unknown)}")
     ns = dict(recipe.bindings)
+    spaces = []
     for tpl in (*recipe.templates, recipe.entry):  # each sees those compiled before it
         space = {**ns, **tpl.bindings} if tpl.bindings else ns
-        ns[tpl.name] = instantiate(tpl.function, space, suffix, **tpl.options)
+        spaces.append(space)
+        ns[tpl.name] = instantiate(
+            tpl.function, space, suffix, check_placeholders=False, **tpl.options
+        )
+    # every placeholder a template reads bound, by the recipe or by a template (numba reads
+    # a global when it compiles, so a template may call one built after it)
+    for tpl, space in zip((*recipe.templates, recipe.entry), spaces, strict=True):
+        _refuse_unbound(tpl.function, space, f"recipe {recipe.kind!r}")
     entry = ns[recipe.entry.name]
     if folder is not None:
         cached = [recipe.entry, *(t for t in recipe.templates if t.name in recipe.also_cached)]

@@ -32,8 +32,8 @@ from aiofl.cache import cache_enabled
 from aiofl.controller import Controller, controller_batch
 from aiofl.engine import discrete_rows
 from aiofl.engine.build import bindings, plant_table
-from aiofl.engine.kernel import member, plant_calls, sampled
 from aiofl.engine.build import compile as compile_
+from aiofl.engine.kernel import member, plant_calls, sampled
 from aiofl.engine.kernel.member import N_IQ, N_Q
 from aiofl.engine.kernel.plant_calls import N_TABLE
 from aiofl.engine.kernel.sampled import N_CS
@@ -69,7 +69,7 @@ def update_recipe(plant: Any = None) -> compile_.Recipe:
     # private copies of every compiled function it calls, as the loops' recipes bind: the
     # public ones are cached by numba beside their own source only, so a cached update
     # could link a stale callee (bindings.private_components)
-    ns = dict(vars(member))
+    ns = compile_.template_globals(member)
     bindings.bind_private(ns)
     ns.update(_N=1, _NZ=1, **bindings.component_functions())
     bindings.bind_discrete(ns, bindings.private_components()["discrete"])

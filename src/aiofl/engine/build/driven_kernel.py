@@ -41,9 +41,8 @@ def driven_kernel(plant: Plant, *, cache: bool = True) -> Any:
             "_N": plant.n_states,
             "_PRANGE": numba.prange,
         }
-        entry = compile_.Template(
-            "_DRIVEN", driven_plant._tpl_driven, {"parallel": True, "error_model": "numpy", "nogil": True}
-        )
+        options = {"parallel": True, "error_model": "numpy", "nogil": True}
+        entry = compile_.Template("_DRIVEN", driven_plant._tpl_driven, options)
         recipe = compile_.Recipe(
             kind="driven",
             plant=plant,

@@ -65,9 +65,9 @@ from numpy.typing import NDArray
 from aiofl import layout as L
 from aiofl.cache import cache_enabled
 from aiofl.engine.build import bindings, plant_table
-from aiofl.engine.kernel import continuous, lane_blocks, loop, member, plant_calls, sampled, views
 from aiofl.engine.build import compile as compile_
 from aiofl.engine.build.bindings import PLANT_FUNCTIONS, PlantFailure
+from aiofl.engine.kernel import continuous, lane_blocks, loop, member, plant_calls, sampled, views
 from aiofl.engine.kernel.sampled import N_CS
 from aiofl.plants.base import Plant, PlantError
 
@@ -203,8 +203,9 @@ def recipe(
     opts = {"fastmath": fastmath, "error_model": "numpy"}
     tpl = compile_.Template
     # the per-member setup and the laws (aiofl.engine.kernel.member), compiled against this
-    # variant's private components (nothing shared with another variant's instances)
-    ns_member = dict(vars(member))
+    # variant's private components (nothing shared with another variant's instances); its
+    # placeholders bound below
+    ns_member = compile_.template_globals(member)
     bindings.bind_private(ns_member, private)
     n, n_p = plant.n_states, len(plant.params)
     independent = plant_independent(width, variant)
@@ -225,9 +226,10 @@ def recipe(
                 for k, fn in enumerate(fns)
             )
         plant_fns = plant_table.direct_bindings(own, tag)
-    # the templates' modules' globals (layout constants, placeholders), without the modules
-    # and compiled functions they import: an instance calls only what is bound below
-    merged = {**vars(lane_blocks), **vars(continuous), **vars(sampled), **vars(loop)}
+    # the templates' modules' globals (layout constants) without their placeholders (bound
+    # below; the factory checks that every one a template reads is) and the modules and
+    # compiled functions they import: an instance calls only what is bound below
+    merged = compile_.template_globals(lane_blocks, continuous, sampled, loop)
     ns = {k: v for k, v in merged.items() if not _imported(v)}
     sin, cos = (vecmath.vsin, vecmath.vcos) if lanes else (np.sin, np.cos)
     nza = n + L.N_METRIC
@@ -293,6 +295,8 @@ def recipe(
             tpl("_STORE_CONTROLLER", sampled._tpl_store_controller, inline),
         ]
     else:
+        # the loop's sampled-only calls, in branches on _SAMPLED that numba prunes
+        ns.update(_SAMPLE=None, _CONTROLLER_BAD=None, _DELAY_OUTPUT=None, _DELAY_INPUT=None)
         templates += [
             tpl("_SETUP", continuous._tpl_setup, opts),
             tpl("_RHS", continuous._tpl_deriv, inline),

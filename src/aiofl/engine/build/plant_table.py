@@ -175,7 +175,6 @@ def _entry_address(plant: Plant, dispatcher: Any, sig: Any) -> int:
 
 def call_bindings(n_states: int, tag: str) -> dict[str, Any]:
     """:data:`BOUND_NAMES` of a plant-independent instance: calls through the table."""
-    from numba import njit
 
     sizes = entry_sizes(n_states)
     bodies = {"f_g": plant_calls._tpl_call_pair, "h": plant_calls._tpl_call_value}
@@ -188,8 +187,8 @@ def call_bindings(n_states: int, tag: str) -> dict[str, Any]:
             "_CALL": call_intrinsic(sizes[k]),
             "PlantCallFailed": plant_calls.PlantCallFailed,
         }
-        fn = compile_.copy_function(body, ns, f"{body.__name__}_{k}_{tag}")
-        out[name] = njit(inline="always", error_model="numpy")(fn)
+        opts = {"inline": "always", "error_model": "numpy"}
+        out[name] = compile_.instantiate(body, ns, f"{k}_{tag}", **opts)
     return out
 
 
@@ -217,9 +216,7 @@ def direct_binding(function: Any, second: Any = None, *, tag: str) -> Any:
     -------
     numba dispatcher
     """
-    from numba import njit
 
     space = {"__name__": plant_calls.__name__, "_PLANT_FN": function, "_PLANT_FN2": second}
     body = plant_calls._tpl_direct if second is None else plant_calls._tpl_direct_pair
-    fn = compile_.copy_function(body, space, f"{body.__name__}_{tag}")
-    return njit(inline="always", error_model="numpy")(fn)
+    return compile_.instantiate(body, space, tag, inline="always", error_model="numpy")

@@ -47,11 +47,9 @@ from numpy.typing import NDArray
 
 from aiofl import layout as L
 from aiofl.cache import cache_enabled, subdir
-from aiofl.engine.build import compile as compile_
-from aiofl.engine.kernel import loop
 from aiofl.engine.batch import Batch, Outputs
+from aiofl.engine.build import compile as compile_
 from aiofl.engine.build.controller_update import compile_ahead
-from aiofl.engine.discrete_rows import N_DISC
 from aiofl.engine.build.instances import (
     instance_for,
     instance_kind,
@@ -59,6 +57,8 @@ from aiofl.engine.build.instances import (
     run,
     run_groups,
 )
+from aiofl.engine.discrete_rows import N_DISC
+from aiofl.engine.kernel import loop
 from aiofl.engine.kernel.plant_calls import N_TABLE
 from aiofl.limits import MAX_STATES
 from aiofl.plants.base import Plant
@@ -251,7 +251,8 @@ def _stop(proc: subprocess.Popen[bytes]) -> None:
 def main(argv: Sequence[str]) -> int:
     """``python -m aiofl.engine.build.prepare PLANT SPEC...`` (see the module notes)."""
     if len(argv) < 2:
-        print("usage: python -m aiofl.engine.build.prepare PLANT|--states=N SPEC...", file=sys.stderr)
+        usage = "usage: python -m aiofl.engine.build.prepare PLANT|--states=N SPEC..."
+        print(usage, file=sys.stderr)
         return 2
     from aiofl.plants.plant_cache import plant_from_file
     from aiofl.plants.registry import get_plant

@@ -4,9 +4,13 @@ into compiled code (:mod:`aiofl.engine.build`).
 A *template* (``_tpl_*``, or ``_blk_*`` for a lane block) reads its collaborators as module
 globals: the lane width, the plant's functions, the controller's component functions, the
 other templates.  In this package those globals are *placeholders*, stand-ins so a module
-imports (``_W = 32``, ``_PFG = None``); each module's placeholder block says which function
-of :mod:`aiofl.engine.build` fills them, and with what.  Nothing here compiles, caches or
-runs anything, and nothing here imports :mod:`aiofl.engine.build`.
+imports (``_W = 32``, ``_PFG = None``), declared in one block per module whose comments say
+which function of :mod:`aiofl.engine.build` fills them (``aiofl/engine/build/instances.py:
+recipe``, ...) and with what, and listed in the module's ``PLACEHOLDERS``: a recipe starts
+from a module's globals without them (:func:`~aiofl.engine.build.compile.template_globals`)
+and the compile factory refuses one that leaves a placeholder a template reads unbound,
+naming it (:func:`~aiofl.engine.build.compile.unbound_placeholders`).  Nothing here
+compiles, caches or runs anything, and nothing here imports :mod:`aiofl.engine.build`.
 
 Read in this order:
 

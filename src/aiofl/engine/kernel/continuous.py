@@ -77,6 +77,18 @@ _BLK_INLSEF_LIMIT = _BLK_LINEAR_SEF = _BLK_LAW = _BLK_IOFL = _BLK_ESO_ERROR = No
 _BLK_INLESO_ERROR = _BLK_ESO_ROW = _BLK_ESO_INPUT = _BLK_ESO_LAST = _BLK_PLANT = None
 _BLK_DISTURBANCE = _BLK_METRICS = _BLK_MODEL = _BLK_MODEL_LAW = _BLK_MODEL_INPUT = None
 _BLK_PLANT_OUTPUT = None
+PLACEHOLDERS = tuple(
+    """
+    _W _N _NZ _MEMBER_SETUP _SETUP _LEADING_ROWS _REFERENCE _RHS _BLK_HAN _BLK_ITD
+    _BLK_PREFILTER_START _BLK_PREFILTER_TERM _BLK_COPY _BLK_FILL _BLK_OUTPUT _BLK_ERROR
+    _BLK_FAL _BLK_INLSEF _BLK_LINEAR_TERM _BLK_INLSEF_LIMIT _BLK_LINEAR_SEF _BLK_LAW
+    _BLK_IOFL _BLK_ESO_ERROR _BLK_INLESO_ERROR _BLK_ESO_ROW _BLK_ESO_INPUT _BLK_ESO_LAST
+    _BLK_PLANT _BLK_DISTURBANCE _BLK_METRICS _BLK_MODEL _BLK_MODEL_LAW _BLK_MODEL_INPUT
+    _BLK_PLANT_OUTPUT
+    """.split()  # noqa: SIM905 - the names as a reader scans them
+)
+"""The names of the placeholder block: what the compile factory checks a recipe binds
+when a template of this module reads one (:func:`aiofl.engine.build.compile.build`)."""
 
 
 def _tpl_deriv(fns, t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - compiled

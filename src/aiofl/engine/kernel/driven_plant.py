@@ -18,6 +18,13 @@ __all__: list[str] = []  # a template, compiled per plant (aiofl.engine.build.dr
 _F = _G = _H = None  # the plant's f, g, h: scalar private copies (bindings.plant_function)
 _N = 1  # the plant's number of states
 _PRANGE = range  # numba.prange: members in parallel
+PLACEHOLDERS = tuple(
+    """
+    _F _G _H _N _PRANGE
+    """.split()  # noqa: SIM905 - the names as a reader scans them
+)
+"""The names of the placeholder block: what the compile factory checks a recipe binds
+when a template of this module reads one (:func:`aiofl.engine.build.compile.build`)."""
 
 
 def _tpl_driven(

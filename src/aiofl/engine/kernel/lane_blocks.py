@@ -35,12 +35,21 @@ _N = 1  # the plant's number of states
 # (aiofl/engine/build/plant_table.py:direct_bindings or call_bindings)
 _PFG = _PH = _PBD = _PNF = _PAB = None
 _IOFL_COMMAND = None  # kernel.member._iofl_command, re-bound to the private components
-_UNMANAGED = _COLUMN = None  # kernel.views.unmanaged_intrinsic(), lane_column_intrinsic()
+_COLUMN = None  # kernel.views.lane_column_intrinsic()
 _SIN = _COS = None  # the reference's sine and cosine: components.vecmath (lanes) or numpy
 # the component functions (aiofl/engine/build/bindings.py:component_functions)
 _HAN_TD = _ITD = _FAL = _FAL_POWER_NEEDED = _FAL_LINEAR = None
 _INLSEF_TERM = _INLSEF_LIMIT = _LINEAR_SEF = _INLESO = _AIOFL_LAW = _SATURATE = None
 _MODEL_ASSISTED_LAW = None
+PLACEHOLDERS = tuple(
+    """
+    _W _N _PFG _PH _PBD _PNF _PAB _IOFL_COMMAND _COLUMN _SIN _COS _HAN_TD _ITD _FAL
+    _FAL_POWER_NEEDED _FAL_LINEAR _INLSEF_TERM _INLSEF_LIMIT _LINEAR_SEF _INLESO _AIOFL_LAW
+    _SATURATE _MODEL_ASSISTED_LAW
+    """.split()  # noqa: SIM905 - the names as a reader scans them
+)
+"""The names of the placeholder block: what the compile factory checks a recipe binds
+when a template of this module reads one (:func:`aiofl.engine.build.compile.build`)."""
 
 
 def _blk_sine(t, a, w, phase, offset, with_cos, r, sn, cs, amp):  # pragma: no cover

@@ -134,6 +134,17 @@ _DELAY_OUTPUT = _DELAY_INPUT = _DELAY_STAGE_IN = _DELAY_STAGE_OUT = None
 # lane blocks (kernel.lane_blocks._blk_stage ... under their upper-case names)
 _BLK_STAGE = _BLK_OUT_OF_RANGE = _BLK_COPY = _BLK_FILL = _BLK_INPUTS = None
 _BLK_SINE = _BLK_SINE_DERIVATIVE = _BLK_STEP = None
+PLACEHOLDERS = tuple(
+    """
+    _W _SAMPLED _N _NZ _CONTROLLER_SIZE _PH _UNMANAGED _KEEP_ALIVE _STORE_ROW _REFERENCE
+    _STEP_INPUTS _DELAY_SETUP _ASSIGN_LANES _LOAD_LANES _START_MEMBERS _STOP_LANE
+    _FINISH_LANES _WATCH _RHS _SETUP _SAMPLE _CONTROLLER_BAD _STORE_CONTROLLER _DELAY_OUTPUT
+    _DELAY_INPUT _DELAY_STAGE_IN _DELAY_STAGE_OUT _BLK_STAGE _BLK_OUT_OF_RANGE _BLK_COPY
+    _BLK_FILL _BLK_INPUTS _BLK_SINE _BLK_SINE_DERIVATIVE _BLK_STEP
+    """.split()  # noqa: SIM905 - the names as a reader scans them
+)
+"""The names of the placeholder block: what the compile factory checks a recipe binds
+when a template of this module reads one (:func:`aiofl.engine.build.compile.build`)."""
 
 
 def _tpl_delay_setup(sc, dt, dsteps, s):  # pragma: no cover - compiled

@@ -60,6 +60,13 @@ k·dt, so a switch on the grid happens exactly at its step boundary."""
 _N = 1  # the plant's number of states (1 in the update without a plant)
 # the component functions (aiofl/engine/build/bindings.py:component_functions, private copies)
 _ITD_CONSTANTS = _PREFILTER_COEF = _FAL_SLOPE = _LINEAR_SEF_GAIN = _ESO_GAIN = None
+PLACEHOLDERS = tuple(
+    """
+    _N _ITD_CONSTANTS _PREFILTER_COEF _FAL_SLOPE _LINEAR_SEF_GAIN _ESO_GAIN
+    """.split()  # noqa: SIM905 - the names as a reader scans them
+)
+"""The names of the placeholder block: what the compile factory checks a recipe binds
+when a template of this module reads one (:func:`aiofl.engine.build.compile.build`)."""
 
 
 # ------------------------------------------------------------ the law, written once

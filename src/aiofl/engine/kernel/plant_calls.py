@@ -114,6 +114,13 @@ def _tpl_entry_pair(x, n_x, p, n_p, out):  # pragma: no cover - compiled
 _INDEX = 0  # the entry's index in the table (TABLE)
 _CALL = None  # call_intrinsic(entry_sizes(n)[_INDEX]): the call through an address
 _PLANT_FN = _PLANT_FN2 = None  # the compiled plant function(s) called directly (f, g: a pair)
+PLACEHOLDERS = tuple(
+    """
+    _FN _FN2 _SIZE _CARRAY _INDEX _CALL _PLANT_FN _PLANT_FN2
+    """.split()  # noqa: SIM905 - the names as a reader scans them
+)
+"""The names of the placeholder blocks: what the compile factory checks a recipe binds
+when a template of this module reads one (:func:`aiofl.engine.build.compile.build`)."""
 
 
 def _tpl_call_values(fns, x, p):  # pragma: no cover - compiled

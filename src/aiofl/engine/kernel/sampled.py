@@ -123,6 +123,16 @@ _BLK_OUTPUT = _BLK_PLANT_OUTPUT = _BLK_PLANT = _BLK_DISTURBANCE = _BLK_METRICS =
 _SATURATE = _INLESO = _HAN_TD = _ITD = _PREFILTER = None
 # the discrete component functions (aiofl/engine/build/bindings.py:bind_discrete)
 _FHAN_TD = _OBS_INNOVATION = _OBS_CORRECT = _OBS_PREDICT = _LIN_UPDATE = None
+PLACEHOLDERS = tuple(
+    """
+    _W _N _PNF _PAB _MEMBER_SETUP _IOFL_COMMAND _LEADING_ROWS _COLUMN _CTRL_INIT _CTRL_STEP
+    _DELAY_REFERENCE _BLK_OUTPUT _BLK_PLANT_OUTPUT _BLK_PLANT _BLK_DISTURBANCE _BLK_METRICS
+    _SATURATE _INLESO _HAN_TD _ITD _PREFILTER _FHAN_TD _OBS_INNOVATION _OBS_CORRECT
+    _OBS_PREDICT _LIN_UPDATE
+    """.split()  # noqa: SIM905 - the names as a reader scans them
+)
+"""The names of the placeholder block: what the compile factory checks a recipe binds
+when a template of this module reads one (:func:`aiofl.engine.build.compile.build`)."""
 
 
 # ---------------------------------------------------------------------------- templates
