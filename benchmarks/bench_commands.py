@@ -9,13 +9,13 @@ sources) and "warm" the same command again in a new process:
 * ``simulate`` of a config on a plant file (a 2-state Duffing oscillator, 5-s step, LADRC,
   dt = 1e-3): cold, then warm (the plant module and its kernel are loaded from the cache);
   then once more after editing a parameter value in the plant file (a new plant module,
-  sympy runs again, the kernel is the same: :mod:`aiofl.engine.code_fingerprint`); then a
+  sympy runs again, the kernel is the same: :mod:`aiofl.engine.build.code_fingerprint`); then a
   plant file of another model, never seen, in the same cache (sympy and its table entries;
-  the width-1 loop of 2-state plants is cached: :mod:`aiofl.engine.plant_table`);
+  the width-1 loop of 2-state plants is cached: :mod:`aiofl.engine.build.plant_table`);
 * ``simulate frontier-s1-ladrc`` (a built-in plant): cold, then warm;
 * ``robustness`` of the plant-file config over 100 draws of ±20 % k and ±50 % c
   (``--no-corners``): 100 members of one kind, which run in lanes once the plant's lane
-  instance is at hand or worth its compile (:mod:`aiofl.engine.lane_choice`), alone before;
+  instance is at hand or worth its compile (:mod:`aiofl.engine.build.lane_choice`), alone before;
 * with ``--reproduce``: ``aiofl reproduce`` cold, then warm.
 
 The targets of issue 19 (2-core machine, quiet): plant file cold <= 15 s, warm <= 3 s;

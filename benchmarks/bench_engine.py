@@ -139,7 +139,8 @@ def part_c(repeat: int, size: int) -> None:
         rc = load_config(name)
         w0 = rc.controller.value("eso.omega0")
         batch = controller_batch(rc.controller, {"eso.omega0": w0 * np.linspace(0.98, 1.02, size)})
-        # engine="lanes": the lane instance, whatever the cache holds (aiofl.engine.lane_choice)
+        # engine="lanes": the lane instance, whatever the cache holds
+        # (aiofl.engine.build.lane_choice)
         simulate_batch(rc.plant, batch, rc.scenario, engine="lanes")  # warm
         times = {}
         for threads in sorted({1, max_threads}):
@@ -176,7 +177,8 @@ _COLD = textwrap.dedent(
     import time
     t0 = time.perf_counter()
     from aiofl.config import load_config
-    from aiofl.engine import instances, simulation
+    from aiofl.engine import simulation
+    from aiofl.engine.build import instances
     rc = load_config("paper-s1-leso")
     t1 = time.perf_counter()
     import dataclasses

@@ -93,7 +93,7 @@ def ns_per_step(
     preset: str, ts: float, precision: str, extra: list[str], args: argparse.Namespace
 ) -> float:
     from aiofl.config import load_config
-    from aiofl.engine.discrete import Sampling
+    from aiofl.engine.discrete_rows import Sampling
     from aiofl.export import export_c
 
     cfg = load_config(preset)
@@ -119,8 +119,8 @@ def ns_per_step(
 
 def agreement(preset: str, ts: float, precision: str, t_final: float) -> float:
     from aiofl.config import load_config
-    from aiofl.engine.discrete import Sampling
-    from aiofl.engine.standalone import DiscreteController
+    from aiofl.discrete_controller import DiscreteController
+    from aiofl.engine.discrete_rows import Sampling
     from aiofl.export import export_c
     from aiofl.export.c_check import CController, build, loop
 

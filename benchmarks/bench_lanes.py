@@ -11,7 +11,7 @@ For each structure (LESO: ``retuned-s1-leso``; INLESO: ``paper-s1-inleso``; LADR
 ``retuned-s1-ladrc``; all on the paper's scenario 1, RK4, dt = 1e-4, metrics only, every
 member stable) and batch size (1, 8, 64, 256, 1024 copies of the design), the time of one
 ``simulate_batch`` call with ``engine="scalar"`` (one member at a time: the time loop of
-:mod:`aiofl.engine.loop` at width 1 with libm and fast-math) and ``engine="lanes"`` (groups
+:mod:`aiofl.engine.kernel.loop` at width 1 with libm and fast-math) and ``engine="lanes"`` (groups
 of 32 members in SIMD lanes, or alone for batches under 16), on
 ``numba.get_num_threads()`` threads, after a warm-up call (compilation excluded), best of
 ``--repeat``.  Printed as member-steps per second (members
@@ -44,7 +44,7 @@ def measure(
     from dataclasses import replace
 
     from aiofl.config import load_config
-    from aiofl.engine.discrete import Sampling
+    from aiofl.engine.discrete_rows import Sampling
     from aiofl.engine.simulation import simulate_batch
 
     rc = load_config(name)

@@ -5,7 +5,7 @@ Run ``python benchmarks/bench_reproduce_stages.py``.  Times, with ``time.process
 lanes: the robustness draws of every shipped design (the report's 100 draws and 16
 corners), the β/b0 stability ranges and the sampling limits.  Each is run once first so
 that its kernels are compiled or loaded (the lane choice may rent on that first run and
-compile on the next: :mod:`aiofl.engine.lane_choice`), then timed.  On N cores a stage's
+compile on the next: :mod:`aiofl.engine.build.lane_choice`), then timed.  On N cores a stage's
 wall time is at least its CPU seconds over N, which bounds what any warm
 ``aiofl reproduce`` can take (``docs/benchmarks.md``).
 """

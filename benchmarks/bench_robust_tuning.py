@@ -15,7 +15,7 @@ is 64 × 17 = 1088 members in one batched engine call (on all numba threads).
 
 What makes it fast is the engine, not a shortcut in the tuner: every member is an
 independent compiled loop, the 1088 members of a generation run 16 at a time in SIMD lanes
-(:mod:`aiofl.engine.loop`) on both cores in one call, and a member that diverges stops at
+(:mod:`aiofl.engine.kernel.loop`) on both cores in one call, and a member that diverges stops at
 that step, so the unstable candidates a GA tries early cost only their time to divergence.
 No member is stopped on a partial ITAE.
 

@@ -10,6 +10,7 @@ lower layer to a higher one, per :data:`LAYERS`.  One name per concept: no two m
 from __future__ import annotations
 
 import ast
+import re
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -39,17 +40,24 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     # plain descriptions of a design, a test and the model error (uncertainty)
     ("aiofl.controller", "aiofl.scenario", "aiofl.uncertainty", "aiofl.rig"),
     ("aiofl.plants",),
-    ("aiofl.engine", "aiofl.sensor"),  # the engine; the measurement a user has (sensor)
+    # the engine, three floors: what the kernels read (the batch record, the discrete
+    # coefficient rows); the kernels as written (templates); how they are built and cached
+    ("aiofl.engine.batch", "aiofl.engine.discrete_rows"),
+    ("aiofl.engine.kernel",),
+    ("aiofl.engine.build",),
+    # the engine's entry points (simulate*, ...); the measurement a user has (sensor)
+    ("aiofl.engine", "aiofl.sensor"),
     ("aiofl.config",),  # TOML -> plant + scenario + controller (+ run settings)
+    # the discrete controller stepped from Python, built from a design or a config: what a
+    # test rig runs, what the sampled loop's analysis and the exports' checks step
+    ("aiofl.discrete_controller",),
     ("aiofl.analysis",),
     # from a logged experiment to a plant, b0, rho and a delay
     ("aiofl.identification",),
     ("aiofl.export",),
     ("aiofl.tuning",),
     ("aiofl.reporting",),
-    # the notebook API (plant + controller + scenario -> every command) and the test-rig
-    # controller object built from a config
-    ("aiofl.design", "aiofl.discrete_controller"),
+    ("aiofl.design",),  # the notebook API (plant + controller + scenario -> every command)
     ("aiofl.cli", "aiofl.__main__"),
 )
 """The layers, lowest first."""
@@ -189,13 +197,11 @@ def test_modules_are_read_in_a_sitting() -> None:
     assert not long, f"modules over {MAX_LINES} lines (split them along their seams): {long}"
 
 
-# Temporary: the engine-house branch moves engine/discrete.py's kernel templates apart from
-# the discrete controller, which ends the pair of discrete.py modules, and makes
-# DiscreteController one class; then these entries go (the tests below fail on a stale one).
-SHARED_MODULE_NAMES = {"discrete": ["aiofl.components.discrete", "aiofl.engine.discrete"]}
-SHARED_CLASS_NAMES = {
-    "DiscreteController": ["aiofl.discrete_controller", "aiofl.engine.standalone"],
-}
+# The names two modules, or two classes, may share ({name: [owners]}): none, one name per
+# concept (engine/discrete.py is engine/discrete_rows.py and DiscreteController one class
+# since the engine-house branch); the tests below fail on a stale entry.
+SHARED_MODULE_NAMES: dict[str, list[str]] = {}
+SHARED_CLASS_NAMES: dict[str, list[str]] = {}
 
 
 def _shared(owners: Iterable[tuple[str, str]]) -> dict[str, list[str]]:
@@ -243,3 +249,62 @@ def test_one_class_per_name() -> None:
     """No two classes share a name: one concept, one class; else names that say which."""
     shared = _shared((c, m) for m in MODULES for c in _classes(m))
     _check_shared("classes", shared, SHARED_CLASS_NAMES)
+
+
+KERNEL = PACKAGE / "engine" / "kernel"
+FILLER = re.compile(r"aiofl/engine/build/(\w+)\.py:(\w+)")
+
+
+def _placeholder_blocks(tree: ast.Module, text: str) -> tuple[set[str], list[str]]:
+    """The names a template module's ``# Placeholders`` blocks assign, and the blocks' text."""
+    lines = text.splitlines()
+    starts = [i for i, ln in enumerate(lines) if ln.startswith("# Placeholders")]
+    blocks, names = [], set()
+    for start in starts:
+        end = next(i for i in range(start, len(lines)) if not lines[i].strip())
+        blocks.append("\n".join(lines[start:end]))
+        for node in tree.body:
+            if isinstance(node, ast.Assign) and start < node.lineno <= end:
+                for target in node.targets:
+                    names |= {n.id for n in ast.walk(target) if isinstance(n, ast.Name)}
+    return names - {"PLACEHOLDERS"}, blocks
+
+
+@pytest.mark.parametrize("path", sorted(KERNEL.glob("[a-z]*.py")), ids=lambda p: p.stem)
+def test_a_templates_placeholders_say_what_fills_them(path: Path) -> None:
+    """A template module's placeholders (the globals the compile factory binds per kernel)
+    are declared in its placeholder blocks, listed in its PLACEHOLDERS (what the factory
+    checks a recipe binds), each read by a template, and each block names the recipe
+    function that fills them, one that exists in engine/build/."""
+    text = path.read_text(encoding="utf-8")
+    tree = ast.parse(text)
+    templates = [
+        f
+        for f in tree.body
+        if isinstance(f, ast.FunctionDef) and f.name.startswith(("_tpl_", "_blk_"))
+    ]
+    if not templates:  # no template (views: intrinsics the recipes bind)
+        assert "# Placeholders" not in text
+        return
+    names, blocks = _placeholder_blocks(tree, text)
+    declared = next(
+        (
+            n.value
+            for n in tree.body
+            if isinstance(n, ast.Assign)
+            and "PLACEHOLDERS" in {t.id for t in n.targets if isinstance(t, ast.Name)}
+        ),
+        None,
+    )
+    assert declared is not None, f"{path.name}: no PLACEHOLDERS"
+    # PLACEHOLDERS = tuple("""names""".split())
+    listed = set(ast.literal_eval(declared.args[0].func.value).split())
+    assert blocks and listed == names, f"{path.name}: PLACEHOLDERS {listed ^ names} differ"
+    read = {n.id for f in templates for n in ast.walk(f) if isinstance(n, ast.Name)}
+    assert names <= read, f"{path.name}: placeholders no template reads: {names - read}"
+    for block in blocks:
+        fillers = FILLER.findall(block)
+        assert fillers, f"{path.name}: a placeholder block names no aiofl/engine/build/X.py:fn"
+        for module, function in fillers:
+            build = (PACKAGE / "engine" / "build" / f"{module}.py").read_text(encoding="utf-8")
+            assert f"def {function}(" in build, f"{path.name}: {module}.py has no {function}"

@@ -22,17 +22,17 @@ from pathlib import Path
 import pytest
 
 from aiofl import cache
-from aiofl.engine import compile
+from aiofl.engine.build import compile
 
 # ----------------------------------------------------------------- kernel cache files
 _PROBE = """\
 import json, sys
 import aiofl
-from aiofl.engine import standalone
+from aiofl.engine.build import controller_update
 ctrl = aiofl.DiscreteController.from_config("frontier-s1-ladrc", ts=1e-3)
 ctrl.reset(0.0)
 us = [ctrl.step(1.0, 0.01 * k) for k in range(5)]
-fns = vars(standalone._standalone(None))
+fns = vars(controller_update.compiled_update(None))
 print(json.dumps({
     "us": us,
     "hits": {k: sum(f.stats.cache_hits.values()) for k, f in fns.items()},

@@ -19,7 +19,8 @@ import numpy as np
 import pytest
 
 from aiofl.cache import CacheWarning
-from aiofl.engine import compile, instances, plant_table, standalone
+from aiofl.engine.build import compile, controller_update, instances, plant_table
+from aiofl.engine.kernel import plant_calls
 from aiofl.plants import get_plant
 from reachable import reachable_compiled
 
@@ -37,8 +38,8 @@ def _recipes() -> dict[str, compile.Recipe]:
         "scalar": rec(plant, 1, variant="scalar"),
         "sampled scalar": rec(plant, 1, sampled_data=True, variant="scalar"),
         "guarded": rec(plant, 1, variant="guarded"),
-        "discrete controller": standalone.standalone_recipe(),
-        "model-assisted discrete controller": standalone.standalone_recipe(plant),
+        "discrete controller": controller_update.update_recipe(),
+        "model-assisted discrete controller": controller_update.update_recipe(plant),
         "plant table, lanes": plant_table.table_recipe(plant, "lanes"),
         "plant table, scalar": plant_table.table_recipe(plant, "scalar"),
     }
@@ -97,7 +98,7 @@ def test_the_fingerprint_does_not_depend_on_the_hash_seed():
     fingerprint (the fast-math flags are a set: its plain repr changed with the seed, so
     the scalar kernels and the discrete controller were compiled in every process)."""
     code = (
-        "import json, test_compile as t; from aiofl.engine import compile as c; "
+        "import json, test_compile as t; from aiofl.engine.build import compile as c; "
         "print(json.dumps({k: c.fingerprint(r) for k, r in t._recipes().items()}))"
     )
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(Path(__file__).parent), *sys.path])}
@@ -127,6 +128,27 @@ def test_kind_plant_and_options_are_part_of_the_fingerprint():
     assert compile.fingerprint(other) != fps["lanes w32"]
 
 
+def test_every_placeholder_a_template_reads_is_bound_or_the_recipe_is_refused():
+    """Every recipe binds each placeholder its templates read (the factory checks, with
+    nothing compiled); one that leaves one unbound is refused naming it and its template
+    (it used to compile against the module's stand-in ``None`` and fail in numba's
+    typing), and so is a template instantiated on its own."""
+    for recipe in _recipes().values():
+        compile.build(recipe, cache=False)  # lazy: no compile
+    rec = _recipes()["sampled lanes w32"]
+    for name, template in (("_W", "_blk_"), ("_PFG", "_blk_plant"), ("_CTRL_STEP", "_tpl_sample")):
+        space = {k: v for k, v in rec.bindings.items() if k != name}
+        with pytest.raises(
+            ValueError, match=rf"template {template}\w* .* placeholder\(s\) {name},"
+        ):
+            compile.build(dataclasses.replace(rec, bindings=space), cache=False)
+    from aiofl.engine.kernel import member
+
+    with pytest.raises(ValueError, match="_ESO_GAIN"):
+        compile.instantiate(member._tpl_setup, compile.template_globals(member), "t")
+    assert compile.unbound_placeholders(member._tpl_setup, vars(member)) == []
+
+
 def _defined(source: str, name: str = "f", **space: object) -> object:
     """Function ``name`` of ``source`` executed with the globals ``space`` (no source file,
     as in a notebook cell)."""
@@ -140,7 +162,7 @@ _HELPER = "def helper(v):\n    return 0.5 * v\n"
 
 
 def test_a_plant_function_is_identified_by_its_code_and_what_it_reads():
-    """The plant part of a kernel's fingerprint (aiofl.engine.code_fingerprint): the same
+    """The plant part of a kernel's fingerprint (aiofl.engine.build.code_fingerprint): the same
     code reading the same values is the same kernel wherever it is defined (a notebook cell
     without a source file, moved within its file); a change of its code, of a constant it
     reads, of a function it calls or of an array it reads is another kernel."""
@@ -321,7 +343,7 @@ dt = 1e-3
 _PROBE = """\
 import json, sys
 from aiofl.config import load_config
-from aiofl.engine import instances, plant_table
+from aiofl.engine.build import instances, plant_table
 cfg = load_config(sys.argv[1])
 res = cfg.simulate(store=False)
 kernel = instances.instance_for(cfg.plant, 1).entry
@@ -376,7 +398,7 @@ def test_a_plant_file_is_built_and_compiled_once_across_processes(tmp_path, monk
     cfg.write_text(CONFIG_TOML)
     cache_dir = tmp_path / "cache"
     # two processes at once on an empty cache: one compiles (or a process one of them
-    # started ahead, aiofl.engine.prepare), the others wait for it
+    # started ahead, aiofl.engine.build.prepare), the others wait for it
     # (compile.compile_lock) and load the kernel it stored
     both = [_result(p) for p in [_start_probe(cfg, cache_dir), _start_probe(cfg, cache_dir)]]
     assert all(r["misses"] + r["hits"] == 1 for r in both)
@@ -384,7 +406,7 @@ def test_a_plant_file_is_built_and_compiled_once_across_processes(tmp_path, monk
     stored = list((cache_dir / "kernels").glob("loop._tpl_loop_lc1n2_noplant_*.nbi"))
     assert len(stored) == 1
     # the plant's table entries: each compiled once, by either process
-    n_table = plant_table.N_TABLE
+    n_table = plant_calls.N_TABLE
     assert sum(r["entry_misses"] for r in both) == n_table
     assert all(r["entry_misses"] + r["entry_hits"] == n_table for r in both)
     first = both[0]
@@ -453,7 +475,7 @@ def _symbolic_kernel_identity(cache_dir: Path, k: float, f2: str = "-k*sin(x1)")
     and the fingerprint of its compiled code, its table's entries (nothing is compiled)."""
     code = (
         _SYMBOLIC.replace("K", repr(k)).replace("F", f2)
-        + "import json\nfrom aiofl.engine import compile, plant_table\n"
+        + "import json\nfrom aiofl.engine.build import compile, plant_table\n"
         + "print(json.dumps({'file': plant.f.__code__.co_filename, "
         + "'analysed': 'analysis' in sym._cache, "
         + "'fp': compile.fingerprint(plant_table.table_recipe(plant, 'lanes'))}))\n"
@@ -490,7 +512,7 @@ def test_a_symbolic_plant_built_in_python_gets_a_cacheable_kernel(tmp_path, monk
 
 
 def test_numba_inlining_copies_a_callee_with_one_memo():
-    """The compile-time fix of :func:`aiofl.engine.compile.share_scope_when_inlining` is in
+    """The compile-time fix of :func:`aiofl.engine.build.compile.share_scope_when_inlining` is in
     place on the numba version the project pins (a numba whose source changed would leave
     it out silently, and every lane instance would compile ~1.5x slower: this says so)."""
     from numba.core import inline_closurecall as ic
@@ -502,14 +524,14 @@ def test_numba_inlining_copies_a_callee_with_one_memo():
 
 
 def test_the_probe_batch_compiles_the_signature_of_real_batches():
-    """The background compile (aiofl.engine.prepare) is useful only if its probe batch has
+    """The background compile (aiofl.engine.build.prepare) is useful only if its probe batch has
     the numba types of the batches simulate_batch packs, continuous and sampled alike."""
     import numba
 
     from aiofl.config import load_config
     from aiofl.controller import controller_batch
-    from aiofl.engine import prepare
-    from aiofl.engine.discrete import Sampling, sampling_rows
+    from aiofl.engine.build import prepare
+    from aiofl.engine.discrete_rows import Sampling, sampling_rows
     from aiofl.engine.simulation import pack
 
     cfg = load_config("frontier-s1-ladrc")
@@ -534,7 +556,7 @@ def test_the_probe_batch_compiles_the_signature_of_real_batches():
 
 
 def test_prepare_specs_and_a_disabled_cache(monkeypatch):
-    from aiofl.engine import prepare
+    from aiofl.engine.build import prepare
 
     assert prepare.parse_spec("c32") == (32, False) and prepare.parse_spec("s1") == (1, True)
     for bad in ("x1", "c", "c7", "s-1"):
@@ -548,12 +570,12 @@ def test_prepare_specs_and_a_disabled_cache(monkeypatch):
 
 
 def test_the_prepared_discrete_controller_is_the_one_a_command_loads(tmp_path, monkeypatch):
-    """``python -m aiofl.engine.prepare slfjm dc`` fills the cache with the discrete
+    """``python -m aiofl.engine.build.prepare slfjm dc`` fills the cache with the discrete
     controller's entries; a later process building a DiscreteController (another design,
     the same plant-free update) loads every entry it calls and compiles none."""
     monkeypatch.delenv("AIOFL_NO_CACHE", raising=False)
     env = {**os.environ, "AIOFL_CACHE_DIR": str(tmp_path)}
-    cmd = [sys.executable, "-m", "aiofl.engine.prepare", "slfjm", "dc"]
+    cmd = [sys.executable, "-m", "aiofl.engine.build.prepare", "slfjm", "dc"]
     subprocess.run(cmd, env=env, check=True, capture_output=True)
     names = sorted(p.name.split("_standalone")[0] for p in (tmp_path / "kernels").glob("*.nbi"))
     assert names == [
@@ -566,8 +588,8 @@ def test_the_prepared_discrete_controller_is_the_one_a_command_loads(tmp_path, m
     probe = (
         "import numpy as np\n"
         "from aiofl.config import load_config\n"
-        "from aiofl.engine.discrete import Sampling\n"
-        "from aiofl.engine.standalone import DiscreteController\n"
+        "from aiofl.engine.discrete_rows import Sampling\n"
+        "from aiofl.discrete_controller import DiscreteController\n"
         "dc = DiscreteController(load_config('retuned-s1-leso').controller, Sampling(1e-3))\n"
         "dc.init(0.1); dc.step([0.2, 0.0], 0.1); dc.run(3, 0.2, 0.1)\n"
         "dc.step_each(np.repeat(dc.state[None, :], 2, axis=0), 0.2, np.array([0.1, 0.2]))\n"
@@ -588,7 +610,7 @@ def test_a_new_plant_file_prepares_the_loops_of_its_size_ahead(tmp_path, monkeyp
     it; nothing is started for a plant file already built, when the cache holds a loop of
     that size, or with the cache off."""
     from aiofl.config.run_config import resolve_plant
-    from aiofl.engine import prepare
+    from aiofl.engine.build import prepare
 
     started = []
     monkeypatch.setattr(
@@ -618,10 +640,10 @@ def test_a_new_plant_file_prepares_the_loops_of_its_size_ahead(tmp_path, monkeyp
 
 
 def test_the_loops_prepared_without_a_plant_are_those_a_plant_of_the_size_runs():
-    """``python -m aiofl.engine.prepare --states=N c1`` compiles, without a plant, the very
+    """``python -m aiofl.engine.build.prepare --states=N c1`` compiles, without a plant, the very
     instance (recipe fingerprint and loop) every N-state plant then runs; other sizes and
     plant-specific widths are refused with exit status 2."""
-    from aiofl.engine import prepare
+    from aiofl.engine.build import prepare
     from aiofl.plants.expressions import MAX_STATES
 
     pendulum = get_plant("pendulum")

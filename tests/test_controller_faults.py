@@ -20,7 +20,7 @@ import pytest
 
 import aiofl
 from aiofl.config import load_config
-from aiofl.engine.discrete import Sampling
+from aiofl.engine.discrete_rows import Sampling
 from aiofl.export import ExportError, export_c
 from aiofl.export.c_check import CC, CController, build
 

@@ -125,7 +125,7 @@ def test_discrete_table_refuses_what_would_mislead(table: str, needles: list[str
 
 def test_sampling_refuses_a_bool_delay_and_a_huge_h0_in_python() -> None:
     from aiofl.controller import controller_batch
-    from aiofl.engine.discrete import Sampling, sampling_rows
+    from aiofl.engine.discrete_rows import Sampling, sampling_rows
 
     with pytest.raises(ValueError, match="delay = True; allowed: the integer 0 or 1"):
         Sampling(1e-3, delay=True)  # type: ignore[arg-type]

@@ -11,10 +11,10 @@ import pytest
 
 from aiofl.config import ConfigError, parse_config
 from aiofl.controller import Controller
-from aiofl.engine.discrete import Sampling, sample_steps
-from aiofl.engine.reference import reference_sampled_simulate
+from aiofl.discrete_controller import DiscreteController
+from aiofl.engine.discrete_rows import Sampling, sample_steps
+from aiofl.engine.reference_sampled import reference_sampled_simulate
 from aiofl.engine.simulation import simulate
-from aiofl.engine.standalone import DiscreteController
 from aiofl.plants import get_plant
 from aiofl.plants.base import Plant
 from aiofl.scenario import Scenario

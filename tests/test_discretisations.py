@@ -17,8 +17,8 @@ from aiofl.components.differentiators import han_td_rhs, improved_td_rhs
 from aiofl.components.observers import binomial_alphas, eso_gains
 from aiofl.config import load_config
 from aiofl.controller import Controller
-from aiofl.engine.discrete import Sampling
-from aiofl.engine.standalone import DiscreteController
+from aiofl.discrete_controller import DiscreteController
+from aiofl.engine.discrete_rows import Sampling
 
 PAPER_LESO_ALPHAS = [8.772, 0.1946, 0.7384, 0.0096881, 2.2651e-06]  # printed, distinct roots
 

@@ -74,11 +74,12 @@ ALLOWED: dict[str, str] = {
     + "parameters as noise_gain's (documented)",
     "aiofl.config.run_config:RunConfig.with_rig": _CAP
     + "preset, source, **fields: described in its prose",
-    "aiofl.engine.instances:instance_built": _CAP
+    "aiofl.engine.build.instances:instance_built": _CAP
     + "parameters as recipe's (documented); returns a bool",
-    "aiofl.engine.instances:instance_kind": _CAP
+    "aiofl.engine.build.instances:instance_kind": _CAP
     + "a cache-key helper (width, sampled_data, variant, n_states)",
-    "aiofl.engine.instances:set_plant_table": _CAP + "writes plant's table for variant into batch",
+    "aiofl.engine.build.instances:set_plant_table": _CAP
+    + "writes plant's table for variant into batch",
     "aiofl.engine.reference:setup_loop": _CAP
     + "precomputes one loop's gains (plant, controller, scenario)",
     "aiofl.engine.simulation:pack": _CAP

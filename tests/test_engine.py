@@ -15,7 +15,7 @@ from hypothesis import strategies as st
 
 from aiofl.config import load_config
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine import instances
+from aiofl.engine.build import instances
 from aiofl.engine.reference import closed_loop, reference_simulate, setup_loop
 from aiofl.engine.simulation import closed_loop_rhs, simulate, simulate_batch
 from aiofl.plants import get_plant
@@ -218,7 +218,7 @@ def test_kernel_links_no_component_from_numbas_per_function_cache(slfjm):
     assert {"fal_scaled", "linear_sef_gain", "binomial_power", "abspow", "aiofl_law"} <= names
     assert any(d.py_func.__name__ == "_aiofl_command" for d in found)
     for d in found:
-        if d.py_func.__module__.startswith(("aiofl.components.", "aiofl.engine.member")):
+        if d.py_func.__module__.startswith(("aiofl.components.", "aiofl.engine.kernel.member")):
             assert type(d._cache).__name__ == "NullCache", d.py_func.__qualname__
     for public in (fastmath, feedback, observers, differentiators, law):
         assert not any(d is v for d in found for v in vars(public).values())

@@ -19,8 +19,8 @@ from typer.testing import CliRunner
 from aiofl.cli.app import app
 from aiofl.config import load_config
 from aiofl.controller import Controller
-from aiofl.engine.discrete import Sampling
-from aiofl.engine.standalone import DiscreteController
+from aiofl.discrete_controller import DiscreteController
+from aiofl.engine.discrete_rows import Sampling
 from aiofl.export import HEADER, PARAMS, SOURCE, ExportError, export_c
 from aiofl.export.c_check import CC, STRICT_FLOAT, WARN, CController, build, loop
 from aiofl.plants import get_plant

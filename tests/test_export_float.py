@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from aiofl.config import list_presets, load_config
-from aiofl.engine.discrete import Sampling
-from aiofl.engine.standalone import DiscreteController
+from aiofl.discrete_controller import DiscreteController
+from aiofl.engine.discrete_rows import Sampling
 from aiofl.export import export_c
 from aiofl.export.c_check import (
     CC,

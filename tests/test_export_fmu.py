@@ -20,8 +20,8 @@ from typer.testing import CliRunner
 from aiofl.cli.app import app
 from aiofl.config import load_config
 from aiofl.controller import Controller
-from aiofl.engine.discrete import Sampling
-from aiofl.engine.standalone import DiscreteController
+from aiofl.discrete_controller import DiscreteController
+from aiofl.engine.discrete_rows import Sampling
 from aiofl.export.fmu import export_fmu_for_config, find_compiler
 
 fmpy = pytest.importorskip("fmpy")

@@ -31,7 +31,7 @@ from typer.testing import CliRunner
 
 from aiofl.cli.app import app
 from aiofl.controller import Controller
-from aiofl.engine.discrete import Sampling
+from aiofl.engine.discrete_rows import Sampling
 from aiofl.export import HEADER, export_c
 
 GCC = shutil.which("gcc")

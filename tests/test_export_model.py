@@ -4,7 +4,7 @@ The nominal :math:`(\\hat\\alpha, \\hat\\beta)(\\xi)` is C generated from the pl
 expressions (:mod:`aiofl.export.c_model`); compiled (``-std=c99 -Wall -Wextra -Werror``,
 float code also under ``-Wconversion -Wdouble-promotion``) and driven in closed loop, its
 commands equal those of the engine's discrete controller stepped from Python with the
-plant (:class:`aiofl.engine.standalone.DiscreteController`, whose observer gain is placed for
+plant (:class:`aiofl.discrete_controller.DiscreteController`, whose observer gain is placed for
 the model as the sampled engine's is).  A model-assisted controller is never exported
 without its model; a plain Python plant (no expressions) is refused, through the CLI with
 exit status 2; a model-free controller's export ignores the plant.
@@ -23,7 +23,7 @@ from typer.testing import CliRunner
 from aiofl.cli.app import app
 from aiofl.config import load_config
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine.discrete import D_L, Sampling, sampling_rows
+from aiofl.engine.discrete_rows import D_L, Sampling, sampling_rows
 from aiofl.engine.observer_gains import model_jacobians
 from aiofl.export import HEADER, PARAMS, SOURCE, ExportError, export_c
 from aiofl.export.c_code import MODEL

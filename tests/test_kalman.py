@@ -27,7 +27,7 @@ from aiofl.cli.app import app
 from aiofl.components import kalman as K
 from aiofl.config import ConfigError, parse_config, preset_text
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine.discrete import D_L, Sampling, sampling_rows
+from aiofl.engine.discrete_rows import D_L, Sampling, sampling_rows
 from aiofl.scenario import Scenario
 from aiofl.tuning.space import used_parameters
 

@@ -17,9 +17,9 @@ import pytest
 
 from aiofl.config import load_config
 from aiofl.controller import Controller
-from aiofl.engine.discrete import Sampling
+from aiofl.discrete_controller import DiscreteController
+from aiofl.engine.discrete_rows import Sampling
 from aiofl.engine.simulation import simulate
-from aiofl.engine.standalone import DiscreteController
 from aiofl.export import export_c
 from aiofl.export.c_check import CC, STRICT_FLOAT, CController, build, loop
 from aiofl.plants import get_plant

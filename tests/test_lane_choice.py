@@ -1,4 +1,4 @@
-"""When a batch runs in lanes (aiofl.engine.lane_choice): the lane instance at hand, or
+"""When a batch runs in lanes (aiofl.engine.build.lane_choice): the lane instance at hand, or
 worth its compile by the rent rule; otherwise its members run alone, with the same numbers.
 
 The plants here are fresh copies of a library plant (a new object: no instance of it is
@@ -15,8 +15,10 @@ import pytest
 
 from aiofl.cache import subdir
 from aiofl.controller import Controller
-from aiofl.engine import compile as compile_
-from aiofl.engine import instances, lane_choice, loop, simulation
+from aiofl.engine import simulation
+from aiofl.engine.build import compile as compile_
+from aiofl.engine.build import instances, lane_choice
+from aiofl.engine.kernel import loop
 from aiofl.engine.simulation import simulate_batch
 from aiofl.plants import get_plant
 from aiofl.scenario import Reference, Scenario

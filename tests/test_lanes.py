@@ -1,4 +1,4 @@
-"""The lane engine (aiofl.engine.loop and its instances): its vector math, lane and batch
+"""The lane engine (aiofl.engine.kernel.loop and its instances): its vector math, lane and batch
 independence (bitwise), and agreement with the scalar engine (1e-10 relative): the same time
 loop at width 1 compiled with libm and the components' fast-math flags, a differently
 rounded check of the lane instances."""
@@ -15,8 +15,8 @@ from aiofl.components import vecmath_tables as T
 from aiofl.components.vecmath import vcos, vexp, vlog, vsin
 from aiofl.config import list_presets, load_config
 from aiofl.controller import Controller
-from aiofl.engine.discrete import Sampling
-from aiofl.engine.loop import WIDTH
+from aiofl.engine.discrete_rows import Sampling
+from aiofl.engine.kernel.loop import WIDTH
 from aiofl.engine.simulation import simulate_batch
 from aiofl.scenario import Reference, Scenario
 

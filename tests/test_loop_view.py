@@ -15,8 +15,8 @@ from aiofl.analysis.loop_view import disk_margin, format_loop_view_text, loop_vi
 from aiofl.analysis.sampled_loop import SampledLoop, zoh
 from aiofl.analysis.two_dof import format_two_dof_text, ladrc_two_dof, two_dof_closed_loop
 from aiofl.controller import Controller
-from aiofl.engine.discrete import Sampling
-from aiofl.engine.standalone import DiscreteController
+from aiofl.discrete_controller import DiscreteController
+from aiofl.engine.discrete_rows import Sampling
 from aiofl.plants.symbolic import SymbolicPlant
 from aiofl.scenario import Reference, Scenario
 from chain_plant import chain3

@@ -21,10 +21,10 @@ import pytest
 from aiofl.analysis.closed_loop import ClosedLoop
 from aiofl.config.run_config import ConfigError, parse_config
 from aiofl.controller import Controller
-from aiofl.engine.discrete import Sampling, sample_steps
+from aiofl.discrete_controller import DiscreteController
+from aiofl.engine.discrete_rows import Sampling, sample_steps
 from aiofl.engine.reference import reference_simulate
 from aiofl.engine.simulation import simulate
-from aiofl.engine.standalone import DiscreteController
 from aiofl.plants.base import Plant
 from aiofl.plants.library import symbolic_model
 from aiofl.plants.registry import get_plant

@@ -19,7 +19,7 @@ from aiofl.cli.app import app
 from aiofl.components.discrete import eso_zoh
 from aiofl.controller import Controller
 from aiofl.discrete_controller import DiscreteController
-from aiofl.engine.discrete import Sampling
+from aiofl.engine.discrete_rows import Sampling
 
 DATA = Path(__file__).parent / "data"
 

@@ -21,10 +21,10 @@ from aiofl.cli.configs import load_run_config
 from aiofl.config import ConfigError
 from aiofl.config.objects import controller_table
 from aiofl.controller import Controller
-from aiofl.engine.discrete import Sampling
+from aiofl.discrete_controller import DiscreteController
+from aiofl.engine.discrete_rows import Sampling
 from aiofl.engine.reference import reference_simulate
 from aiofl.engine.simulation import simulate
-from aiofl.engine.standalone import DiscreteController
 from aiofl.export import export_c
 from aiofl.export.c_check import CC, CController, build, loop
 from aiofl.export.fmu import fmu_parameters

@@ -1,4 +1,4 @@
-"""The plant table (aiofl.engine.plant_table): width-1 instances compiled without the
+"""The plant table (aiofl.engine.build.plant_table): width-1 instances compiled without the
 plant, calling its functions through addresses.
 
 One plant-independent instance serves every plant of a size, with each plant's numbers
@@ -15,7 +15,8 @@ from numba import njit
 
 from aiofl import layout as L
 from aiofl.controller import Controller
-from aiofl.engine import instances, plant_table
+from aiofl.engine.build import instances, plant_table
+from aiofl.engine.kernel import plant_calls
 from aiofl.engine.reference import reference_simulate
 from aiofl.engine.simulation import simulate
 from aiofl.plants import get_plant
@@ -46,17 +47,17 @@ def test_every_entry_returns_the_plant_values_and_a_strided_view_is_refused():
         (tuple(nf(x, p)) + (0.0,) * (L.RHO_MAX + 2 - plant.relative_degree - 2),),
         (tuple(ab(x, p)),),
     ]
-    for k, sizes in enumerate(plant_table.entry_sizes(plant.n_states)):
-        status, *got = _probe(plant_table.call_intrinsic(sizes))(table[k], x, p)
-        assert status == 0 and tuple(got) == want[k], plant_table.TABLE[k]
+    for k, sizes in enumerate(plant_calls.entry_sizes(plant.n_states)):
+        status, *got = _probe(plant_calls.call_intrinsic(sizes))(table[k], x, p)
+        assert status == 0 and tuple(got) == want[k], plant_calls.TABLE[k]
     wide = np.zeros(8)
     wide[::2] = x
-    pair = _probe(plant_table.call_intrinsic((4, 4)))
+    pair = _probe(plant_calls.call_intrinsic((4, 4)))
     status, fx, _ = pair(table[0], wide[::2], p)
     assert status == 2 and fx == (0.0,) * 4
     status, fx, _ = pair(0, x, p)  # a batch whose table was never set: no call
     assert status == 3 and fx == (0.0,) * 4
-    assert table.flags.writeable is False and table.size == plant_table.N_TABLE
+    assert table.flags.writeable is False and table.size == plant_calls.N_TABLE
 
 
 def _probe(call):
@@ -104,7 +105,7 @@ def test_a_plant_independent_instance_has_no_plant_in_its_recipe():
     for plant in (user, slfjm):
         generic = instances.recipe(plant, 1)
         assert generic.plant is None
-        for name in plant_table.BOUND_NAMES:
+        for name in plant_calls.BOUND_NAMES:
             assert generic.bindings[name].py_func.__name__.startswith("_tpl_call")
     for plant, width, variant in ((user, 32, "lanes"), (user, 1, "guarded"), (slfjm, 32, "lanes")):
         own = instances.recipe(plant, width, variant=variant)
@@ -129,7 +130,7 @@ def test_a_plant_gives_the_same_bits_through_its_table_as_inlined_in_lanes(ts):
     plant files (``plants/library_generated.py``), as a user's are; its lane instances are
     the ones the other tests compile, so this check compiles nothing of its own."""
     from aiofl.config import load_config
-    from aiofl.engine.discrete import Sampling
+    from aiofl.engine.discrete_rows import Sampling
     from aiofl.engine.simulation import simulate_batch
 
     # sampled: the model-assisted design (retuned-s1-ladrc sampled, even at 0.1 ms, loses

@@ -16,9 +16,9 @@ from scipy.integrate import quad, solve_ivp
 
 from aiofl.config import ConfigError, load_config, parse_config, preset_text
 from aiofl.controller import Controller
-from aiofl.engine.discrete import Sampling
+from aiofl.engine.discrete_rows import Sampling
 from aiofl.engine.driven import simulate_driven
-from aiofl.engine.reference import reference_sampled_simulate
+from aiofl.engine.reference_sampled import reference_sampled_simulate
 from aiofl.engine.simulation import simulate
 from aiofl.plants import get_plant
 from aiofl.plants.actuated import with_rig

@@ -15,9 +15,9 @@ from typer.testing import CliRunner
 from aiofl.cli.app import app
 from aiofl.config import ConfigError, load_config, parse_config
 from aiofl.controller import Controller
-from aiofl.engine.discrete import D_L, Sampling, sample_steps
+from aiofl.discrete_controller import DiscreteController
+from aiofl.engine.discrete_rows import D_L, Sampling, sample_steps
 from aiofl.engine.simulation import simulate, simulate_batch
-from aiofl.engine.standalone import DiscreteController
 from aiofl.plants import get_plant
 from aiofl.plants.base import Plant
 from aiofl.scenario import Scenario

@@ -142,7 +142,7 @@ def test_the_one_sample_delay_is_in_the_linearisation(tmp_path: Path) -> None:
     the ESO's prediction: state (y, ẑ1, ẑ2, u_{k-1}), the matrix written out."""
     from dataclasses import replace
 
-    from aiofl.engine.discrete import Sampling
+    from aiofl.engine.discrete_rows import Sampling
 
     cfg = load_config(str(first_order(tmp_path)))
     loop = SampledLoop(replace(cfg, sampling=Sampling(1e-4, delay=1, eso="euler")))

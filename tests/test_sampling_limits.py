@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 from aiofl.analysis.sampling_limits import sampling_figure, sampling_limits, sampling_limits_many
 from aiofl.cli.app import app
 from aiofl.config import RunConfig, parse_config
-from aiofl.engine.discrete import Sampling
+from aiofl.engine.discrete_rows import Sampling
 
 W0, WC, B = 100.0, 10.0, 4.0  # observer and feedback bandwidths, the plant's input gain
 

@@ -286,7 +286,7 @@ def test_allowed_text_is_allowed_and_raw_text_is_refused() -> None:
 
 @pytest.mark.skipif(shutil.which("gcc") is None, reason="no gcc on the PATH")
 def test_the_c_export_of_any_text_compiles(tmp_path: Path) -> None:
-    from aiofl.engine.discrete import Sampling
+    from aiofl.engine.discrete_rows import Sampling
     from aiofl.export import export_c
 
     files = export_c(_controller(), Sampling(1e-3), title=ALLOWED, notes=[RAW, f"Config: {RAW}"])
@@ -303,7 +303,7 @@ def test_the_c_export_of_any_text_compiles(tmp_path: Path) -> None:
 
 def test_fmpy_loads_the_fmu_of_any_text(tmp_path: Path) -> None:
     fmpy = pytest.importorskip("fmpy")
-    from aiofl.engine.discrete import Sampling
+    from aiofl.engine.discrete_rows import Sampling
     from aiofl.export.fmu import export_fmu, find_compiler
 
     try:

@@ -32,7 +32,7 @@ TABLE_MEANINGS: dict[str, str] = {
     "fed-back state (at least ``n_feedback``); a short one is refused, not padded.",
     "controller.law": "The control law u = v − ξ̂_{ρ+1}/b0 (eq. 14) and the actuator range.",
     "controller.discrete": "Run the controller sampled, as a processor does "
-    "(:mod:`aiofl.engine.discrete`): at t_k = k·ts it reads y, updates once and holds its "
+    "(:mod:`aiofl.engine.discrete_rows`): at t_k = k·ts it reads y, updates once and holds its "
     "command until the next sample.  Prefer ``[sensor]`` for ``ts`` and the quantum.",
     "simulation": "The integrator of the closed loop.",
     "metrics": "The OPI of eq. (22): OPI = Σ w_i·J_i/N_i over ITAE, ISU and IAU.",

@@ -4,7 +4,7 @@ Two kinds of entry share one directory, :func:`cache_root`:
 
 - ``kernels/``: numba's cache files of the compiled closed-loop kernels, one per plant,
   kernel instance and fingerprint of the code it was compiled from
-  (:mod:`aiofl.engine.compile`);
+  (:mod:`aiofl.engine.build.compile`);
 - ``plants/``: the generated Python module of a symbolic plant (a plant file) with its
   analysis, keyed by a hash of the plant's text (:mod:`aiofl.plants.plant_cache`), so that
   numba can cache the kernel of a plant file like that of any plant with a source file.
@@ -20,7 +20,7 @@ a partial one; :func:`prune_older_than` removes entries nobody used for a while 
 refreshes an entry's modification time, :func:`touch`).
 
 **Damage heals.**  Every entry carries a digest of its content (a plant module its last
-line, a kernel file a header, :mod:`aiofl.engine.compile`); an entry that is damaged
+line, a kernel file a header, :mod:`aiofl.engine.build.compile`); an entry that is damaged
 (truncated, emptied, flipped bits, another entry's file under its name, text that is not
 UTF-8) or fails to load is removed and built again, with one :class:`CacheWarning` naming
 the file (:func:`warn_damaged`).  No command keeps failing until the cache is deleted.

@@ -26,7 +26,7 @@ the process- and measurement-noise intensities ``eso.q`` and ``eso.r``
 :meth:`Controller.float_row` and :func:`controller_batch` write into the ``eso.omega0``
 and ``eso.alpha*`` columns (so the engine, the analyses and the reports see the
 equivalent bandwidth); a sampled controller gets the discrete Kalman gain instead
-(:func:`aiofl.engine.discrete.sampling_rows`).
+(:func:`aiofl.engine.discrete_rows.sampling_rows`).
 
 :meth:`Controller.check_plant` refuses a controller that cannot drive a plant: ρ different
 from the plant's known relative degree (unless ``allow_rho_mismatch``), an IOFL law on a

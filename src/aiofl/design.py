@@ -50,7 +50,7 @@ class Design:
     dt, method, decimation, divergence_threshold
         The ``[simulation]`` settings.
     sampling
-        An :class:`aiofl.engine.discrete.Sampling` (``[controller.discrete]``): run the
+        An :class:`aiofl.engine.discrete_rows.Sampling` (``[controller.discrete]``): run the
         controller sampled; None: continuous (or the sensor's sample time).
     sensor
         A sensor preset name (``"encoder-12bit"``) or an :class:`aiofl.sensor.Sensor`
@@ -311,7 +311,7 @@ class Design:
         dict of str to Path
             The written files by file name.
         """
-        from aiofl.engine.discrete import Sampling
+        from aiofl.engine.discrete_rows import Sampling
         from aiofl.export import ExportError, export_c
         from aiofl.export.fmu import export_fmu_for_config
         from aiofl.outputs import atomic_write_bytes, atomic_write_text

@@ -1,8 +1,10 @@
 r"""The controller object for test rigs and hardware in the loop: ``u = ctrl.step(r, y)``.
 
-:class:`DiscreteController` is the engine's discrete controller
-(:class:`aiofl.engine.standalone.DiscreteController`: the compiled update ``aiofl simulate
---ts`` runs and the exported C is checked against) with a constructor from a config::
+:class:`DiscreteController` is the engine's discrete controller stepped from Python: the
+compiled update ``aiofl simulate --ts`` runs (:mod:`aiofl.engine.kernel.sampled`), compiled
+without a plant (:mod:`aiofl.engine.build.controller_update`), what the exported C is checked
+against and what the sampled loop's linearisation steps, with a constructor from a
+config::
 
     ctrl = aiofl.DiscreteController.from_config("assisted-s1-ladrc")   # its sensor's Ts
     ctrl.reset(y0)                       # bumpless start at the first measurement
@@ -32,11 +34,16 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl import layout as L
+from aiofl.checks import check_number
 from aiofl.config import RunConfig, load_config
-from aiofl.controller import Controller
-from aiofl.engine import member, standalone
-from aiofl.engine.discrete import Sampling
-from aiofl.engine.sample_time import SIGNAL_MAX, TS_MAX, TS_MIN, check_ts
+from aiofl.controller import Controller, controller_batch
+from aiofl.engine.build.controller_update import NO_TABLE, compiled_update, member_constants
+from aiofl.engine.discrete_rows import Sampling
+from aiofl.engine.kernel import member
+from aiofl.engine.kernel.member import IQ_EINIT
+from aiofl.engine.kernel.sampled import C_RPREV, C_TD, C_X, N_CS
+from aiofl.engine.observer_gains import model_jacobians
+from aiofl.engine.sample_time import SIGNAL_MAX, TS_MAX, TS_MIN, check_ts, discrete_row
 
 __all__ = ["DiscreteController"]
 
@@ -72,10 +79,16 @@ def _usable(value: float) -> bool:
     return abs(value) <= SIGNAL_MAX
 
 
-class DiscreteController(standalone.DiscreteController):
-    __doc__ = (
-        (standalone.DiscreteController.__doc__ or "")
-        + """
+class DiscreteController:
+    r"""The engine's discrete controller, stepped from Python one sample at a time.
+
+    The same compiled update the sampled engine runs
+    (:func:`aiofl.engine.kernel.sampled._tpl_ctrl_step`, compiled without a plant by
+    :mod:`aiofl.engine.build.controller_update`), with the coefficients of
+    :func:`aiofl.engine.discrete_rows.sampling_rows`.  One call per sample: :meth:`init` with
+    the first measurement (or :meth:`reset`, a bumpless start), then :meth:`step` with the
+    reference (and its derivatives) and the measurement, returning u.
+
     Refusals and faults (the same in the exported C and the FMU,
     :mod:`aiofl.engine.sample_time`): the sample time must be a number in [1e-9, 1] s at
     which the design can be discretised (ValueError naming ``ts``, with the design's range),
@@ -84,9 +97,28 @@ class DiscreteController(standalone.DiscreteController):
     command or the state non-finite, is a fault: the sample changes nothing, the last
     command (before the first: the start's ``eso.u0``, 0 by default) is returned, and
     :attr:`fault` stays True, every later sample ignored with the command held, until
-    :meth:`init` or :meth:`reset`.
+    :meth:`init` or :meth:`reset`.  :meth:`step_each` (the Jacobians of the update) runs
+    the update as it is, without the fault policy.
+
+    Parameters
+    ----------
+    controller
+        An AIOFL controller (LESO, INLESO, LADRC, ...); the IOFL law needs the plant state
+        and is refused.
+    sampling
+        Sample time and discretisation (:class:`aiofl.engine.discrete_rows.Sampling`); ``ts``
+        must be a number in [1e-9, 1] s at which the design can be discretised.
+    plant
+        The plant whose nominal model a model-assisted observer (``eso.model =
+        "nominal"``) carries, with its nominal parameters; not needed otherwise (default
+        None).
+    x0
+        The plant state the model-assisted observer's bandwidth gains are placed at, as the
+        engine places them at the scenario's initial state:
+        :math:`J = \partial(\hat\alpha + \hat\beta u^*)/\partial\xi` at
+        :math:`\xi^* = \Phi(x_0)` (:func:`aiofl.engine.observer_gains.model_jacobians`);
+        empty (the default): the origin.  Not used otherwise.
     """
-    )
 
     def __init__(
         self,
@@ -95,24 +127,29 @@ class DiscreteController(standalone.DiscreteController):
         plant: Any = None,
         x0: Sequence[float] = (),
     ) -> None:
-        """The controller of ``controller`` sampled as ``sampling``, refused as the class notes say.
-
-        Parameters
-        ----------
-        controller
-            An AIOFL controller (LESO, INLESO, LADRC, ...); the IOFL law is refused.
-        sampling
-            Sample time and discretisation (:class:`aiofl.engine.discrete.Sampling`); ``ts`` must
-            be a number in [1e-9, 1] s at which the design can be discretised.
-        plant
-            The plant whose nominal model a model-assisted observer (``eso.model = "nominal"``)
-            carries; not needed otherwise (default None).
-        x0
-            The plant state the model-assisted observer's gains are placed at (default: the
-            origin); not used otherwise.
-        """
         check_ts(sampling.ts, "ts")
-        super().__init__(controller, sampling, plant=plant, x0=x0)
+        if controller.law != "aiofl":
+            raise ValueError(
+                f"controller.law_kind = {controller.law!r}: a discrete controller without "
+                "the plant needs the AIOFL law (the IOFL law evaluates the plant model)"
+            )
+        sampling.check(controller)
+        model = controller.eso_model != "none"
+        if model:
+            if plant is None:
+                raise ValueError(
+                    f"controller.eso.model = {controller.eso_model!r}: the discrete controller "
+                    "evaluates the plant's nominal model; pass plant="
+                )
+            controller.check_plant(plant)
+        self.controller = controller
+        self.sampling = sampling
+        # a model-assisted observer's gain is placed for the model's error map at Φ(x0)
+        jac = model_jacobians(plant, controller_batch(controller), [x0]) if model else None
+        self.row = discrete_row(controller, sampling, jac)  # a failing Ts named, with its range
+        self._fn = compiled_update(plant if model else None)
+        self._pn = plant.param_vector() if plant is not None else np.zeros(1)
+        self._q, self._iq = member_constants(self._fn, controller)
         derived = self._q[L.N_FLOAT :]
         if not np.all(np.isfinite(derived)):
             first = L.N_FLOAT + int(np.flatnonzero(~np.isfinite(derived))[0])
@@ -121,6 +158,9 @@ class DiscreteController(standalone.DiscreteController):
                 f"controller: the design's {what} are not finite; allowed: parameters whose "
                 "coefficients are finite numbers (a smaller value)"
             )
+        self._cs = np.zeros(N_CS)
+        self._scr = np.zeros(N_CS)
+        self._rr = np.zeros((1, L.RHO_MAX + 2))
         self._fault = False
         self._held = 0.0
         self._saved = np.empty_like(self._cs)
@@ -134,15 +174,45 @@ class DiscreteController(standalone.DiscreteController):
         return self._fault
 
     def init(self, y0: float) -> None:
+        r"""Reset the states for the first measurement ``y0`` as ``controller.eso_init``
+        says, as the continuous loop starts it: ``"zero"`` (the default: prediction 0, the
+        differentiator at 0, ``y0`` unused), ``"output"`` (:math:`\hat\xi_1 = y_0`, the
+        other states 0) or ``"bumpless"`` (that and the differentiator at rest at ``y0``;
+        :meth:`reset`).  Clears :attr:`fault` (unless ``y0`` is not usable)."""
         y = _real(y0, "y0")
-        super().init(y)
+        self._fn.init(self._iq, self._q, self._cs, y)
         zero = self.controller.eso_init == "zero"
         self._start(zero or _usable(y), 0.0 if zero else self.controller.value("eso.u0"))
 
     def reset(self, y0: float, u0: float | None = None) -> None:
+        r"""A bumpless (re)start at ``y0``, at any sample boundary, whatever the config's
+        start: :math:`\hat\xi = (y_0, 0, ..., 0, -b_0 u_0)`, the differentiator at rest at
+        ``y0``; a plant at rest at :math:`y_0 = r` gets :math:`u = u_0` next (the hand-over
+        of a manual command ``u0``; None: the design's ``eso.u0``).  The model-assisted
+        observer starts at its model's :math:`-\hat\alpha/\hat\beta` (``u0`` refused).
+        Clears :attr:`fault` (unless ``y0`` is not usable)."""
         y = _real(y0, "y0")
-        super().reset(y, u0)
+        iq = self._iq.copy()
+        iq[IQ_EINIT] = L.ESO_INIT_BUMPLESS
+        q = self._q.copy()
+        if u0 is not None:
+            q[L.F_ESO_U0] = check_number("u0", u0, finite=True)
+            if u0 != 0.0 and self.controller.eso_model != "none":
+                raise ValueError(f"u0 = {u0}: the model-assisted observer takes no u0")
+        self._fn.init(iq, q, self._cs, y)
         self._start(_usable(y), self.controller.value("eso.u0") if u0 is None else float(u0))
+
+    def _reference(self, r: float | Sequence[float] | NDArray[np.float64]) -> None:
+        """``r`` (r, or r, r', ...) into the reference row the update reads."""
+        rv = np.atleast_1d(np.asarray(r, dtype=np.float64))
+        self._rr[0, :] = 0.0
+        self._rr[0, : rv.size] = rv
+
+    def _update_args(self, cs: NDArray[np.float64], y: float | NDArray[np.float64]) -> tuple:
+        """The arguments of the compiled update up to the nominal parameters (the plant
+        table is unread: α, β are called directly), from the controller state ``cs`` and
+        the measurement(s) ``y``."""
+        return (NO_TABLE, self._iq, self._q, self.row, cs, self._scr, y, self._rr, 0, self._pn)
 
     def _start(self, usable: bool, u0: float) -> None:
         """After a start: the start's command ``u0`` held (``eso.u0``, 0 unless set), the
@@ -184,7 +254,9 @@ class DiscreteController(standalone.DiscreteController):
             self._fault = True
             return self._held
         self._saved[:] = self._cs
-        u = super().step(rv, yv) if n is None else super().run(n, rv, yv)
+        self._reference(rv)
+        args = self._update_args(self._cs, yv)
+        u = float(self._fn.step(*args) if n is None else self._fn.run(*args, n))
         if not (math.isfinite(u) and self._cs.dot(self._zeros) == 0.0):  # NaN or inf in it
             self._cs[:] = self._saved
             self._fault = True
@@ -219,6 +291,71 @@ class DiscreteController(standalone.DiscreteController):
         if isinstance(n, bool) or not isinstance(n, int | np.integer) or not 1 <= n <= 10**9:
             raise ValueError(f"n = {n!r}; allowed: an integer, 1 <= n <= 1e9")
         return self._sample(r, y, int(n))
+
+    def step_each(
+        self,
+        states: NDArray[np.float64],
+        r: float | Sequence[float] | NDArray[np.float64],
+        ys: NDArray[np.float64],
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """One sample from each of several controller states (rows of ``states``, shape
+        (K, len(state))) with the measurements ``ys`` (K,) and one reference ``r``:
+        ``(next states, commands)``, as :meth:`step` from each (the controller's own
+        state is left alone), without the fault policy.  For finite-difference Jacobians of
+        the update.
+
+        Parameters
+        ----------
+        states
+            The controller states, (K, len(state)).
+        r
+            The reference.
+        ys
+            The measurements, (K,).
+
+        Returns
+        -------
+        states, commands : ndarray
+        """
+        st = np.array(states, dtype=np.float64, order="C", ndmin=2)
+        yv = np.ascontiguousarray(ys, dtype=np.float64).reshape(-1)
+        if st.ndim != 2 or st.shape[1] != self._cs.size or yv.size != st.shape[0]:
+            raise ValueError(
+                f"states has shape {st.shape} and ys {yv.shape}; allowed: (K, {self._cs.size}) "
+                "and (K,)"
+            )
+        self._reference(r)
+        us = np.empty(st.shape[0])
+        self._fn.step_each(*self._update_args(st, yv), us)
+        return st, us
+
+    @property
+    def state(self) -> NDArray[np.float64]:
+        """A copy of the whole controller state (the engine's ``cs`` vector: differentiator,
+        ESO prediction and estimate, previous command, measurement and reference, ...);
+        assign to it to set the state (for the one-sample Jacobian of
+        :mod:`aiofl.analysis.sampled_loop`)."""
+        return self._cs.copy()
+
+    @state.setter
+    def state(self, value: NDArray[np.float64]) -> None:
+        v = np.asarray(value, dtype=np.float64)
+        if v.shape != self._cs.shape:
+            raise ValueError(f"state has shape {v.shape}; allowed: {self._cs.shape}")
+        self._cs[:] = v
+
+    @property
+    def estimate(self) -> NDArray[np.float64]:
+        """The ESO estimate ξ̂ after the last sample's correction (ρ+1 values)."""
+        return self._cs[C_X : C_X + self.controller.rho + 1].copy()
+
+    @property
+    def differentiator(self) -> NDArray[np.float64]:
+        """The differentiator's (or prefilter's) state, already advanced to the next sample."""
+        out = self._cs[C_TD : C_TD + L.RHO_MAX].copy()
+        if self.controller.td == "han":  # kept as r_1 - r_prev
+            out[0] += self._cs[C_RPREV]
+        return out
 
     @classmethod
     def from_config(cls, config: Any, ts: float | None = None) -> DiscreteController:

@@ -67,7 +67,7 @@ METHOD_RK4 = 0
 METHOD_EULER = 1
 METHODS = MappingProxyType({"rk4": METHOD_RK4, "euler": METHOD_EULER})
 
-# What a member's run did (the engine's verdict, :mod:`aiofl.engine.loop`): *ok*; *lost*,
+# What a member's run did (the engine's verdict, :mod:`aiofl.engine.kernel.loop`): *ok*; *lost*,
 # the plant left its operating envelope (the output's distance from the reference, the
 # output's or a state's declared range), a fact about the plant; *diverged*, the numbers
 # blew up (non-finite, or a plant state beyond the divergence threshold).  The observer's
@@ -105,7 +105,7 @@ def _float_columns() -> dict[str, int]:
     names += ["eso.u0"]
     # the known measurement delay [s] (a whole number of samples) the discrete controller
     # compensates: its ESO is fed the command that delay old and its reference is delayed
-    # by it, aligned with the delayed measurement (aiofl.engine.sampled)
+    # by it, aligned with the delayed measurement (aiofl.engine.kernel.sampled)
     names += ["eso.delay"]
     names += ["td.R", "td.a", "td.b", "td.c", "td.rho", "td.omega"]
     for vec in ("k", "alpha", "delta", "kb", "mu"):
@@ -160,7 +160,7 @@ S_STEADY_FROM = 16  # the steady-state window starts here [s] (noise in u, stead
 N_SCEN = 17
 
 # ------------------------------------------------------ what the loop watches per member
-# (aiofl.engine.loop._tpl_watch, at every step t_k on the plant's y = h(x_k), the reference
+# (aiofl.engine.kernel.loop._tpl_watch, at every step t_k on the plant's y = h(x_k), the reference
 # r(t_k) and the command u applied over the step)
 ST_U_PEAK = 0  #: max |u|
 ST_T_SAT = 1  #: time with u at the actuator's limit [s]

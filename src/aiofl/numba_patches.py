@@ -9,7 +9,7 @@ numba version, nothing is changed and the patch reports False).  Two patches use
   cached per set of fast-math flags, so a function's code does not depend on what the
   process compiled before it; applied when :mod:`aiofl.components.fastmath` is imported,
   i.e. before any component or kernel is compiled;
-- :func:`aiofl.engine.compile.share_scope_when_inlining`: numba's IR inliner copies a
+- :func:`aiofl.engine.build.compile.share_scope_when_inlining`: numba's IR inliner copies a
   callee with one memo (compile time only; applied by the engine's compile factory).
 """
 

@@ -43,7 +43,7 @@ the controller is not told, it still designs for the bare plant):
   :math:`y(t - \tau_m)`), ``computation_delay`` its ``input_delay`` (the plant gets
   :math:`u(t - \tau_c)`); the sampled engine holds both exactly at integer multiples of its
   step, the continuous controller by the method of steps
-  (:func:`aiofl.engine.discrete.delay_steps`).  The controller's own one-sample
+  (:func:`aiofl.engine.discrete_rows.delay_steps`).  The controller's own one-sample
   computation delay, ``[controller.discrete] delay = 1``, is a delay the controller *knows*
   (its ESO is fed the applied command); the rig's is not known to it.
   A delay that is not a multiple of the step is held exactly at a finer step

@@ -28,7 +28,7 @@ __all__ = ["DELAY_MAX", "Reference", "Scenario", "noise_sequence", "realisation_
 
 DELAY_MAX = 1.0
 """Largest input or output transport delay [s] a scenario accepts (the engine's delay
-buffer is bounded before it is allocated; see :func:`aiofl.engine.discrete.delay_steps`)."""
+buffer is bounded before it is allocated; see :func:`aiofl.engine.discrete_rows.delay_steps`)."""
 
 
 #: allowed values of the reference's numbers (as ``[scenario.reference]`` in a config)
@@ -139,7 +139,7 @@ class Scenario:
         reads :math:`y(t - \\tau_{out})` (:math:`y(0)` before :math:`t = \\tau_{out}`) plus the
         noise at t.  Each must be an integer multiple of the step dt: the sampled engine
         holds them exactly, the continuous controller by the method of steps
-        (:func:`aiofl.engine.discrete.delay_steps`).
+        (:func:`aiofl.engine.discrete_rows.delay_steps`).
     envelope
         The operating envelope: a run whose :math:`|y - r|` exceeds it is *lost* (stopped
         and reported with the time; ``inf`` switches it off).  None (default):

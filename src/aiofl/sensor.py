@@ -16,7 +16,7 @@ noisy.  :class:`Sensor` describes that measurement in one place:
 
 The sensor fills what the engine already has (:meth:`Sensor.apply`): the scenario's
 ``noise_variance``, ``noise_hold``, ``noise_seed`` and the sampled controller's ``ts`` and
-``y_quantum`` (:class:`aiofl.engine.discrete.Sampling`, ADC
+``y_quantum`` (:class:`aiofl.engine.discrete_rows.Sampling`, ADC
 :math:`Q_q(v) = q\lfloor v/q + 1/2\rfloor`).  A quantum needs a sample time (the
 continuous loop has no ADC).  The older places of these quantities, ``[scenario]
 noise_*`` and ``[controller.discrete] ts`` / ``y_quantum``, still work; a config that sets
@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from aiofl.engine.discrete import QUANTUM_MIN, Sampling
+from aiofl.engine.discrete_rows import QUANTUM_MIN, Sampling
 from aiofl.scenario import realisation_seed
 
 __all__ = [
@@ -152,7 +152,7 @@ class Sensor:
     ts
         Sample time [s], ``0 < ts <= 1``; None: the controller is not sampled by the sensor.
     quantum
-        Measurement quantum (0: none, else >= :data:`aiofl.engine.discrete.QUANTUM_MIN`).
+        Measurement quantum (0: none, else >= :data:`aiofl.engine.discrete_rows.QUANTUM_MIN`).
     noise_variance
         Variance of the Gaussian output noise, >= 0.
     noise_hold
@@ -271,7 +271,7 @@ class Sensor:
         """``(scenario, sampling)`` with this sensor's noise and sample time / quantum.
 
         ``scenario`` is an :class:`aiofl.scenario.Scenario`; ``sampling`` an
-        :class:`aiofl.engine.discrete.Sampling` or None (a sensor with ``ts`` makes one).
+        :class:`aiofl.engine.discrete_rows.Sampling` or None (a sensor with ``ts`` makes one).
         Raises ``ValueError`` when the sampling's ts contradicts the sensor's, or for a
         quantum without any sample time.
         """

@@ -35,7 +35,7 @@ sensor's, :mod:`aiofl.sensor`); a drawn sample time replaces ``[controller.discr
 (:meth:`Draws.samplings`), the sensor's quantum kept.  Drawn transport delays replace the
 scenario's ``output_delay`` / ``input_delay`` (a ``[rig]``'s): uniform over the integer
 multiples of the step dt in the range (the sampled engine holds exactly those,
-:func:`aiofl.engine.discrete.delay_steps`), like ``ts``.  A rig's actuator and friction
+:func:`aiofl.engine.discrete_rows.delay_steps`), like ``ts``.  A rig's actuator and friction
 are plant parameters (``rig_lag``, ``rig_coulomb``, ...; :mod:`aiofl.plants.actuated`),
 drawn as factors like any other.
 
@@ -393,7 +393,7 @@ class Draws:
         return out
 
     def samplings(self, base: Any) -> list[Any]:
-        """One sampling setting per draw: ``base`` (an ``aiofl.engine.discrete.Sampling``,
+        """One sampling setting per draw: ``base`` (an ``aiofl.engine.discrete_rows.Sampling``,
         or None) with the drawn sample time; ``[base] * K`` if ``ts`` is not drawn."""
         if self.ts is None or base is None:
             return [base] * len(self)

@@ -1,7 +1,7 @@
 r"""The whole closed loop (plant + TD + ESO + SEF + law) as a Python right-hand side.
 
 :class:`ClosedLoop` evaluates :math:`F(z; r, \tau_d, n)`, the ODE the engine integrates
-(:mod:`aiofl.engine.continuous`), from the same component functions the kernel calls, so
+(:mod:`aiofl.engine.kernel.continuous`), from the same component functions the kernel calls, so
 each formula is written once; the tests check it against the engine.  In ``"linearise"``
 mode it is the loop :mod:`aiofl.analysis.linearize` differentiates.
 
@@ -117,8 +117,8 @@ def reference_operating_value(ref: Reference) -> float:
 class ClosedLoop:
     r"""Python right-hand side :math:`F(z; r, \tau_d, n)` of one closed loop.
 
-    The same equations as the engine's kernel (:mod:`aiofl.engine.continuous`): TD (18)/(21)/linear,
-    ESO (5)/(16)/(19), SEF (17)/(20)/linear, law (14) or classical IOFL.
+    The same equations as the engine's kernel (:mod:`aiofl.engine.kernel.continuous`): TD
+    (18)/(21)/linear, ESO (5)/(16)/(19), SEF (17)/(20)/linear, law (14) or classical IOFL.
 
     Parameters
     ----------

@@ -1,6 +1,6 @@
 r"""Linearisation of the whole closed loop (plant + TD + ESO + SEF + law) and its stability.
 
-The closed loop of :mod:`aiofl.engine.continuous` is an ODE
+The closed loop of :mod:`aiofl.engine.kernel.continuous` is an ODE
 :math:`\dot z = F(z; r, \tau_d, n)`.  :class:`aiofl.analysis.closed_loop.ClosedLoop` writes
 the same equations in Python (checked against the engine in the tests); this module finds
 the operating point :math:`z^*` with the reference held at a constant :math:`r^*` and the

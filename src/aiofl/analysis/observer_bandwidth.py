@@ -48,7 +48,7 @@ config (what ``aiofl analyze`` prints and ``aiofl tune --omega0-ceiling`` clips
 
 ``tests/test_observer_bandwidth.py`` checks each cap's closed form and that the noise
 cap's ω0 gives the stated command noise in a simulated sampled loop
-(:class:`aiofl.engine.standalone.DiscreteController` on the ZOH chain).
+(:class:`aiofl.discrete_controller.DiscreteController` on the ZOH chain).
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 r"""A plant's functions with their exact Jacobians, compiled: the plant part of the loop.
 
 :func:`plant_jets` compiles, once per plant (cached on disk by the engine's compile
-factory, :func:`aiofl.engine.compile.build`, under a fingerprint of the plant's code and
+factory, :func:`aiofl.engine.build.compile.build`, under a fingerprint of the plant's code and
 this file), one function that evaluates the plant's h, f, g, b_d, the model's
 :math:`(\alpha, \beta)(\xi)` and the normal form at a real state and, on request, their
 Jacobians by the complex step (:mod:`aiofl.analysis.derivatives`), all in compiled code.
@@ -303,7 +303,7 @@ def plant_jets(plant: Plant, *, cache: bool = True) -> Any:
     """
     from numba.core.errors import NumbaError
 
-    from aiofl.engine import compile as compile_
+    from aiofl.engine.build import compile as compile_
 
     key = id(plant)
     with _LOCK:

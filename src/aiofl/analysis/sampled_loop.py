@@ -2,7 +2,7 @@ r"""The sampled closed loop linearised at its operating point: is it stable at a
 
 The sampled loop is a hybrid system: the plant runs in continuous time between samples,
 driven by the held command; the controller updates once per sample
-(:mod:`aiofl.engine.sampled`).  Its linearisation at the operating point is a
+(:mod:`aiofl.engine.kernel.sampled`).  Its linearisation at the operating point is a
 discrete-time system in the deviations :math:`(\delta x_k, \delta c_k)` of the plant
 state and the discrete controller's state at :math:`t_k = kT_s`, built here from two
 exact-or-nearly pieces:
@@ -18,8 +18,8 @@ exact-or-nearly pieces:
   (one matrix exponential of the augmented matrix :math:`[[A_p, B_p], [0, 0]]T_s`; Franklin,
   Powell & Workman, *Digital Control of Dynamic Systems*, 3rd ed., §4.3.3);
 * **the controller**: the engine's own one-sample update
-  (:class:`aiofl.engine.standalone.DiscreteController`, the coefficients of
-  :func:`aiofl.engine.discrete.sampling_rows`), linearised by central finite differences
+  (:class:`aiofl.discrete_controller.DiscreteController`, the coefficients of
+  :func:`aiofl.engine.discrete_rows.sampling_rows`), linearised by central finite differences
   in its state and in the measurement,
   :math:`\delta c_{k+1} = J_{cc}\delta c_k + J_{cy}\delta y_k`,
   :math:`\delta u_k = J_{uc}\delta c_k + J_{uy}\delta y_k`, at its equilibrium
@@ -53,7 +53,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl.analysis.closed_loop import DEFAULT_AMPLITUDE, ClosedLoop
-from aiofl.engine.discrete import Sampling
+from aiofl.engine.discrete_rows import Sampling
 
 __all__ = ["SampledLoop", "sampled_margins", "unit_circle_margins", "zoh"]
 
@@ -136,7 +136,7 @@ class SampledLoop:
         return bool(np.all(eig.real < -1e-9 * max(1.0, float(np.max(np.abs(eig))))))
 
     def _controller(self, ts: float) -> Any:
-        from aiofl.engine.standalone import DiscreteController
+        from aiofl.discrete_controller import DiscreteController
 
         cfg = self.config
         c = cfg.controller
@@ -186,7 +186,7 @@ class SampledLoop:
     def _controller_pieces(self, ts: float) -> tuple[Any, ...]:
         """``(jcc, jcy, juc, juy, keep, i_uprev)`` of the controller's one-sample
         linearisation at ``ts`` (module docstring), cached per Ts."""
-        from aiofl.engine.sampled import C_UPREV
+        from aiofl.engine.kernel.sampled import C_UPREV
 
         if ts in self._pieces:
             return self._pieces[ts]

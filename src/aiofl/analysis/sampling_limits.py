@@ -13,7 +13,7 @@ candidate of every config of one plant is a member of one engine call) and finds
      controller update, linearised by finite differences; skipped, and said so, where
      there is no linearisation, e.g. the IOFL law);
   2. *bounded*: the simulation over the scenario's horizon neither loses the plant (its
-     envelope, :mod:`aiofl.engine.loop`) nor diverges (non-finite, or a plant state beyond
+     envelope, :mod:`aiofl.engine.kernel.loop`) nor diverges (non-finite, or a plant state beyond
      ``divergence_threshold``);
   3. *off the saturation*: :math:`|u|` sits at its limit (``law.u_max``/``law.u_min``)
      for at most ``saturation_allowance`` (5 %) of the horizon more than the continuous
@@ -64,7 +64,7 @@ from numpy.typing import NDArray
 
 from aiofl.analysis.budget import budget_spent
 from aiofl.config import RunConfig
-from aiofl.engine.discrete import Sampling
+from aiofl.engine.discrete_rows import Sampling
 from aiofl.engine.simulation import simulate_batch
 
 __all__ = [

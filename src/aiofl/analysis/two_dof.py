@@ -30,7 +30,7 @@ with :math:`r_{1..\rho}, r^{(\rho)}` the prefilter's states and its :math:`\dot 
 (:func:`aiofl.components.differentiators.linear_prefilter_update`) or the supplied
 derivatives.
 
-**Discrete controller** (:mod:`aiofl.engine.sampled`, one update per sample, the
+**Discrete controller** (:mod:`aiofl.engine.kernel.sampled`, one update per sample, the
 coefficients of the engine's discrete row :func:`aiofl.engine.sample_time.discrete_row`):
 with the predicted state :math:`p_k`, the correction :math:`\hat\xi_k = (I - Le_1^T)p_k +
 Ly_k`, the law on :math:`\hat\xi_k` and the prefilter's state at :math:`t_k`, the
@@ -59,7 +59,7 @@ from aiofl import layout as L
 from aiofl.components.differentiators import linear_prefilter_coefficients
 from aiofl.components.feedback import linear_sef_gains
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine.discrete import Sampling
+from aiofl.engine.discrete_rows import Sampling
 
 __all__ = ["TwoDof", "format_two_dof_text", "ladrc_two_dof", "two_dof_closed_loop"]
 
@@ -186,7 +186,7 @@ def _continuous(c: Controller) -> tuple[NDArray[np.float64], ...]:
 
 def _discrete(c: Controller, sampling: Sampling) -> tuple[NDArray[np.float64], ...]:
     """(A, B, C, D) of the engine's discrete controller (module docstring)."""
-    from aiofl.engine import discrete as DS
+    from aiofl.engine import discrete_rows as DS
     from aiofl.engine.sample_time import discrete_row
 
     sampling.check(c)
@@ -286,7 +286,7 @@ def ladrc_two_dof(controller: Controller, sampling: Sampling | None = None) -> T
         A linear ADRC: ``eso = "linear"`` (bandwidth or Kalman gains), ``sef = "linear"``,
         ``law = "aiofl"``, ``td = "linear"`` or ``"exact"``, ``eso.model = "none"``.
     sampling
-        None for the continuous controller; a :class:`~aiofl.engine.discrete.Sampling`
+        None for the continuous controller; a :class:`~aiofl.engine.discrete_rows.Sampling`
         for the engine's discrete one (ESO by ZOH or Euler as configured, the prefilter
         by ZOH, the computation delay).
 

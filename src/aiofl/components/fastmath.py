@@ -58,7 +58,7 @@ a function's disk cache on its own source file only, so a cached caller loaded a
 edit of its callee's module would run the callee's old code (numbers stale by ~1e-8 in the
 analysis after editing this file).  Compiling them in each process costs a fraction of a
 second on first call; the engine's kernels link their own uncached copies anyway
-(:func:`aiofl.engine.bindings.private_components`) and are cached under a fingerprint of
+(:func:`aiofl.engine.build.bindings.private_components`) and are cached under a fingerprint of
 every source they use."""
 
 
@@ -102,7 +102,7 @@ def fast_tanh(x: float) -> float:
     A rational approximation for |x| < 0.625 (Cephes), ``1 - 2/(exp(2|x|) + 1)`` up to 20,
     and 1 beyond (tanh 20 rounds to 1); odd; NaN propagates.  Both forms are evaluated and
     the result chosen by plain selects, so a loop over SIMD lanes vectorizes
-    (:mod:`aiofl.engine.loop`); the value is the same as choosing first.
+    (:mod:`aiofl.engine.kernel.loop`); the value is the same as choosing first.
     """
     ax = abs(x)
     p0, p1, p2 = _TANH_P

@@ -50,7 +50,7 @@ def saturate_range(u: float, u_min: float, u_max: float) -> float:
     ``u_min = -inf`` / ``u_max = inf`` leave that side open; NaN passes through (so the
     engine's divergence check sees it).  With ``u_min = -u_max`` this is :func:`saturate`
     exactly.  The caller guarantees :math:`u_{min} < u_{max}`.  Written as two plain
-    selects, which LLVM vectorizes in a loop over lanes (:mod:`aiofl.engine.loop`).
+    selects, which LLVM vectorizes in a loop over lanes (:mod:`aiofl.engine.kernel.loop`).
 
     Parameters
     ----------

@@ -1,6 +1,6 @@
 r"""Branch-free exp, log, sin and cos that LLVM can put in SIMD lanes.
 
-The engine's lane kernel (:mod:`aiofl.engine.loop`) advances eight members at once, one
+The engine's lane kernel (:mod:`aiofl.engine.kernel.loop`) advances eight members at once, one
 per lane of an AVX-512 register, and relies on LLVM's loop vectorizer.  A call to libm's
 ``exp`` or ``sin`` cannot be vectorized (numba's LLVM has no vector math library: Intel's
 SVML needs an SVML-patched llvmlite, which PyPI's is not), so the vectorizer would split

@@ -219,7 +219,7 @@ def _leave_noise_to_sensor(
 
 
 def _sampling_table(sampling: Any) -> dict[str, Any]:
-    from aiofl.engine.discrete import Sampling
+    from aiofl.engine.discrete_rows import Sampling
 
     if not isinstance(sampling, Sampling):
         raise ValueError(f"sampling = {sampling!r}; allowed: None or an aiofl Sampling")
@@ -244,7 +244,7 @@ def config_dict(
 ) -> dict[str, Any]:
     """The config dict (as a TOML file would give) of these objects; see the module notes.
 
-    ``sampling`` (:class:`aiofl.engine.discrete.Sampling`) becomes ``[controller.discrete]``,
+    ``sampling`` (:class:`aiofl.engine.discrete_rows.Sampling`) becomes ``[controller.discrete]``,
     ``sensor`` (a preset name or a :class:`~aiofl.sensor.Sensor`) ``[sensor]``,
     ``uncertainty`` (an :class:`aiofl.uncertainty.UncertaintyModel` or its dict)
     ``[uncertainty]``.  Nothing is validated here (:func:`run_config_from_objects` does).

@@ -53,7 +53,7 @@ is bounded before anything is allocated (:mod:`aiofl.limits`).  A bad file raise
     [controller.law]
     b0 = 22.771                      # finite, non-zero, with the sign of the plant's beta
     u_max = inf                      # actuator range [u_min, u_max]; u_min omitted: -u_max
-    [controller.discrete]            # optional: run the controller sampled (engine.discrete)
+    [controller.discrete]            # optional: run the controller sampled (engine.discrete_rows)
     ts = 1e-3                        # an integer multiple of dt; delay, u_quantum,
                                      # eso = "zoh" | "euler", td = "fhan" | "euler", h0
 
@@ -99,7 +99,7 @@ from aiofl.config.schema import REQUIRED_KEYS, ConfigError, ConfigModel, Discret
 from aiofl.config.sensor_table import check_sensor_ts as _check_sensor_ts
 from aiofl.config.sensor_table import merge_sensor as _merge_sensor
 from aiofl.controller import Controller
-from aiofl.engine.discrete import delay_steps
+from aiofl.engine.discrete_rows import delay_steps
 from aiofl.limits import (
     MAX_NOISE_SAMPLES,
     MAX_STEPS,
@@ -145,7 +145,7 @@ class RunConfig:
     divergence_threshold: float
     weights: OPIWeights
     raw: dict[str, Any]
-    sampling: Any = None  # aiofl.engine.discrete.Sampling: [controller.discrete], or None
+    sampling: Any = None  # aiofl.engine.discrete_rows.Sampling: [controller.discrete], or None
     uncertainty: UncertaintyModel | None = None  # [uncertainty] (aiofl.uncertainty), or None
     sensor: Sensor = field(default_factory=Sensor)  # the measurement ([sensor] or old keys)
     rig: Rig | None = None  # [rig] (aiofl.rig): actuator, friction, delays; None: none
@@ -275,7 +275,7 @@ class RunConfig:
         if self.sampling is None:
             return
         from aiofl.controller import controller_batch
-        from aiofl.engine.discrete import sampling_rows
+        from aiofl.engine.discrete_rows import sampling_rows
 
         try:
             self.sampling.check_horizon(self.scenario.t_final)
@@ -425,13 +425,13 @@ def resolve_plant(name_or_file: str, base_dir: str | Path | None = None) -> Plan
 def _prepare_loops_ahead(path: Path) -> None:
     """A plant file the cache has never seen: start compiling the loops of its number of
     states in a second process while sympy builds it, if the cache has none
-    (:func:`aiofl.engine.prepare.prepare_loops_ahead`)."""
+    (:func:`aiofl.engine.build.prepare.prepare_loops_ahead`)."""
     from aiofl.plants.plant_cache import declared_states, plant_module_path
 
     module = plant_module_path(path)
     n_states = declared_states(path) if module is not None and not module.exists() else None
     if n_states is not None:
-        from aiofl.engine.prepare import prepare_loops_ahead
+        from aiofl.engine.build.prepare import prepare_loops_ahead
 
         prepare_loops_ahead(n_states)
 

@@ -293,11 +293,11 @@ class LawModel(TableModel):
 
 
 class DiscreteModel(TableModel):
-    """``[controller.discrete]``: run the controller sampled (:mod:`aiofl.engine.discrete`).
+    """``[controller.discrete]``: run the controller sampled (:mod:`aiofl.engine.discrete_rows`).
 
     ``delay`` is the integer 0 or 1 (``true`` is refused); ``h0`` is bounded by the sample
-    time (:data:`aiofl.engine.discrete.H0_RANGE`, checked with dt); the sample count over
-    the horizon with the scenario (:meth:`aiofl.engine.discrete.Sampling.check_horizon`).
+    time (:data:`aiofl.engine.discrete_rows.H0_RANGE`, checked with dt); the sample count over
+    the horizon with the scenario (:meth:`aiofl.engine.discrete_rows.Sampling.check_horizon`).
     """
 
     ts: Annotated[float, Field(gt=0, le=1.0, allow_inf_nan=False)]
@@ -311,14 +311,14 @@ class DiscreteModel(TableModel):
     @field_validator("y_quantum", "u_quantum")
     @classmethod
     def _quantum(cls, v: float) -> float:
-        from aiofl.engine.discrete import QUANTUM_MIN
+        from aiofl.engine.discrete_rows import QUANTUM_MIN
 
         if 0 < v < QUANTUM_MIN:  # 1/q overflows for subnormal q: NaN in the quantiser
             raise ValueError(f"allowed: 0 (none) or a quantum >= {QUANTUM_MIN:g}")
         return v
 
     def build(self) -> Any:
-        from aiofl.engine.discrete import Sampling
+        from aiofl.engine.discrete_rows import Sampling
 
         return Sampling(**self.model_dump())
 
@@ -487,7 +487,7 @@ class SensorModel(TableModel):
     @field_validator("quantum")
     @classmethod
     def _quantum(cls, v: float | None) -> float | None:
-        from aiofl.engine.discrete import QUANTUM_MIN
+        from aiofl.engine.discrete_rows import QUANTUM_MIN
 
         if v is not None and 0 < v < QUANTUM_MIN:
             raise ValueError(

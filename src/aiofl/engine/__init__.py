@@ -1,22 +1,28 @@
 """The compiled batched engine: one time loop, compiled per plant, runs a batch of closed loops.
 
 :func:`simulate` runs one member, :func:`simulate_batch` a batch in one compiled call
-(:mod:`aiofl.engine.simulation`).  The modules, in the order data flows through them:
+(:mod:`aiofl.engine.simulation`).  The engine has three floors, each importing only from
+the ones below it (``tests/test_architecture.py``):
 
-- :mod:`~aiofl.engine.batch`: the batch as the loop reads it (one record of packed arrays);
-- :mod:`~aiofl.engine.loop`: the time loop, one template for every instance (lane width,
-  continuous or sampled, RK4 or Euler as stage tables), with :mod:`~aiofl.engine.lane_blocks`
-  (each formula over the lanes of a group) and :mod:`~aiofl.engine.views` (array views);
-- :mod:`~aiofl.engine.continuous` and :mod:`~aiofl.engine.sampled`: the controller as it
-  plugs into the loop (its blocks in the stage right-hand side; its discrete update at the
-  samples, and :class:`~aiofl.engine.standalone.DiscreteController`), with
-  :mod:`~aiofl.engine.member` (per-member constants and the law, written once) and
-  :mod:`~aiofl.engine.discrete` (the discrete controller's coefficient rows);
-- :mod:`~aiofl.engine.bindings`, :mod:`~aiofl.engine.instances`, :mod:`~aiofl.engine.compile`:
-  what an instance is compiled with, which instances exist and how a batch runs on them,
-  and the one compile factory with its disk cache;
-- :mod:`~aiofl.engine.reference`: the slow, deliberately independent scipy path the tests
-  check the engine against.
+- what the kernels read: :mod:`~aiofl.engine.batch` (the batch, one record of packed
+  arrays) and :mod:`~aiofl.engine.discrete_rows` (the sampled controller's settings,
+  :class:`~aiofl.engine.discrete_rows.Sampling`, and its coefficient rows);
+- :mod:`aiofl.engine.kernel`: the kernels as written, templates with placeholders (the time
+  loop, the lane blocks, the continuous and the sampled controller, the member's constants
+  and law, the plant calls, the driven simulation);
+- :mod:`aiofl.engine.build`: how a kernel is built and cached (recipes, the compile
+  factory, the fingerprint and the disk cache, the instances a batch runs on, lanes or not,
+  compiling ahead);
+- here, the entry points: :mod:`~aiofl.engine.simulation` (simulate*, the results),
+  :mod:`~aiofl.engine.response` (what the loop watched as figures),
+  :mod:`~aiofl.engine.observer_gains` (the model-assisted observer's gains),
+  :mod:`~aiofl.engine.sample_time` (what a controller run by a user refuses, and its
+  faults), :mod:`~aiofl.engine.driven` (a plant driven by a logged input), and the slow,
+  deliberately independent scipy paths the tests check the engine against
+  (:mod:`~aiofl.engine.reference`, :mod:`~aiofl.engine.reference_sampled`).
+
+The discrete controller stepped from Python is :class:`aiofl.DiscreteController`
+(:mod:`aiofl.discrete_controller`, above the configs: it is built from one).
 """
 
 from aiofl.engine.simulation import (

@@ -42,16 +42,16 @@ class Batch(NamedTuple):
     noise_table, noise_row
         Unit-variance noise sequences, one row per distinct scenario, and each member's row.
     disc
-        (B, :data:`aiofl.engine.discrete.N_DISC`) the discrete controller's rows (zeros for
+        (B, :data:`aiofl.engine.discrete_rows.N_DISC`) the discrete controller's rows (zeros for
         a continuous member).
     bounds
         (B, n + 1, 2) the plant's declared ranges, ``[low, high]``: rows 0..n-1 the
         states, row n the output (``-inf, inf`` where none); leaving one makes a member
-        lost (:func:`aiofl.engine.loop._tpl_watch`).
+        lost (:func:`aiofl.engine.kernel.loop._tpl_watch`).
     plant_table
-        (:data:`aiofl.engine.plant_table.N_TABLE`,) the addresses of the plant's functions
-        a plant-independent instance calls (:mod:`aiofl.engine.plant_table`; set by
-        :func:`aiofl.engine.instances.run` before such an instance runs, unread by the
+        (:data:`aiofl.engine.kernel.plant_calls.N_TABLE`,) the addresses of the plant's functions
+        a plant-independent instance calls (:mod:`aiofl.engine.build.plant_table`; set by
+        :func:`aiofl.engine.build.instances.run` before such an instance runs, unread by the
         others).
     dt, n_steps, method, decimation, store, threshold
         The step [s], the number of steps, the method (:data:`aiofl.layout.METHODS`), the

@@ -26,24 +26,24 @@ first sample it could not give, and its outputs from there on are NaN, the only 
 module returns (``stopped = -1``: the member ran to the end).  The caller decides what a
 stopped member costs (the fit scores it as a large finite penalty).
 
-**Compilation.**  The kernel is built per plant through the engine's compile factory
-(:func:`aiofl.engine.compile.build`): compiled on first use and cached on disk under a
-fingerprint of this file and the plant's functions, like every engine kernel.
+**Compilation.**  The template (:mod:`aiofl.engine.kernel.driven_plant`) is built per plant
+through the engine's compile factory (:mod:`aiofl.engine.build.driven_kernel`): compiled on
+first use and cached on disk under a fingerprint of its file and the plant's functions,
+like every engine kernel.
 """
 
 from __future__ import annotations
 
-import threading
-from typing import Any, NamedTuple
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from aiofl.engine import compile as compile_
+from aiofl.engine.build.driven_kernel import driven_kernel
 from aiofl.limits import MAX_POPULATION, MAX_STEPS
 from aiofl.plants.base import Plant, PlantError
 
-__all__ = ["DEFAULT_LIMIT", "DEFAULT_SUBSTEPS", "Driven", "driven_kernel", "simulate_driven"]
+__all__ = ["DEFAULT_LIMIT", "DEFAULT_SUBSTEPS", "Driven", "simulate_driven"]
 
 DEFAULT_SUBSTEPS = 4
 """RK4 steps per sample interval (the sampled input is constant over each)."""
@@ -72,118 +72,6 @@ class Driven(NamedTuple):
     def diverged(self) -> NDArray[np.bool_]:
         """(P,) whether each member stopped early."""
         return self.stopped >= 0
-
-
-# --------------------------------------------------------------------------- the template
-_F = _G = _H = None  # placeholders: the plant's compiled f, g, h
-_N = 1  # placeholder: the number of states
-_PRANGE = range  # placeholder: numba.prange
-
-
-def _tpl_driven(
-    u, ts, params, x0, delay, substeps, limit, gain, y_meas, y_out, stopped
-):  # pragma: no cover - compiled
-    """Simulate every member (row of ``params``) over the log; see the module notes."""
-    n_members = params.shape[0]
-    n_samples = u.shape[0]
-    h = ts / substeps
-    inject = False
-    for i in range(_N):
-        if gain[i] != 0.0:
-            inject = True
-    for m in _PRANGE(n_members):
-        p = params[m].copy()
-        x = x0[m].copy()
-        xs = np.empty(_N)
-        k1 = np.empty(_N)
-        k2 = np.empty(_N)
-        k3 = np.empty(_N)
-        k4 = np.empty(_N)
-        stopped[m] = -1
-        y_out[m, 0] = _H(x, p)
-        for k in range(n_samples - 1):
-            j = k - delay
-            uk = u[j] if j >= 0 else 0.0
-            yk = y_meas[k]
-            for _s in range(substeps):
-                for stage in range(4):
-                    if stage == 0:
-                        for i in range(_N):
-                            xs[i] = x[i]
-                    elif stage == 1:
-                        for i in range(_N):
-                            xs[i] = x[i] + 0.5 * h * k1[i]
-                    elif stage == 2:
-                        for i in range(_N):
-                            xs[i] = x[i] + 0.5 * h * k2[i]
-                    else:
-                        for i in range(_N):
-                            xs[i] = x[i] + h * k3[i]
-                    fx = _F(xs, p)
-                    gx = _G(xs, p)
-                    e = 0.0
-                    if inject:
-                        e = yk - _H(xs, p)
-                    kk = k1 if stage == 0 else (k2 if stage == 1 else (k3 if stage == 2 else k4))
-                    for i in range(_N):
-                        kk[i] = fx[i] + gx[i] * uk + gain[i] * e
-                for i in range(_N):
-                    x[i] = x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-            ok = True
-            for i in range(_N):
-                if not (abs(x[i]) <= limit):  # NaN fails too
-                    ok = False
-            yn = _H(x, p)
-            if not (ok and np.isfinite(yn)):
-                stopped[m] = k + 1
-                for q in range(k + 1, n_samples):
-                    y_out[m, q] = np.nan
-                break
-            y_out[m, k + 1] = yn
-    return 0
-
-
-_KERNELS: dict[int, tuple[Plant, Any]] = {}
-_LOCK = threading.Lock()
-
-
-def driven_kernel(plant: Plant, *, cache: bool = True) -> Any:
-    """The compiled driven-simulation kernel of ``plant`` (built once per process, loaded
-    from the disk cache when this file and the plant's functions are unchanged)."""
-    import numba
-
-    from aiofl.engine import bindings
-
-    with _LOCK:
-        hit = _KERNELS.get(id(plant))
-        if hit is not None and hit[0] is plant:
-            return hit[1]
-        compiled = plant.compiled
-        space = {
-            "__name__": __name__,
-            "np": np,
-            "_F": bindings.plant_function(compiled[0], "scalar"),
-            "_G": bindings.plant_function(compiled[1], "scalar"),
-            "_H": bindings.plant_function(compiled[2], "scalar"),
-            "_N": plant.n_states,
-            "_PRANGE": numba.prange,
-        }
-        entry = compile_.Template(
-            "_DRIVEN", _tpl_driven, {"parallel": True, "error_model": "numpy", "nogil": True}
-        )
-        recipe = compile_.Recipe(
-            kind="driven",
-            plant=plant,
-            bindings=space,
-            templates=(),
-            entry=entry,
-            sources=(__file__, *bindings.engine_sources()),
-        )
-        inst = compile_.build(recipe, cache=cache)
-        if not inst.cached and bindings.user_functions(plant):
-            plant.typecheck()  # a function numba cannot compile: a PlantError naming it
-        _KERNELS[id(plant)] = (plant, inst.entry)
-        return inst.entry
 
 
 def _array(name: str, value: ArrayLike, shape: tuple[int, ...]) -> NDArray[np.float64]:

@@ -8,7 +8,7 @@ here, per member, at the run's initial state :math:`\xi^* = \Phi(x_0)` with the 
 parameters: :func:`model_jacobians` gives J per member (NaN rows for the others),
 :func:`with_model_gains` a batch whose ``eso.alpha*`` are the placed continuous gains in
 the engine's form :math:`\alpha_i = L_i/\omega_0^i` (what the continuous loop and forward
-Euler read), and :func:`aiofl.engine.discrete.sampling_rows` places the sampled observer's
+Euler read), and :func:`aiofl.engine.discrete_rows.sampling_rows` places the sampled observer's
 current-observer gain from J itself.  Model-free members and Kalman gains are untouched.
 """
 

@@ -1,6 +1,6 @@
 r"""What the time loop watched, as an engineer reads it: the verdict, step metrics, noise in u.
 
-The loop (:func:`aiofl.engine.loop._tpl_watch`) keeps a few numbers per member at every
+The loop (:func:`aiofl.engine.kernel.loop._tpl_watch`) keeps a few numbers per member at every
 step :math:`t_k` (:data:`aiofl.layout.ST_U_PEAK` ..); :func:`response_figures` turns them
 into the figures a user asks of a run:
 

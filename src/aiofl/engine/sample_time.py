@@ -30,7 +30,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine.discrete import Sampling, known_delay_samples, sampling_rows
+from aiofl.engine.discrete_rows import Sampling, known_delay_samples, sampling_rows
 
 __all__ = [
     "SIGNAL_MAX",

@@ -1,17 +1,18 @@
 """Simulating closed loops: the Python-facing API of the compiled, batched engine.
 
 :func:`simulate_batch` packs a *batch* of members (one row each of controller,
-plant-parameter, scenario and discrete-controller arrays: a :class:`~aiofl.engine.batch.Batch`),
-plans their groups (:func:`plan`: by timing, kinds and lane width), runs each group on the
-plant's compiled instance of the time loop (:mod:`aiofl.engine.loop`,
-:mod:`aiofl.engine.instances`) in parallel, and unpacks the outputs; :func:`simulate` is a
-batch of one.  The closed loop (plant, tracking differentiator, ESO, state error feedback,
-linearizing law and the performance integrals, RK4 or forward Euler) is described in
-:mod:`aiofl.engine.continuous` and, sampled, :mod:`aiofl.engine.sampled`.  A member that
-is *lost* (its plant left the operating envelope: the output's distance from the reference
-or a declared range of the output or a state) or *diverged* (its numbers blew up: a plant
-state non-finite or beyond ``divergence_threshold``, a controller state non-finite) is
-reported as such with the time, the others carry on; results come back as a
+plant-parameter, scenario and discrete-controller arrays: a
+:class:`~aiofl.engine.batch.Batch`), plans their groups (:func:`plan`: by timing, kinds and
+lane width), runs each group on the plant's compiled instance of the time loop
+(:mod:`aiofl.engine.kernel.loop`, :mod:`aiofl.engine.build.instances`) in parallel, and
+unpacks the outputs; :func:`simulate` is a batch of one.  The closed loop (plant, tracking
+differentiator, ESO, state error feedback, linearizing law and the performance integrals,
+RK4 or forward Euler) is described in :mod:`aiofl.engine.kernel.continuous` and, sampled,
+:mod:`aiofl.engine.kernel.sampled`.  A member that is *lost* (its plant left the operating
+envelope: the output's distance from the reference or a declared range of the output or a
+state) or *diverged* (its numbers blew up: a plant state non-finite or beyond
+``divergence_threshold``, a controller state non-finite) is reported as such with the time,
+the others carry on; results come back as a
 :class:`BatchResult` (or a :class:`SimulationResult` per member), with the step metrics,
 the noise in u and the saturation time of :mod:`aiofl.engine.response`.
 :func:`closed_loop_rhs` evaluates the compiled right-hand side once, for cross-checks.
@@ -31,12 +32,12 @@ from aiofl.checks import check_integer, check_number
 from aiofl.components.metrics import OPIWeights, opi
 from aiofl.controller import Controller, ControllerBatch, controller_batch
 from aiofl.engine.batch import Batch, Outputs
-from aiofl.engine.discrete import D_STEPS, N_DISC, Sampling, check_delays, sampling_rows
-from aiofl.engine.instances import instance_for, plan_groups, run, set_plant_table
-from aiofl.engine.lane_choice import lanes_worth_it
-from aiofl.engine.loop import WIDTH
+from aiofl.engine.build.instances import instance_for, plan_groups, run, set_plant_table
+from aiofl.engine.build.lane_choice import lanes_worth_it
+from aiofl.engine.discrete_rows import D_STEPS, N_DISC, Sampling, check_delays, sampling_rows
+from aiofl.engine.kernel.loop import WIDTH
+from aiofl.engine.kernel.plant_calls import N_TABLE
 from aiofl.engine.observer_gains import model_jacobians, with_model_gains
-from aiofl.engine.plant_table import N_TABLE
 from aiofl.engine.response import response_figures
 from aiofl.limits import DT_MAX, MAX_STEPS, MAX_TRAJECTORY_BYTES, check_run_size
 from aiofl.plants.base import Plant
@@ -298,16 +299,16 @@ def simulate_batch(
         A member whose state leaves ``|z| < threshold`` (or becomes NaN) is stopped and
         reported as diverged.
     sampling
-        Run controllers sampled (:class:`aiofl.engine.discrete.Sampling`): one setting for
+        Run controllers sampled (:class:`aiofl.engine.discrete_rows.Sampling`): one setting for
         all members or one per member (None = continuous); sample times must be integer
-        multiples of ``dt`` (:mod:`aiofl.engine.sampled`).  Continuous members are
+        multiples of ``dt`` (:mod:`aiofl.engine.kernel.sampled`).  Continuous members are
         unaffected.
     engine
         ``"lanes"``: members run in groups of 32, one per SIMD lane, or alone (width 1)
-        when their kind has few members (:mod:`aiofl.engine.instances`); ``"auto"``
+        when their kind has few members (:mod:`aiofl.engine.build.instances`); ``"auto"``
         (default): as ``"lanes"``, but members run alone while the plant's lane instance
         is neither at hand (built, or in the kernel cache) nor worth its compile for the
-        work so far (:mod:`aiofl.engine.lane_choice`): the same numbers, bit for bit;
+        work so far (:mod:`aiofl.engine.build.lane_choice`): the same numbers, bit for bit;
         ``"scalar"``: every member alone, in the same time loop compiled with libm and
         the components' fast-math flags, a differently-rounded check of the lane engine.
         Default: the environment variable ``AIOFL_ENGINE``, else ``"auto"``.  Sampled
@@ -478,10 +479,10 @@ def plan(
     batch: Batch, engine: str = "auto", plant: Plant | None = None
 ) -> dict[tuple[int, bool], NDArray[np.int64]]:
     """The groups to run, by (lane width, sampled): continuous and sampled members apart,
-    grouped by kinds (:func:`aiofl.engine.instances.plan_groups`); with ``engine="scalar"``
+    grouped by kinds (:func:`aiofl.engine.build.instances.plan_groups`); with ``engine="scalar"``
     every member alone (width 1); with ``engine="auto"`` (and the ``plant``) the members
     planned for lanes run alone instead when the lanes are neither at hand nor worth
-    compiling (:func:`aiofl.engine.lane_choice.lanes_worth_it`)."""
+    compiling (:func:`aiofl.engine.build.lane_choice.lanes_worth_it`)."""
     steps = batch.disc[:, D_STEPS]
     sampled = steps > 0
     out: dict[tuple[int, bool], NDArray[np.int64]] = {}

@@ -5,7 +5,7 @@ design (:func:`float_holds`) and by the tests.  The plant runs in a compiled RK4
 (:func:`advancer`, the plant's own numba functions, :math:`\dot x = f + g u + b_d d`), so a
 20-s loop at Ts = 1 ms takes about a second; the controller is any ``step(r, y) -> u``
 callable: the C (:class:`CController`) or the engine's
-:class:`aiofl.engine.standalone.DiscreteController`.
+:class:`aiofl.discrete_controller.DiscreteController`.
 """
 
 from __future__ import annotations
@@ -295,7 +295,7 @@ def float_holds(cfg: Any, sampling: Any, files: dict[str, dict[str, str]]) -> st
     cfg
         The run config.
     sampling
-        Its sampling (:class:`aiofl.engine.discrete.Sampling`).
+        Its sampling (:class:`aiofl.engine.discrete_rows.Sampling`).
     files
         The C files by precision, ``{"double": ..., "float": ...}``.
 
@@ -380,7 +380,7 @@ def start_command(controller: Any) -> float:
 
 def engine_agreement(cfg: Any, sampling: Any, files: dict[str, str]) -> dict[str, float]:
     r"""The exported C (``files``, prefix ``aiofl``) against the engine's discrete
-    controller (:class:`aiofl.engine.standalone.DiscreteController`) in the config's closed
+    controller (:class:`aiofl.discrete_controller.DiscreteController`) in the config's closed
     loop at ``sampling.ts``: both started as the config says and fed the same measurement
     and reference at every sample, the plant driven by the C's command.
 
@@ -401,7 +401,7 @@ def engine_agreement(cfg: Any, sampling: Any, files: dict[str, str]) -> dict[str
     """
     import tempfile
 
-    from aiofl.engine.standalone import DiscreteController
+    from aiofl.discrete_controller import DiscreteController
 
     if CC is None:
         raise RuntimeError("no C compiler (cc or gcc) on PATH")

@@ -1,7 +1,7 @@
 r"""C99 of a sampled AIOFL controller: a hand-written template plus a generated header.
 
 :func:`export_c` writes the discrete controller the engine simulates
-(:mod:`aiofl.engine.sampled`) as freestanding C99 (no dynamic memory, no globals but the
+(:mod:`aiofl.engine.kernel.sampled`) as freestanding C99 (no dynamic memory, no globals but the
 ``const`` parameter instance, only ``<math.h>``), in double or single precision:
 
 * ``NAME_controller.c``: the hand-written source of the structure family, the package file
@@ -19,7 +19,7 @@ r"""C99 of a sampled AIOFL controller: a hand-written template plus a generated 
 The prefix (default ``aiofl``) is applied by replacing the template's ``aiofl_`` and
 ``AIOFL_`` (:func:`apply_prefix`).  Python computes only numbers: the coefficients of the
 discrete update are the engine's own, the member row of
-:func:`aiofl.engine.discrete.sampling_rows` (ESO :math:`\Phi - I, \Gamma, K, L`; prefilter
+:func:`aiofl.engine.discrete_rows.sampling_rows` (ESO :math:`\Phi - I, \Gamma, K, L`; prefilter
 :math:`\Phi - I`), and the per-design constants come from the component functions the
 engine uses.  ``params_only=True`` writes another instance of the same struct
 (:func:`params_files`), checked at compile time against the controller's
@@ -47,8 +47,8 @@ import numpy as np
 from aiofl.components.differentiators import improved_td_constants, linear_prefilter_coefficient
 from aiofl.components.feedback import fal_inner_slope, linear_sef_gain
 from aiofl.controller import Controller
-from aiofl.engine import discrete as DS
-from aiofl.engine.discrete import Sampling
+from aiofl.engine import discrete_rows as DS
+from aiofl.engine.discrete_rows import Sampling
 from aiofl.engine.sample_time import check_ts, discrete_row
 from aiofl.export.c_model import ModelCode, nominal_model
 from aiofl.export.c_text import c_prefix, check_comment_line, check_inert, comment_text
@@ -409,7 +409,7 @@ def export_c(
     controller
         An AIOFL controller (any ESO, TD and SEF kind).
     sampling
-        Sample time and discretisation (:class:`aiofl.engine.discrete.Sampling`); the
+        Sample time and discretisation (:class:`aiofl.engine.discrete_rows.Sampling`); the
         converters' quanta are not part of the code.
     precision
         ``"double"`` or ``"float"`` (the type ``NAME_real``).

@@ -52,8 +52,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from aiofl.controller import Controller, controller_batch
-from aiofl.engine import discrete as DS
-from aiofl.engine.discrete import Sampling, sampling_rows
+from aiofl.engine import discrete_rows as DS
+from aiofl.engine.discrete_rows import Sampling, sampling_rows
 from aiofl.export import c_code
 from aiofl.export.c_text import c_prefix
 from aiofl.export.errors import ExportError

@@ -27,7 +27,7 @@ model, like the kernel: a division by zero, an overflow or a math domain error (
 becomes non-finite and the engine reports it *diverged* at that time (no NaN in the
 results).  A plant function that raises (``raise ValueError(...)``) stops the run with a
 :class:`PlantError` naming the plant, the function and the state where it failed
-(:func:`aiofl.engine.instances.run_groups`).
+(:func:`aiofl.engine.build.instances.run_groups`).
 
 An optional ``normal_form(x, p) -> (ξ_1, ..., ξ_ρ, α, β)`` (see :mod:`aiofl.plants.normal_form`)
 enables the classical IOFL baseline law.
@@ -150,7 +150,7 @@ class Plant:
     state_bounds
         Physical ranges of some states, ``{name: (low, high)}`` (±inf leaves a side open):
         a run whose state leaves its range is *lost* (a levitated ball on the magnet or on
-        the floor, a joint past its stop; :mod:`aiofl.engine.loop`).
+        the floor, a joint past its stop; :mod:`aiofl.engine.kernel.loop`).
     output_range
         The output's physical range ``(low, high)``, or None; leaving it makes a run lost.
 
@@ -426,7 +426,7 @@ class Plant:
         The arguments are C-contiguous float64 vectors (x, p).  f, g and b_d must return a
         tuple of n floats or a float vector, h one real number, the normal form a tuple or
         vector of floats.  Compiling here is not extra work when the kernel is then compiled
-        (numba reuses these compilations); :mod:`aiofl.engine.instances` calls it for plants
+        (numba reuses these compilations); :mod:`aiofl.engine.build.instances` calls it for plants
         defined outside aiofl before compiling their kernel, or when that compilation fails.
         """
         from numba import types as nt

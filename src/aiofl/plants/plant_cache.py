@@ -9,7 +9,7 @@ the generated functions and what the :class:`~aiofl.plants.base.Plant` needs bes
 generates it, and imports the plant from that module.  Later processes import the module
 and skip sympy altogether; and because the plant's functions now live in a real source
 file, the engine's compiled kernel of the plant is cached on disk too
-(:mod:`aiofl.engine.compile`), so a command on a plant file compiles nothing the second
+(:mod:`aiofl.engine.build.compile`), so a command on a plant file compiles nothing the second
 time.
 
 A module is written under a temporary name and renamed into place, so concurrent processes

@@ -4,7 +4,7 @@ A symbolic plant's functions are generated Python source (:mod:`aiofl.plants.cod
 Executed in memory they have no source file; written as a **module file** into
 ``<cache root>/plants`` (:mod:`aiofl.cache`) and imported from there, they are plain
 functions of a real module, and the engine's kernel compiled for them is cached on disk
-(:mod:`aiofl.engine.compile`).  This module writes, reads and prunes those files:
+(:mod:`aiofl.engine.build.compile`).  This module writes, reads and prunes those files:
 
 - :func:`module_source`: the text of a module, the generated functions and ``PLANT`` (the
   :class:`~aiofl.plants.base.Plant`'s other fields), with a digest of its text on its last
@@ -13,7 +13,7 @@ functions of a real module, and the engine's kernel compiled for them is cached 
   digest of the functions alone.
   A kernel loaded from numba's disk cache imports its plant functions' module by that name,
   so a plant whose parameter values changed (another file, the same functions, the same
-  kernel: :mod:`aiofl.engine.code_fingerprint`) keeps it;
+  kernel: :mod:`aiofl.engine.build.code_fingerprint`) keeps it;
 - :func:`load_module`: the plant of a module file (executed afresh, so its ``PLANT`` is the
   file's; registered in ``sys.modules`` under its name), or None;
 - :func:`store_module`: write a module under a temporary name and rename it into place, so

@@ -543,13 +543,13 @@ def _timed_case_verdicts(presets: list[str], ts: float | None) -> tuple[dict[str
 
 def _prepare_later_instances(cases: list[Case], *, sampled: bool) -> None:
     """Compile, in a second process, the instances of the cases' plants this run needs
-    after its first simulation (:mod:`aiofl.engine.prepare`), in the order it needs them:
+    after its first simulation (:mod:`aiofl.engine.build.prepare`), in the order it needs them:
     the discrete controller's update (the sampled loop's linearisation), the sampled ones
     of width 1 and 32 for the sampling limits (a ladder of sample times per design: the
     kinds with many members run in lanes) and the sensor rows, then the width-32 one for
     the robustness draws (sampled when every design is); the first simulation compiles the
     width-1 one meanwhile."""
-    from aiofl.engine.prepare import prepare_in_background
+    from aiofl.engine.build.prepare import prepare_in_background
     from aiofl.plants.registry import available_plants
 
     names = {c.config.plant.name for c in cases} & set(available_plants())

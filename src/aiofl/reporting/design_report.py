@@ -3,7 +3,7 @@ the paper, for the user's own config.
 
 :func:`design_report` runs and measures the design and :func:`design_html` renders it:
 
-- the verdict (:mod:`aiofl.engine.loop`: ok, lost or diverged, with the time and, for a lost
+- the verdict (:mod:`aiofl.engine.kernel.loop`: ok, lost or diverged, with the time and, for a lost
   plant, the bound it left), the integrals of eq. (22), the step metrics and the command's
   figures (peak, noise at steady state, saturation: :mod:`aiofl.engine.response`);
 - the trajectory figure (output and reference, error, command);

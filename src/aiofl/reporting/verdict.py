@@ -1,7 +1,7 @@
 """What a run did, in words: its verdict (with why a lost plant was lost), its step
 response and its command.
 
-The engine decides the verdict (:mod:`aiofl.engine.loop`: *ok*, *lost*, *diverged*) and
+The engine decides the verdict (:mod:`aiofl.engine.kernel.loop`: *ok*, *lost*, *diverged*) and
 keeps the figures (:mod:`aiofl.engine.response`); this module says them as a user reads
 them, for the ``aiofl simulate`` summary and the report.
 """

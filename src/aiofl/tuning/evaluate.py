@@ -67,7 +67,7 @@ class EvalSpec:
     expected_candidates
         Candidates the whole run evaluates (population × generations; 0: unknown), each
         (K + 1) R members: declared to the engine's lane choice
-        (:func:`aiofl.engine.lane_choice.expect`), so a run worth the plant's lane instance
+        (:func:`aiofl.engine.build.lane_choice.expect`), so a run worth the plant's lane instance
         compiles it at its first generation.  Not part of :meth:`key`.
     """
 
@@ -176,7 +176,7 @@ def evaluate_chunk(spec: EvalSpec, values: NDArray[np.float64]) -> PopulationRes
     ``b (K+1) + k`` is candidate b on scenario k (0 = nominal).
     """
     from aiofl.controller import controller_batch
-    from aiofl.engine.lane_choice import expect
+    from aiofl.engine.build.lane_choice import expect
     from aiofl.engine.simulation import simulate_batch
 
     values = np.asarray(values, dtype=np.float64)

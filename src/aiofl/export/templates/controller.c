@@ -7,7 +7,7 @@
  * (a known measurement delay in samples: the ESO is fed the command that much older and the
  * reference is delayed as much, aligned with the measurement).
  *
- * One sample, the engine's update (aiofl.engine.sampled._tpl_ctrl_step):
+ * One sample, the engine's update (aiofl.engine.kernel.sampled._tpl_ctrl_step):
  *   ESO correction   xhat = p + L phi(e),            e = y - p_1
  *   control          e_i = r_i - xhat_i, v = SEF(e), u = v - xhat_(rho+1)/b0 (law 14),
  *                    clamped to [u_min, u_max]

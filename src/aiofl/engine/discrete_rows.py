@@ -6,10 +6,10 @@ the converters and the discretisation of its dynamic parts.  :func:`sampling_row
 batch of controllers and their settings into one float row per member holding every
 coefficient of the discrete update (:mod:`aiofl.components.discrete`): the ESO's Φ, Γ, K,
 L, the prefilter's Φ, Γ, the TD's step and filter factor.  The engine's sampled loop
-(:mod:`aiofl.engine.sampled`) and the C export (:mod:`aiofl.export`) both run the update
+(:mod:`aiofl.engine.kernel.sampled`) and the C export (:mod:`aiofl.export`) both run the update
 from exactly these numbers; a member whose row has ``D_STEPS = 0`` is continuous.
 
-What the engine simulates at :math:`t_k = kT_s` (:mod:`aiofl.engine.sampled`):
+What the engine simulates at :math:`t_k = kT_s` (:mod:`aiofl.engine.kernel.sampled`):
 
 1. the ADC: :math:`y_k = Q_y(h(x(t_k)) + n(t_k))`, :math:`Q_q(v) = q\lfloor v/q + 1/2\rfloor`
    (``y_quantum``; none if 0), the scenario's noise as in the continuous loop;
@@ -265,7 +265,7 @@ def delay_steps(key: str, tau: float, dt: float, sampled: bool) -> int:
     :math:`y(t_k - m\,dt)`.  The continuous controller's observer reads, at every stage
     of the integrator, the output of the same stage m steps back, and the plant gets the
     command of that stage (the method of steps,
-    :func:`aiofl.engine.continuous._tpl_delay_stage_in`).  A delay between grid points
+    :func:`aiofl.engine.kernel.continuous._tpl_delay_stage_in`).  A delay between grid points
     would put a jump inside an RK4 step: refused (ValueError naming the field), as is a
     delay of more than :data:`DELAY_STEPS_MAX` steps.  ``sampled`` (the controller's
     timing) no longer changes what is held; it is kept for the callers.

@@ -1,7 +1,7 @@
 """What identifies a plant function's compiled code: its bytecode and what it reads.
 
 A kernel inlines the plant's functions, so its disk-cache fingerprint
-(:func:`aiofl.engine.compile.fingerprint`) must change exactly when what numba compiles from
+(:func:`aiofl.engine.build.compile.fingerprint`) must change exactly when what numba compiles from
 them changes.  numba compiles a function from its **code object** and freezes the
 **globals** it reads (numbers, strings, tuples, arrays) into the machine code; it calls the
 functions it names.  :func:`function_fingerprint` digests exactly that:
@@ -61,7 +61,7 @@ def file_digest(path: str) -> str:
 
 def source_digest(path: str) -> str:
     """The SHA-256 of ``path``'s text as this process first read it (memoized, so that a
-    fingerprint describes the code loaded: :func:`aiofl.engine.compile.sources_changed`)."""
+    fingerprint describes the code loaded: :func:`aiofl.engine.build.compile.sources_changed`)."""
     with _DIGESTS_LOCK:
         if path not in _DIGESTS:
             _DIGESTS[path] = file_digest(path)

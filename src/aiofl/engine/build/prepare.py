@@ -6,7 +6,7 @@ sampled one for the sampling limits, the width-32 continuous one for the robustn
 compiles them one after the other.  :func:`prepare_in_background` starts a second Python
 process that compiles the instances the command will need *later* into the disk cache
 while the command compiles (and runs) what it needs now.  The two meet through the cache
-and its compile lock (:func:`aiofl.engine.compile.compile_lock`): whichever process reaches
+and its compile lock (:func:`aiofl.engine.build.compile.compile_lock`): whichever process reaches
 an instance second waits for the first and loads it, so nothing is compiled twice and a
 wrong guess costs only the second core's time.
 
@@ -15,17 +15,18 @@ those of every real batch (:func:`probe`), so the signature it compiles is the o
 command will look up.  It is stopped when the command's process exits.  With the cache
 disabled nothing is started.
 
-``python -m aiofl.engine.prepare PLANT SPEC...`` is that process: ``PLANT`` a registered
+``python -m aiofl.engine.build.prepare PLANT SPEC...`` is that process: ``PLANT`` a registered
 plant's name or a plant file, each ``SPEC`` an instance as ``c1``, ``c32``, ``s1``, ``s32``
 (continuous or sampled, lane width), or ``dc``: the discrete controller's update compiled
-without a plant (:class:`aiofl.engine.standalone.DiscreteController`, which the sampled loop's
-linearisation and the exports step).  ``PLANT`` may also be ``--states=N``: the
+without a plant (:mod:`aiofl.engine.build.controller_update`: what
+:class:`aiofl.discrete_controller.DiscreteController`, the sampled loop's linearisation and
+the exports' checks step).  ``PLANT`` may also be ``--states=N``: the
 plant-independent instances (``c1``, ``s1``) of every N-state plant, compiled without
 one.
 
 A plant file the cache has never seen (:func:`prepare_loops_ahead`, from
 :func:`aiofl.config.run_config.resolve_plant`): the width-1 loops of its number of states
-do not depend on it (:mod:`aiofl.engine.plant_table`), so when the cache has none of them
+do not depend on it (:mod:`aiofl.engine.build.plant_table`), so when the cache has none of them
 a second process compiles them while this one runs sympy on the file and compiles the
 plant's table entries: on an empty cache the first command on a plant file waits for the
 longer of the two, not for both.
@@ -46,18 +47,19 @@ from numpy.typing import NDArray
 
 from aiofl import layout as L
 from aiofl.cache import cache_enabled, subdir
-from aiofl.engine import compile as compile_
-from aiofl.engine import loop
 from aiofl.engine.batch import Batch, Outputs
-from aiofl.engine.discrete import N_DISC
-from aiofl.engine.instances import (
+from aiofl.engine.build import compile as compile_
+from aiofl.engine.build.controller_update import compile_ahead
+from aiofl.engine.build.instances import (
     instance_for,
     instance_kind,
     plant_independent,
     run,
     run_groups,
 )
-from aiofl.engine.plant_table import N_TABLE
+from aiofl.engine.discrete_rows import N_DISC
+from aiofl.engine.kernel import loop
+from aiofl.engine.kernel.plant_calls import N_TABLE
 from aiofl.limits import MAX_STATES
 from aiofl.plants.base import Plant
 
@@ -127,24 +129,6 @@ CONTROLLER = "dc"
 """The spec of the discrete controller's update compiled without a plant."""
 
 
-def prepare_controller() -> None:
-    """Compile (or load) :class:`~aiofl.engine.standalone.DiscreteController`'s entries (setup,
-    start, step, n steps, one step from each of several states) by stepping a plain LADRC
-    once through each: the argument types are those of every controller without a plant
-    model."""
-    from aiofl.controller import Controller
-    from aiofl.engine.discrete import Sampling
-    from aiofl.engine.standalone import DiscreteController
-
-    values = {"eso.omega0": 10.0, "sef.omega_c": 2.0, "td.omega": 5.0, "law.b0": 1.0}
-    ladrc = Controller.from_structure("LADRC", rho=1, values=values)
-    dc = DiscreteController(ladrc, Sampling(1e-3))
-    dc.init(0.0)
-    dc.step(0.0, 0.0)
-    dc.run(1, 0.0, 0.0)
-    dc.step_each(dc.state[None, :], 0.0, np.zeros(1))
-
-
 def prepare(plant: Plant, specs: Sequence[tuple[int, bool]], *, controller: bool = False) -> None:
     """Compile (or load) the discrete controller's update (``controller``, first) and the
     instances ``specs`` (lane width, sampled) of ``plant``.
@@ -159,7 +143,7 @@ def prepare(plant: Plant, specs: Sequence[tuple[int, bool]], *, controller: bool
         Also the discrete controller's update.
     """
     if controller:
-        prepare_controller()
+        compile_ahead()
     groups, batch, out = probe(plant)
     for width, sampled_data in specs:
         run(plant, width, groups, batch, out, sampled_data=sampled_data, compile_only=True)
@@ -245,7 +229,7 @@ def prepare_in_background(
     args = [CONTROLLER] * controller + [f"{'s' if s else 'c'}{w}" for w, s in specs]
     try:
         proc = subprocess.Popen(
-            [sys.executable, "-m", "aiofl.engine.prepare", plant, *args],
+            [sys.executable, "-m", "aiofl.engine.build.prepare", plant, *args],
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,
             stderr=subprocess.DEVNULL,
@@ -265,9 +249,10 @@ def _stop(proc: subprocess.Popen[bytes]) -> None:
 
 
 def main(argv: Sequence[str]) -> int:
-    """``python -m aiofl.engine.prepare PLANT SPEC...`` (see the module notes)."""
+    """``python -m aiofl.engine.build.prepare PLANT SPEC...`` (see the module notes)."""
     if len(argv) < 2:
-        print("usage: python -m aiofl.engine.prepare PLANT|--states=N SPEC...", file=sys.stderr)
+        usage = "usage: python -m aiofl.engine.build.prepare PLANT|--states=N SPEC..."
+        print(usage, file=sys.stderr)
         return 2
     from aiofl.plants.plant_cache import plant_from_file
     from aiofl.plants.registry import get_plant
@@ -275,7 +260,7 @@ def main(argv: Sequence[str]) -> int:
     try:
         specs = [parse_spec(a) for a in argv[1:] if a != CONTROLLER]
     except ValueError as exc:
-        print(f"aiofl.engine.prepare: {exc}", file=sys.stderr)
+        print(f"aiofl.engine.build.prepare: {exc}", file=sys.stderr)
         return 2
     name = argv[0]
     if name.startswith(f"{SIZE_ONLY}="):
@@ -285,7 +270,7 @@ def main(argv: Sequence[str]) -> int:
                 raise ValueError(f"{name}: allowed 1 <= N <= {MAX_STATES}")
             prepare_loops(n_states, specs)
         except ValueError as exc:
-            print(f"aiofl.engine.prepare: {exc}", file=sys.stderr)
+            print(f"aiofl.engine.build.prepare: {exc}", file=sys.stderr)
             return 2
         return 0
     plant = plant_from_file(name) if name.endswith(".toml") else get_plant(name)

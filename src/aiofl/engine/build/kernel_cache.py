@@ -1,6 +1,6 @@
 """numba's disk cache of a compiled kernel, in aiofl's kernel folder, with files that heal.
 
-:class:`KernelCache` is the numba cache :func:`aiofl.engine.compile.build` gives a kernel's
+:class:`KernelCache` is the numba cache :func:`aiofl.engine.build.compile.build` gives a kernel's
 entry: its files live in ``<cache root>/kernels`` (:mod:`aiofl.cache`) and the kernel's
 fingerprint is numba's freshness stamp.  Every file (numba's index ``.nbi`` and data
 ``.nbc``) is **sealed** (:class:`CheckedCacheFile`): a header with the format

@@ -15,8 +15,9 @@ width; the one-member kernels; the diagnostic kernel) is described by a :class:`
 
 :func:`build` compiles a recipe.  The entry is cached under a **fingerprint** of everything
 the compiled code depends on (:func:`fingerprint`: Python, numba and llvmlite versions, the
-recipe's kind, every template's options, the text of every source file, and the plant's
-functions by their code and the values they read, :mod:`aiofl.engine.code_fingerprint`),
+recipe's kind, every template's options, the path in the package and the text of every
+source file, and the plant's functions by their code and the values they read,
+:mod:`aiofl.engine.build.code_fingerprint`),
 in ``<cache root>/kernels`` (:mod:`aiofl.cache`): numba's index and data files of a kernel
 carry the plant's key and the fingerprint in their name, and the fingerprint is also
 numba's freshness stamp of the entry, so a kernel is loaded only if it was compiled from
@@ -28,7 +29,7 @@ file edited on disk after this process loaded it would make the fingerprint desc
 numba is not compiling, so such a kernel is not cached either (:func:`sources_changed`).
 
 Every cache file of a kernel is sealed (size and SHA-256 header) and a damaged entry is
-removed and compiled again with one warning (:mod:`aiofl.engine.kernel_cache`).
+removed and compiled again with one warning (:mod:`aiofl.engine.build.kernel_cache`).
 
 :func:`rejit` is the one helper that re-compiles a compiled function's Python code with
 other globals or options (private, uncached copies of the component functions; the plant
@@ -48,9 +49,9 @@ from pathlib import Path
 from typing import Any
 
 from aiofl.cache import subdir
-from aiofl.engine import kernel_cache
-from aiofl.engine.code_fingerprint import file_digest, function_fingerprint, source_digest
-from aiofl.engine.kernel_cache import CheckedCacheFile, DamagedEntry, KernelCache
+from aiofl.engine.build import kernel_cache
+from aiofl.engine.build.code_fingerprint import file_digest, function_fingerprint, source_digest
+from aiofl.engine.build.kernel_cache import CheckedCacheFile, DamagedEntry, KernelCache
 from aiofl.numba_patches import key_helpers_by_fastmath, patch_source
 from aiofl.plants.base import Plant
 
@@ -73,6 +74,8 @@ __all__ = [
     "share_scope_when_inlining",
     "source_digest",
     "sources_changed",
+    "template_globals",
+    "unbound_placeholders",
 ]
 
 NO_PLANT_KEY = "noplant"
@@ -222,6 +225,21 @@ def _canonical_repr(value: Any) -> str:
     return repr(value)
 
 
+_PACKAGE_ROOT = Path(__file__).resolve().parents[2]
+"""The aiofl package's folder (``src/aiofl``)."""
+
+
+def _source_name(path: str) -> str:
+    """A source file as the fingerprint names it: its path inside the aiofl package
+    (``engine/kernel/loop.py``: a template moved to another folder makes new kernels, as
+    numba's cached code names its module by it), else its file name; the same in every
+    checkout, so checkouts of one code share the cache."""
+    try:
+        return Path(path).resolve().relative_to(_PACKAGE_ROOT).as_posix()
+    except ValueError:
+        return os.path.basename(path)
+
+
 def fingerprint(recipe: Recipe) -> str | None:
     """A digest of everything ``recipe``'s compiled code depends on (see the module
     notes), or None if a plant function cannot be fingerprinted."""
@@ -236,7 +254,7 @@ def fingerprint(recipe: Recipe) -> str | None:
     for tpl in (*recipe.templates, recipe.entry):
         opts = sorted((k, _canonical_repr(v)) for k, v in tpl.options.items())
         parts.append(f"{tpl.name}:{tpl.function.__name__}:{opts}")
-    parts += [f"{os.path.basename(p)}={source_digest(p)}" for p in recipe.sources]
+    parts += [f"{_source_name(p)}={source_digest(p)}" for p in recipe.sources]
     parts += plant_parts
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:20]
 
@@ -268,12 +286,87 @@ def copy_function(
     py = types.FunctionType(fn.__code__, space, name, fn.__defaults__, fn.__closure__)
     py.__qualname__ = qualname or fn.__qualname__
     py.__doc__ = fn.__doc__
+    if "__name__" not in space:  # still the template of its module (its PLACEHOLDERS)
+        py.__module__ = fn.__module__
     return py
 
 
-def instantiate(tpl: Callable[..., Any], ns: dict[str, Any], suffix: str, **options: Any) -> Any:
+def _names_read(code: types.CodeType) -> set[str]:
+    """The global (and attribute) names ``code`` and the code objects nested in it read."""
+    names: set[str] = set()
+    stack = [code]
+    while stack:
+        c = stack.pop()
+        names.update(c.co_names)
+        stack += [k for k in c.co_consts if isinstance(k, types.CodeType)]
+    return names
+
+
+def template_globals(*modules: types.ModuleType) -> dict[str, Any]:
+    """The globals of template modules (later ones over earlier ones) without their
+    placeholders' stand-ins: what a recipe starts from and binds the placeholders into.
+
+    Parameters
+    ----------
+    *modules
+        The template modules (:mod:`aiofl.engine.kernel`).
+
+    Returns
+    -------
+    dict
+    """
+    out: dict[str, Any] = {}
+    for mod in modules:
+        out.update(vars(mod))
+    for mod in modules:
+        for name in getattr(mod, "PLACEHOLDERS", ()):
+            out.pop(name, None)
+    return out
+
+
+def unbound_placeholders(tpl: Callable[..., Any], space: Mapping[str, Any]) -> list[str]:
+    """The placeholders of ``tpl``'s module (its ``PLACEHOLDERS``, see
+    :mod:`aiofl.engine.kernel`) that the template reads and ``space`` does not bind.
+
+    Parameters
+    ----------
+    tpl
+        The template (a Python function).
+    space
+        The globals it is to be compiled with.
+
+    Returns
+    -------
+    list of str
+    """
+    declared = getattr(sys.modules.get(tpl.__module__ or ""), "PLACEHOLDERS", ())
+    read = _names_read(tpl.__code__)
+    return sorted(n for n in declared if n in read and n not in space)
+
+
+def _refuse_unbound(tpl: Callable[..., Any], space: Mapping[str, Any], what: str) -> None:
+    """Raise ValueError if ``tpl`` reads a placeholder ``space`` does not bind."""
+    missing = unbound_placeholders(tpl, space)
+    if missing:
+        raise ValueError(
+            f"{what}: template {tpl.__name__} of {tpl.__module__} reads the placeholder(s) "
+            f"{', '.join(missing)}, which its recipe does not bind (that module's placeholder "
+            "block says what fills them)"
+        )
+
+
+def instantiate(
+    tpl: Callable[..., Any],
+    ns: dict[str, Any],
+    suffix: str,
+    *,
+    check_placeholders: bool = True,
+    **options: Any,
+) -> Any:
     """Template ``tpl`` as a numba function (compiled lazily) with the globals ``ns``; its
     qualified name carries ``suffix`` (the instance's kind, plant key and fingerprint).
+    A placeholder of its module that it reads and ``ns`` does not bind is a ValueError
+    naming it (:func:`unbound_placeholders`).
 
     Parameters
     ----------
@@ -283,6 +376,9 @@ def instantiate(tpl: Callable[..., Any], ns: dict[str, Any], suffix: str, **opti
         Its globals.
     suffix
         Appended to its qualified name.
+    check_placeholders
+        Refuse a template that reads a placeholder ``ns`` does not bind (False: the
+        caller checks, :func:`build`).
     **options
         numba's ``njit`` options.
 
@@ -292,6 +388,8 @@ def instantiate(tpl: Callable[..., Any], ns: dict[str, Any], suffix: str, **opti
     """
     from numba import njit
 
+    if check_placeholders:
+        _refuse_unbound(tpl, ns, f"{tpl.__name__}_{suffix}")
     return njit(**options)(copy_function(tpl, ns, f"{tpl.__name__}_{suffix}"))
 
 
@@ -300,7 +398,7 @@ def rejit(fn: Any, space: dict[str, Any] | None = None, **override: Any) -> Any:
     with the globals ``space`` (default its own) and its numba options updated by
     ``override``.  numba keys a function's disk cache on its own file only, so a kernel
     never links a cached function (whose callees might be stale); see
-    :func:`aiofl.engine.bindings.private_components`.
+    :func:`aiofl.engine.build.bindings.private_components`.
 
     Parameters
     ----------
@@ -338,9 +436,17 @@ def build(recipe: Recipe, *, cache: bool = True) -> Instance:
     if unknown:
         raise ValueError(f"also_cached names no template of the recipe: {sorted(unknown)}")
     ns = dict(recipe.bindings)
+    spaces = []
     for tpl in (*recipe.templates, recipe.entry):  # each sees those compiled before it
         space = {**ns, **tpl.bindings} if tpl.bindings else ns
-        ns[tpl.name] = instantiate(tpl.function, space, suffix, **tpl.options)
+        spaces.append(space)
+        ns[tpl.name] = instantiate(
+            tpl.function, space, suffix, check_placeholders=False, **tpl.options
+        )
+    # every placeholder a template reads bound, by the recipe or by a template (numba reads
+    # a global when it compiles, so a template may call one built after it)
+    for tpl, space in zip((*recipe.templates, recipe.entry), spaces, strict=True):
+        _refuse_unbound(tpl.function, space, f"recipe {recipe.kind!r}")
     entry = ns[recipe.entry.name]
     if folder is not None:
         cached = [recipe.entry, *(t for t in recipe.templates if t.name in recipe.also_cached)]
@@ -358,7 +464,7 @@ _INLINE_COPY_OLD = """\
             new_block = copy.deepcopy(the_ir.blocks[block_label])
 """
 _INLINE_COPY_NEW = """\
-        memo = {}  # one memo for the whole IR (aiofl.engine.compile)
+        memo = {}  # one memo for the whole IR (aiofl.engine.build.compile)
         for block_label, block in the_ir.blocks.items():
             new_block = copy.deepcopy(the_ir.blocks[block_label], memo)
 """

@@ -1,7 +1,7 @@
 r"""The time loop: one template that every engine instance is compiled from.
 
 :func:`_tpl_loop` integrates a *group* of members over the horizon, one member per lane of
-the (rows, W) workspace arrays (:mod:`aiofl.engine.lane_blocks` holds the formulas, each a
+the (rows, W) workspace arrays (:mod:`aiofl.engine.kernel.lane_blocks` holds the formulas, each a
 loop over the lanes that LLVM vectorizes).  It owns everything that is not the controller:
 the workspace, the lanes' members, the piecewise-constant inputs held over each step
 (measurement noise, disturbance, plant-parameter change), the reference and its
@@ -9,15 +9,15 @@ derivatives at the stage times, the integration method, the trajectory store, di
 and the finish.  The controller plugs in:
 
 - **continuous** (``_SAMPLED`` false): its blocks are part of the stage right-hand side
-  ``_RHS`` (:func:`aiofl.engine.continuous._tpl_deriv`: TD, SEF, law, ESO, plant and the
+  ``_RHS`` (:func:`aiofl.engine.kernel.continuous._tpl_deriv`: TD, SEF, law, ESO, plant and the
   integrands of eq. 22, one ODE);
 - **sampled** (``_SAMPLED`` true): ``_RHS`` is the plant and the integrands under the held
-  command (:func:`aiofl.engine.sampled._tpl_plant_deriv`), and every N steps, at
+  command (:func:`aiofl.engine.kernel.sampled._tpl_plant_deriv`), and every N steps, at
   :math:`t_k = kT_s`, ``_SAMPLE`` runs the discrete controller lane by lane (ADC, update,
-  DAC; :func:`aiofl.engine.sampled._tpl_sample`).
+  DAC; :func:`aiofl.engine.kernel.sampled._tpl_sample`).
 
 The lane width ``_W`` (32, or 1 for a lone member) and the timing ``_SAMPLED`` are
-compile-time constants of an instance (:mod:`aiofl.engine.instances`), so the compiled code
+compile-time constants of an instance (:mod:`aiofl.engine.build.instances`), so the compiled code
 carries no branch of the other timing.  The integration method is data: a stage table
 (:data:`STAGE_TIME`, :data:`STAGE_NEXT`, :data:`STAGE_WEIGHT`, :data:`STAGE_DIVISOR`) drives
 one stage routine (``_BLK_STAGE``) for RK4 and forward Euler alike.
@@ -27,7 +27,7 @@ at 0, the ESO at 0 or (``eso.init = "output"``) with :math:`\hat\xi_1(0) = y_m(0
 (``"bumpless"``: and the differentiator's :math:`r_1(0) = y_m(0)`).
 Piecewise-constant inputs take their value at the start of a step for all its stages, so
 the integrator never straddles a jump: a switch on the time grid is exact, one between grid
-points acts from the next step (:data:`aiofl.engine.member.SWITCH_RTOL`).  At every step
+points acts from the next step (:data:`aiofl.engine.kernel.member.SWITCH_RTOL`).  At every step
 the plant is watched (:func:`_tpl_watch`): a member whose output leaves its envelope
 around the reference, or whose output or a state leaves its declared range, is *lost* at
 that step; one whose plant state leaves ``|x| < threshold`` or whose integrals or
@@ -50,7 +50,7 @@ from __future__ import annotations
 import numpy as np
 
 from aiofl import layout as L
-from aiofl.engine.member import (
+from aiofl.engine.kernel.member import (
     IQ_EINIT,
     IQ_NTD,
     IQ_NZ,
@@ -68,7 +68,7 @@ WIDTH = 32
 """Members per group in a batch: 32 float64 lanes, four AVX-512 registers per quantity (more
 independent work to hide each formula's dependency chain than 16; 64 spill registers; see
 ``docs/benchmarks.md``).  Small batches run groups of 1 (the same code, compiled for one
-lane; the numbers are bitwise the same, see :mod:`aiofl.engine.instances`)."""
+lane; the numbers are bitwise the same, see :mod:`aiofl.engine.build.instances`)."""
 
 LANE_FASTMATH: set[str] = set()
 """LLVM fast-math flags of the lane instances: none, strict IEEE 754.  With any of them
@@ -112,25 +112,46 @@ S_UD = 20  #: continuous, input delay: the command of this stage m steps back
 S_UDON = 21  #: continuous: 1 in a lane with an input delay, else 0
 N_S = 22
 
-# Placeholders for what an instance binds (see aiofl.engine.instances).
-_W = WIDTH
-_SAMPLED = False
-_N = 1
-_NZ = 1
+# Placeholders: stand-ins so this module imports.  Every instance's namespace is filled by
+# aiofl/engine/build/instances.py:recipe: the sizes and the timing by its ``ns.update``, the
+# others by its ``templates`` (each compiled under the name it is called by here); a name an
+# instance does not use keeps its stand-in (a continuous instance's _SAMPLE ..., in branches
+# on _SAMPLED that numba prunes).
+_W = WIDTH  # lane width: 32, or 1 for a lone member
+_SAMPLED = False  # the timing: continuous (False) or sampled (True)
+_N = 1  # the plant's number of states
+_NZ = 1  # the integrated state's rows (plant, integrals, and continuous: TD and ESO)
 _CONTROLLER_SIZE = 1  # row length of the discrete controller's state (sampled instances)
-_PH = None
-_UNMANAGED = _KEEP_ALIVE = _RHS = _SETUP = _SAMPLE = _CONTROLLER_BAD = None
-_STORE_ROW = _STORE_CONTROLLER = _REFERENCE = _STEP_INPUTS = None
-_DELAY_SETUP = _DELAY_OUTPUT = _DELAY_INPUT = _DELAY_STAGE_IN = _DELAY_STAGE_OUT = None
+_PH = None  # the plant's h (kernel.plant_calls, via build/plant_table.py)
+_UNMANAGED = None  # kernel.views.unmanaged_intrinsic()
+# templates of this module (_tpl_keep_alive, _tpl_assign_lanes, ..., _tpl_delay_setup)
+_KEEP_ALIVE = _STORE_ROW = _REFERENCE = _STEP_INPUTS = _DELAY_SETUP = None
 _ASSIGN_LANES = _LOAD_LANES = _START_MEMBERS = _STOP_LANE = _FINISH_LANES = _WATCH = None
+# the controller's plug-in: kernel.continuous._tpl_setup/_tpl_deriv/... or
+# kernel.sampled._tpl_setup/_tpl_plant_deriv/_tpl_sample/...
+_RHS = _SETUP = _SAMPLE = _CONTROLLER_BAD = _STORE_CONTROLLER = None
+_DELAY_OUTPUT = _DELAY_INPUT = _DELAY_STAGE_IN = _DELAY_STAGE_OUT = None
+# lane blocks (kernel.lane_blocks._blk_stage ... under their upper-case names)
 _BLK_STAGE = _BLK_OUT_OF_RANGE = _BLK_COPY = _BLK_FILL = _BLK_INPUTS = None
 _BLK_SINE = _BLK_SINE_DERIVATIVE = _BLK_STEP = None
+PLACEHOLDERS = tuple(
+    """
+    _W _SAMPLED _N _NZ _CONTROLLER_SIZE _PH _UNMANAGED _KEEP_ALIVE _STORE_ROW _REFERENCE
+    _STEP_INPUTS _DELAY_SETUP _ASSIGN_LANES _LOAD_LANES _START_MEMBERS _STOP_LANE
+    _FINISH_LANES _WATCH _RHS _SETUP _SAMPLE _CONTROLLER_BAD _STORE_CONTROLLER _DELAY_OUTPUT
+    _DELAY_INPUT _DELAY_STAGE_IN _DELAY_STAGE_OUT _BLK_STAGE _BLK_OUT_OF_RANGE _BLK_COPY
+    _BLK_FILL _BLK_INPUTS _BLK_SINE _BLK_SINE_DERIVATIVE _BLK_STEP
+    """.split()  # noqa: SIM905 - the names as a reader scans them
+)
+"""The names of the placeholder block: what the compile factory checks a recipe binds
+when a template of this module reads one (:func:`aiofl.engine.build.compile.build`)."""
 
 
 def _tpl_delay_setup(sc, dt, dsteps, s):  # pragma: no cover - compiled
     r"""The lanes' transport delays in steps, :math:`m = \tau/dt` (``dsteps[0]``: input,
-    ``[1]``: output; checked on the host to be integers, :func:`aiofl.engine.discrete.delay_steps`),
-    the lanes' output-delay flags ``s[S_YDON]``; returns the largest."""
+    ``[1]``: output; checked on the host to be integers,
+    :func:`aiofl.engine.discrete_rows.delay_steps`), the lanes' output-delay flags
+    ``s[S_YDON]``; returns the largest."""
     most = 0
     for l in range(_W):
         for j in range(2):

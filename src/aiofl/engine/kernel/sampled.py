@@ -1,26 +1,27 @@
 r"""The discrete controller: what a processor runs at the samples, and its place in the loop.
 
-A member whose discrete row (:mod:`aiofl.engine.discrete`) has ``D_STEPS = N > 0`` runs the
-time loop's sampled instance (:mod:`aiofl.engine.loop` with ``_SAMPLED``): the plant and the
+A member whose discrete row (:mod:`aiofl.engine.discrete_rows`) has ``D_STEPS = N > 0`` runs the
+time loop's sampled instance (:mod:`aiofl.engine.kernel.loop` with ``_SAMPLED``): the plant and the
 performance integrals are integrated at ``dt`` (:func:`_tpl_plant_deriv`, the loop's
 right-hand side between samples), and every N-th step, at :math:`t_k = kT_s`,
 :func:`_tpl_sample` runs the controller of the member's lane once (each lane has its own N,
 so members of different sample times share a group; a lane between its samples holds its
 measurement, reference and command): the ADC reads the measurement,
 :func:`_tpl_ctrl_step` updates the controller, the DAC holds its command until the next
-sample (see :mod:`aiofl.engine.discrete` for the delay and the quantisers).  The update is
+sample (see :mod:`aiofl.engine.discrete_rows` for the delay and the quantisers).  The update is
 scalar, lane by lane, on the member's row of a lane-major controller state; between samples
 the plant runs in SIMD lanes.
 
 The update calls the same component functions as the continuous controller (the INLESO
 injection, Han's TD (18), the ITD, saturation), the same compiled SEF-and-law dispatch
-(:func:`aiofl.engine.member._aiofl_command`, :func:`~aiofl.engine.member._iofl_command`)
-and the discrete ones of :mod:`aiofl.components.discrete` (ESO correction and prediction,
-fhan, the prefilter's ZOH update), with the coefficients of the member's discrete row.  The
-ESO starts as the continuous loop's does (``eso.init``, ``eso.u0``: :func:`_tpl_ctrl_init`).
-:class:`DiscreteController` compiles the same :func:`_tpl_ctrl_step` without a plant and
-steps it from Python: the engine's discrete controller, sample by sample (the C export is
-checked against it).
+(:func:`aiofl.engine.kernel.member._aiofl_command`,
+:func:`~aiofl.engine.kernel.member._iofl_command`) and the discrete ones of
+:mod:`aiofl.components.discrete` (ESO correction and prediction, fhan, the prefilter's ZOH
+update), with the coefficients of the member's discrete row.  The ESO starts as the
+continuous loop's does (``eso.init``, ``eso.u0``: :func:`_tpl_ctrl_init`).  The same
+:func:`_tpl_ctrl_step` compiled without a plant
+(:mod:`aiofl.engine.build.controller_update`) is what :class:`aiofl.DiscreteController`
+steps from Python, sample by sample (the C export is checked against it).
 
 Controller state of one member (``cs``)::
 
@@ -34,15 +35,10 @@ true state at :math:`t_k` and the nominal model, but has no :class:`DiscreteCont
 
 from __future__ import annotations
 
-import sys
-from typing import Any
-
 import numpy as np
 
 from aiofl import layout as L
-from aiofl.engine import bindings, plant_table
-from aiofl.engine import discrete as DS
-from aiofl.engine.discrete import (
+from aiofl.engine.discrete_rows import (
     D_DELAY,
     D_GAM,
     D_H0,
@@ -62,7 +58,7 @@ from aiofl.engine.discrete import (
     STRIDE,
     TDM_FHAN,
 )
-from aiofl.engine.loop import (
+from aiofl.engine.kernel.loop import (
     S_BAD,
     S_D,
     S_NOISE,
@@ -75,7 +71,7 @@ from aiofl.engine.loop import (
     S_YM,
     S_YS,
 )
-from aiofl.engine.member import (
+from aiofl.engine.kernel.member import (
     IQ_EINIT,
     IQ_ESO,
     IQ_LAW,
@@ -89,7 +85,7 @@ from aiofl.engine.member import (
     _aiofl_command,
 )
 
-__all__: list[str] = []  # templates, bound per instance (aiofl.engine.instances)
+__all__: list[str] = []  # templates, bound per instance (aiofl.engine.build.instances)
 
 C_TD = 0  #: differentiator / prefilter state
 C_P = C_TD + L.RHO_MAX  #: ESO prediction p_k
@@ -106,15 +102,37 @@ C_RHIST = C_UHIST + L.KNOWN_DELAY_MAX
 C_RFILL = C_RHIST + L.KNOWN_DELAY_MAX * (L.RHO_MAX + 1)  #: 1 once the rows hold references
 N_CS = C_RFILL + 1
 
-# placeholders bound per instance (see _bind and aiofl.engine.instances)
-_W = 32
-_N = 1
-_PNF = _PAB = _MEMBER_SETUP = _LEADING_ROWS = _IOFL_COMMAND = _COLUMN = None
+# Placeholders: stand-ins so this module imports.  The loop's templates (_tpl_setup,
+# _tpl_sample, _tpl_plant_deriv, ...) are filled per sampled instance by
+# aiofl/engine/build/instances.py:recipe; the update's (_tpl_ctrl_init, _tpl_ctrl_step, ...)
+# by the same recipe (``ns_ctrl``) and, without a plant, by
+# aiofl/engine/build/controller_update.py:update_recipe.
+_W = 32  # lane width: 32, or 1 for a lone member
+_N = 1  # the plant's number of states
+# the plant's normal form and α-β (aiofl/engine/build/plant_table.py:direct_bindings or
+# call_bindings; without a plant: direct_binding of the model's alpha_beta_of_xi)
+_PNF = _PAB = None
+_MEMBER_SETUP = _IOFL_COMMAND = None  # kernel.member's, compiled for the instance
+_LEADING_ROWS = _COLUMN = None  # kernel.views.leading_rows_intrinsic(), lane_column_intrinsic()
+# the update's templates, compiled for the instance (instances.recipe: compile_.instantiate;
+# controller_update.update_recipe: its templates and entry)
 _CTRL_INIT = _CTRL_STEP = _DELAY_REFERENCE = None
-_SATURATE = None
+# the lane blocks the plant needs between samples (kernel.lane_blocks)
 _BLK_OUTPUT = _BLK_PLANT_OUTPUT = _BLK_PLANT = _BLK_DISTURBANCE = _BLK_METRICS = None
-_INLESO = _HAN_TD = _ITD = _PREFILTER = None
+# the component functions (aiofl/engine/build/bindings.py:component_functions)
+_SATURATE = _INLESO = _HAN_TD = _ITD = _PREFILTER = None
+# the discrete component functions (aiofl/engine/build/bindings.py:bind_discrete)
 _FHAN_TD = _OBS_INNOVATION = _OBS_CORRECT = _OBS_PREDICT = _LIN_UPDATE = None
+PLACEHOLDERS = tuple(
+    """
+    _W _N _PNF _PAB _MEMBER_SETUP _IOFL_COMMAND _LEADING_ROWS _COLUMN _CTRL_INIT _CTRL_STEP
+    _DELAY_REFERENCE _BLK_OUTPUT _BLK_PLANT_OUTPUT _BLK_PLANT _BLK_DISTURBANCE _BLK_METRICS
+    _SATURATE _INLESO _HAN_TD _ITD _PREFILTER _FHAN_TD _OBS_INNOVATION _OBS_CORRECT
+    _OBS_PREDICT _LIN_UPDATE
+    """.split()  # noqa: SIM905 - the names as a reader scans them
+)
+"""The names of the placeholder block: what the compile factory checks a recipe binds
+when a template of this module reads one (:func:`aiofl.engine.build.compile.build`)."""
 
 
 # ---------------------------------------------------------------------------- templates
@@ -205,7 +223,7 @@ def _tpl_ctrl_step(fns, iq, q, dsc, cs, scr, y, rr, ri, pn):  # pragma: no cover
         a_hat = ab[0]
         b_hat = ab[1]
 
-    # SEF and law (14), the continuous loop's formulas (aiofl.engine.member._aiofl_command)
+    # SEF and law (14), the continuous loop's formulas (aiofl.engine.kernel.member._aiofl_command)
     u = _aiofl_command(iq, q, rr, ri, cs, C_PROF, cs, C_X, rff, a_hat, b_hat)
     u = _SATURATE(u, q[L.F_UMIN], q[L.F_UMAX])  # actuator range [u_min, u_max]
 
@@ -381,7 +399,7 @@ def _tpl_plant_deriv(fns, t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: n
 def _tpl_controller_bad(rho, ntd, s, ctrl):  # pragma: no cover - compiled
     """Adds to ``s[S_BAD, l]`` when lane l's command, ESO prediction or differentiator
     state is no longer finite (a large but finite controller state is not a verdict: the
-    plant's own state and envelope decide, :func:`aiofl.engine.loop._tpl_watch`)."""
+    plant's own state and envelope decide, :func:`aiofl.engine.kernel.loop._tpl_watch`)."""
     for l in range(_W):
         cs = ctrl[1, l]
         bad = not abs(s[S_U, l]) < np.inf
@@ -405,35 +423,3 @@ def _tpl_store_controller(which, j, rho, ntd, exact, l, z, iq, rrs, ctrl):  # pr
     if j < ntd:
         return cs[C_PROF + j]
     return 0.0
-
-
-# ------------------------------------------------------------------------------ building
-def _bind(ns: dict[str, Any], cd: Any = None) -> None:
-    """Add this module's layout constants and the discrete component functions to ``ns``
-    (those of ``cd``, default :mod:`aiofl.components.discrete`; the lane kernel passes its
-    private copies, see :func:`aiofl.engine.bindings.private_components`)."""
-    if cd is None:
-        from aiofl.components import discrete as cd
-
-    ns.update({k: v for k, v in vars(DS).items() if k.isupper() and isinstance(v, int)})
-    ns.update({k: v for k, v in globals().items() if k.startswith("C_") or k == "N_CS"})
-    ns.update(
-        _FHAN_TD=cd.fhan_td_step,
-        _OBS_INNOVATION=cd.observer_innovation,
-        _OBS_CORRECT=cd.observer_correct,
-        _OBS_PREDICT=cd.observer_predict,
-        _LIN_UPDATE=cd.linear_discrete_update,
-    )
-
-
-def _opts() -> dict[str, Any]:
-    from aiofl.components.fastmath import FASTMATH
-
-    return {"fastmath": FASTMATH, "error_model": "numpy"}
-
-
-def _sources() -> tuple[str, ...]:
-    """Every kernel's sources, this module's, the plant table's (its α, β binding) and the
-    discrete coefficient rows'."""
-    here = sys.modules[__name__].__file__
-    return (*bindings.engine_sources(), here, plant_table.__file__, DS.__file__)

@@ -5,7 +5,7 @@ A continuous member's closed loop is one ODE :math:`\dot z = F(t, z)`, with
     z = [ x (n) | ITAE IAE ISE ISU IAU | TD state (0, 2 or ρ) | ESO state ξ̂ (ρ+1) ]
 
 (only the active part is integrated).  :func:`_tpl_deriv` is F for every lane of a group,
-bound as the time loop's ``_RHS`` (:mod:`aiofl.engine.loop`); :func:`_tpl_setup` fills
+bound as the time loop's ``_RHS`` (:mod:`aiofl.engine.kernel.loop`); :func:`_tpl_setup` fills
 the group's per-member constants; :func:`_tpl_store_controller` gives the trajectory's
 observer and differentiator columns; :func:`_tpl_evaluate` evaluates F once at a given
 state (:func:`aiofl.engine.simulation.closed_loop_rhs`, for cross-checks).
@@ -13,7 +13,7 @@ state (:func:`aiofl.engine.simulation.closed_loop_rhs`, for cross-checks).
 Component kinds are uniform within a group (the batch is grouped by kinds), so the
 branches on kinds are taken here, outside the lane loops.  The classical IOFL law needs the
 plant's normal form (an array per call), which cannot be vectorized: an IOFL group
-evaluates its law lane by lane with :func:`aiofl.engine.member._iofl_command`.
+evaluates its law lane by lane with :func:`aiofl.engine.kernel.member._iofl_command`.
 
 This module's source is part of the cache fingerprint of every kernel.
 """
@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from aiofl import layout as L
-from aiofl.engine.loop import (
+from aiofl.engine.kernel.loop import (
     N_S,
     S_AHAT,
     S_BHAT,
@@ -42,7 +42,7 @@ from aiofl.engine.loop import (
     S_YDON,
     S_YM,
 )
-from aiofl.engine.member import (
+from aiofl.engine.kernel.member import (
     IQ_ESO,
     IQ_LAW,
     IQ_M,
@@ -62,10 +62,14 @@ from aiofl.engine.member import (
     SWITCH_RTOL,
 )
 
-# Placeholders for what an instance binds (see aiofl.engine.instances).
-_W = 32
-_N = 1
-_NZ = 1
+# Placeholders: stand-ins so this module imports.  Filled per continuous instance by
+# aiofl/engine/build/instances.py:recipe: the sizes, _MEMBER_SETUP (kernel.member._tpl_setup
+# compiled for the instance) and _LEADING_ROWS (kernel.views.leading_rows_intrinsic()) by
+# its ``ns.update``; _SETUP, _REFERENCE, _RHS and the lane blocks (kernel.lane_blocks
+# ``_blk_*`` under their upper-case names) by its ``templates``.
+_W = 32  # lane width: 32, or 1 for a lone member
+_N = 1  # the plant's number of states
+_NZ = 1  # the integrated state's rows
 _MEMBER_SETUP = _SETUP = _LEADING_ROWS = _REFERENCE = _RHS = None
 _BLK_HAN = _BLK_ITD = _BLK_PREFILTER_START = _BLK_PREFILTER_TERM = _BLK_COPY = None
 _BLK_FILL = _BLK_OUTPUT = _BLK_ERROR = _BLK_FAL = _BLK_INLSEF = _BLK_LINEAR_TERM = None
@@ -73,6 +77,18 @@ _BLK_INLSEF_LIMIT = _BLK_LINEAR_SEF = _BLK_LAW = _BLK_IOFL = _BLK_ESO_ERROR = No
 _BLK_INLESO_ERROR = _BLK_ESO_ROW = _BLK_ESO_INPUT = _BLK_ESO_LAST = _BLK_PLANT = None
 _BLK_DISTURBANCE = _BLK_METRICS = _BLK_MODEL = _BLK_MODEL_LAW = _BLK_MODEL_INPUT = None
 _BLK_PLANT_OUTPUT = None
+PLACEHOLDERS = tuple(
+    """
+    _W _N _NZ _MEMBER_SETUP _SETUP _LEADING_ROWS _REFERENCE _RHS _BLK_HAN _BLK_ITD
+    _BLK_PREFILTER_START _BLK_PREFILTER_TERM _BLK_COPY _BLK_FILL _BLK_OUTPUT _BLK_ERROR
+    _BLK_FAL _BLK_INLSEF _BLK_LINEAR_TERM _BLK_INLSEF_LIMIT _BLK_LINEAR_SEF _BLK_LAW
+    _BLK_IOFL _BLK_ESO_ERROR _BLK_INLESO_ERROR _BLK_ESO_ROW _BLK_ESO_INPUT _BLK_ESO_LAST
+    _BLK_PLANT _BLK_DISTURBANCE _BLK_METRICS _BLK_MODEL _BLK_MODEL_LAW _BLK_MODEL_INPUT
+    _BLK_PLANT_OUTPUT
+    """.split()  # noqa: SIM905 - the names as a reader scans them
+)
+"""The names of the placeholder block: what the compile factory checks a recipe binds
+when a template of this module reads one (:func:`aiofl.engine.build.compile.build`)."""
 
 
 def _tpl_deriv(fns, t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cover - compiled
@@ -87,7 +103,7 @@ def _tpl_deriv(fns, t, z, dz, iq, q, p, pn, rr, ri, s, dany):  # pragma: no cove
     :math:`\hat\alpha + \hat\beta u` at :math:`\hat x = \Phi^{-1}(\hat\xi)`,
     :func:`aiofl.components.law.model_assisted_law`), the plant
     :math:`\dot x = f(x) + g(x)u + b_d(x)\tau_d` and the integrands of eq. (22).  Each
-    formula is a lane block (:mod:`aiofl.engine.lane_blocks`)."""
+    formula is a lane block (:mod:`aiofl.engine.kernel.lane_blocks`)."""
     rho = iq[IQ_RHO]
     m = iq[IQ_M]
     o_td = iq[IQ_OTD]
@@ -215,7 +231,7 @@ def _tpl_delay_stage_out(k, st, n_stages, s, ring, fns, z, p):  # pragma: no cov
 
 def _tpl_setup(lanes, batch, q, qt, iq, ctrl, nper):  # pragma: no cover - compiled
     """Per-lane constants ``q[:, l]`` of the group's members
-    (:func:`aiofl.engine.member._tpl_setup`) and the group's ``iq`` (kinds and sizes are
+    (:func:`aiofl.engine.kernel.member._tpl_setup`) and the group's ``iq`` (kinds and sizes are
     uniform within a group, so every lane writes the same); ``ctrl`` and ``nper`` (the
     sampled instance's) are unused."""
     for l in range(_W):

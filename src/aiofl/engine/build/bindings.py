@@ -1,6 +1,6 @@
 """What the engine's templates are compiled with: the plant's and the controller's functions.
 
-Every kernel instance (:mod:`aiofl.engine.instances`) binds, under the global names its
+Every kernel instance (:mod:`aiofl.engine.build.instances`) binds, under the global names its
 templates use, private copies of the controller's component functions
 (:func:`component_functions`, :func:`private_components`) and of the plant's f, g, h, b_d
 and normal form.  Private, because numba keys a ``cache=True`` function's disk cache on its
@@ -12,9 +12,9 @@ arithmetic) for the SIMD lane instances, and ``"scalar"`` (the components' own f
 flags and libm) for the differently-rounded check instance.
 
 :func:`engine_sources` lists the files every kernel's code comes from (their text is part of
-every kernel's cache fingerprint, :mod:`aiofl.engine.compile`).  :func:`guarded` wraps a
+every kernel's cache fingerprint, :mod:`aiofl.engine.build.compile`).  :func:`guarded` wraps a
 plant function for the diagnostic instance that names the plant function that raised and
-the state it raised at (:class:`PlantFailure`, see :func:`aiofl.engine.instances.run_groups`).
+the state it raised at (:class:`PlantFailure`, see :func:`aiofl.engine.build.instances.run_groups`).
 """
 
 from __future__ import annotations
@@ -25,13 +25,15 @@ import types
 from typing import Any
 
 from aiofl import layout as L
-from aiofl.engine import batch, member, views
-from aiofl.engine import compile as compile_
-from aiofl.engine.compile import PLANT_FUNCTIONS
+from aiofl.engine import batch
+from aiofl.engine.build import compile as compile_
+from aiofl.engine.build.compile import PLANT_FUNCTIONS
+from aiofl.engine.kernel import member, views
 from aiofl.plants.base import Plant
 
 __all__ = [
     "PlantFailure",
+    "bind_discrete",
     "bind_private",
     "component_functions",
     "engine_sources",
@@ -128,18 +130,18 @@ def private_components(variant: str = "scalar") -> dict[str, types.ModuleType]:
     module's globals whose compiled functions are these copies too.  Returns one stand-in
     module per component module (by short name), holding its copied functions.
 
-    ``variant = "lanes"`` builds the copies the lane instances (:mod:`aiofl.engine.loop`)
+    ``variant = "lanes"`` builds the copies the lane instances (:mod:`aiofl.engine.kernel.loop`)
     links: every function inlined where called and ``np.exp``/``np.log``/``np.sin``/
     ``np.cos`` rebound to the branch-free :mod:`aiofl.components.vecmath` functions
     (:func:`vector_math_globals`), so a loop over lanes that calls them vectorizes, and the
-    lane instances' fast-math flags (:data:`aiofl.engine.loop.LANE_FASTMATH`).
+    lane instances' fast-math flags (:data:`aiofl.engine.kernel.loop.LANE_FASTMATH`).
     """
     with _PRIVATE_LOCK:
         if variant in _PRIVATE:
             return _PRIVATE[variant]
         from numba.core.dispatcher import Dispatcher
 
-        from aiofl.engine.loop import LANE_FASTMATH
+        from aiofl.engine.kernel.loop import LANE_FASTMATH
 
         lanes = variant == "lanes"
         mods = _component_modules()
@@ -202,9 +204,10 @@ def vector_math_globals(space: dict[str, Any]) -> dict[str, Any]:
 
 def bind_private(ns: dict[str, Any], variant: str = "scalar") -> None:
     """Point the component modules ``ns`` names (``_fb``, ``_law``) at the private copies of
-    :func:`private_components`, and re-compile :mod:`aiofl.engine.member`'s compiled functions
-    (``_aiofl_command``, ``_iofl_command``, inlined where called) with ``ns`` as globals, so
-    nothing a kernel compiled from ``ns`` calls comes from numba's per-function disk cache.
+    :func:`private_components`, and re-compile :mod:`aiofl.engine.kernel.member`'s compiled
+    functions (``_aiofl_command``, ``_iofl_command``, inlined where called) with ``ns`` as
+    globals, so nothing a kernel compiled from ``ns`` calls comes from numba's per-function
+    disk cache.
     ``variant`` as for :func:`private_components`."""
     from numba.core.dispatcher import Dispatcher
 
@@ -214,6 +217,29 @@ def bind_private(ns: dict[str, Any], variant: str = "scalar") -> None:
             ns[name] = private[obj.__name__.rsplit(".", 1)[1]]
         elif isinstance(obj, Dispatcher) and obj.py_func.__module__ == member.__name__:
             ns[name] = compile_.rejit(obj, ns)
+
+
+def bind_discrete(ns: dict[str, Any], cd: Any = None) -> None:
+    """Add what the discrete controller's templates (:mod:`aiofl.engine.kernel.sampled`) read to
+    ``ns``: the layout constants of the discrete coefficient row
+    (:mod:`aiofl.engine.discrete_rows`) and of the controller state (``C_*``, ``N_CS``), and the
+    discrete component functions of ``cd`` (default :mod:`aiofl.components.discrete`; the
+    kernels pass the private copies, :func:`private_components`)."""
+    from aiofl.engine import discrete_rows
+    from aiofl.engine.kernel import sampled
+
+    if cd is None:
+        from aiofl.components import discrete as cd
+
+    ns.update({k: v for k, v in vars(discrete_rows).items() if k.isupper() and isinstance(v, int)})
+    ns.update({k: v for k, v in vars(sampled).items() if k.startswith("C_") or k == "N_CS"})
+    ns.update(
+        _FHAN_TD=cd.fhan_td_step,
+        _OBS_INNOVATION=cd.observer_innovation,
+        _OBS_CORRECT=cd.observer_correct,
+        _OBS_PREDICT=cd.observer_predict,
+        _LIN_UPDATE=cd.linear_discrete_update,
+    )
 
 
 def guarded(fn: Any, index: int, n: int, n_p: int) -> Any:
@@ -246,5 +272,5 @@ def guarded(fn: Any, index: int, n: int, n_p: int) -> Any:
         f"    raise PlantFailure({index}{state})\n"
     )
     ns: dict[str, Any] = {"fn": fn, "PlantFailure": PlantFailure}
-    exec(compile(src, "<aiofl.engine.bindings guard>", "exec"), ns)  # fixed source, no input
+    exec(compile(src, "<aiofl.engine.build.bindings guard>", "exec"), ns)  # fixed source, no input
     return njit(error_model="numpy")(ns["guarded"])

@@ -2,8 +2,8 @@ r"""Whether a batch runs in lanes: the lane instance at hand, or worth compiling
 
 A group of 32 lanes runs 5–7 times the member-steps per second of a lone member, but its
 instance is compiled per plant, 12–14 s of numba on one core, while the width-1 instance is
-shared by every plant of a size (:mod:`aiofl.engine.plant_table`) and usually cached.  Both
-give a member the same numbers, bit for bit (:mod:`aiofl.engine.loop`), so the choice is one
+shared by every plant of a size (:mod:`aiofl.engine.build.plant_table`) and usually cached.  Both
+give a member the same numbers, bit for bit (:mod:`aiofl.engine.kernel.loop`), so the choice is one
 of time alone.  A user's ``aiofl robustness`` on a plant file (100 draws of a 5-s scenario
 at 1 ms: 5·10⁵ member-steps) ran in 0.1 s at width 1 and waited 13 s for a width-32
 compile; a tuning run of thousands of members pays for the compile many times over.
@@ -14,7 +14,7 @@ the default of :func:`aiofl.engine.simulation.simulate_batch`):
 1. **At hand** (:func:`lanes_at_hand`): the plant's width-32 instance of that timing is
    built in this process, or its kernel, compiled from exactly this code, is in the disk
    cache or being compiled into it by another process (its compile lock held;
-   :func:`aiofl.engine.compile.kernel_at_hand`): lanes.
+   :func:`aiofl.engine.build.compile.kernel_at_hand`): lanes.
 2. Otherwise the rule of *renting before buying* (the ski-rental problem; Karlin et al.,
    "Competitive randomized algorithms for nonuniform problems", *Algorithmica* 11, 1994):
    the members run at width 1, and their member-steps are added to the plant's *rent* in
@@ -36,8 +36,9 @@ from __future__ import annotations
 
 import threading
 
-from aiofl.engine import compile as compile_
-from aiofl.engine import instances, loop
+from aiofl.engine.build import compile as compile_
+from aiofl.engine.build import instances
+from aiofl.engine.kernel import loop
 from aiofl.plants.base import Plant
 
 __all__ = ["LONE_STEPS_PER_COMPILE", "expect", "lanes_at_hand", "lanes_worth_it", "rent"]
@@ -58,7 +59,7 @@ def lanes_at_hand(plant: Plant, sampled_data: bool) -> bool:
     compile: built in this process, stored in the kernel cache under the fingerprint of
     today's code, or being compiled into it by another process now (``aiofl reproduce``
     compiles the instances it needs later in a second process,
-    :mod:`aiofl.engine.prepare`: waiting for it costs less than renting beside it)."""
+    :mod:`aiofl.engine.build.prepare`: waiting for it costs less than renting beside it)."""
     width = loop.WIDTH
     if instances.instance_built(plant, width, sampled_data=sampled_data):
         return True

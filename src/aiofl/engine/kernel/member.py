@@ -1,6 +1,6 @@
 r"""One member's constants and its law: what every engine instance computes per member.
 
-The time loop (:mod:`aiofl.engine.loop`) advances members in groups; what is the same for
+The time loop (:mod:`aiofl.engine.kernel.loop`) advances members in groups; what is the same for
 every timing and width is written here once:
 
 - the packed per-member constants (:func:`_tpl_setup`): the controller's float row
@@ -9,14 +9,14 @@ every timing and width is written here once:
   prefilter's coefficients, the ITD's constants) and an integer row of kinds and offsets
   (:data:`IQ_ESO` ...);
 - the state error feedback and the law (:func:`_aiofl_command`, :func:`_iofl_command`),
-  which the continuous controller (:mod:`aiofl.engine.continuous`, IOFL lane by lane) and
-  the discrete controller (:mod:`aiofl.engine.sampled`) call.
+  which the continuous controller (:mod:`aiofl.engine.kernel.continuous`, IOFL lane by lane) and
+  the discrete controller (:mod:`aiofl.engine.kernel.sampled`) call.
 
 The controller's formulas are not written here: they call the public scalar component
 functions of :mod:`aiofl.components` (fal, NLSEF, INLSEF, linear SEF, the laws), bound into
-each instance as private copies (:func:`aiofl.engine.bindings.private_components`).
+each instance as private copies (:func:`aiofl.engine.build.bindings.private_components`).
 :func:`_tpl_setup` is a *template*: plain Python that reads the component functions as
-module globals (placeholders here), compiled per instance by :mod:`aiofl.engine.compile`.
+module globals (placeholders here), compiled per instance by :mod:`aiofl.engine.build.compile`.
 
 This module's source is part of the cache fingerprint of every kernel.
 """
@@ -52,16 +52,27 @@ first step whose start k·dt >= t_s (1 - SWITCH_RTOL): the tolerance absorbs the
 k·dt, so a switch on the grid happens exactly at its step boundary."""
 
 
-# Placeholders for the names an instance binds (see aiofl.engine.bindings.component_functions):
-# the template below is plain Python until aiofl.engine.compile compiles it, with a copy of
-# this module's globals (private component modules bound) as its globals.
-_N = 1  # plant states
+# Placeholders: stand-ins so this module imports.  _tpl_setup is compiled with a copy of this
+# module's globals (its component modules and compiled laws re-bound to private copies,
+# aiofl/engine/build/bindings.py:bind_private) updated by
+# aiofl/engine/build/instances.py:recipe (``ns_member``) and
+# aiofl/engine/build/controller_update.py:update_recipe (``ns``):
+_N = 1  # the plant's number of states (1 in the update without a plant)
+# the component functions (aiofl/engine/build/bindings.py:component_functions, private copies)
 _ITD_CONSTANTS = _PREFILTER_COEF = _FAL_SLOPE = _LINEAR_SEF_GAIN = _ESO_GAIN = None
+PLACEHOLDERS = tuple(
+    """
+    _N _ITD_CONSTANTS _PREFILTER_COEF _FAL_SLOPE _LINEAR_SEF_GAIN _ESO_GAIN
+    """.split()  # noqa: SIM905 - the names as a reader scans them
+)
+"""The names of the placeholder block: what the compile factory checks a recipe binds
+when a template of this module reads one (:func:`aiofl.engine.build.compile.build`)."""
 
 
 # ------------------------------------------------------------ the law, written once
 # The state error feedback and the law are the same formulas in the continuous controller
-# (aiofl.engine.continuous) and in the discrete one (aiofl.engine.sampled): both call these.
+# (aiofl.engine.kernel.continuous) and in the discrete one (aiofl.engine.kernel.sampled):
+# both call these.
 # They depend on no plant function, so they are compiled once, here, and inlined (numba IR
 # inlining) where called, so each caller compiles to the code it had with them in place.
 @njit(inline="always", fastmath=FASTMATH, error_model="numpy")

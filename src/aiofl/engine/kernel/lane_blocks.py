@@ -1,4 +1,4 @@
-r"""The lane blocks of the time loop (:mod:`aiofl.engine.loop`): each formula of the closed
+r"""The lane blocks of the time loop (:mod:`aiofl.engine.kernel.loop`): each formula of the closed
 loop applied to every lane of a group, in a loop over the lanes that LLVM vectorizes.
 
 Each block is one compiled function holding its loop over the lanes, so LLVM optimizes (and
@@ -6,11 +6,11 @@ vectorizes) that loop alone; the scalar formulas it calls (the component functio
 :mod:`aiofl.components`, the plant's f, g, h, b_d) are inlined into it.  A block takes every
 quantity it writes as its own array (a row of the group's workspace), so that no two
 arguments overlap (blocks are compiled with ``noalias``, see
-:func:`aiofl.engine.instances._noalias_option`), and reaches per-lane plant states through
+:func:`aiofl.engine.build.instances._noalias_option`), and reaches per-lane plant states through
 unmanaged views (no reference counting).  Multi-row outputs whose row stride LLVM cannot see
 are written flat (state i of lane l at ``i W + l``).
 
-Like the other templates these are plain Python until :mod:`aiofl.engine.instances`
+Like the other templates these are plain Python until :mod:`aiofl.engine.build.instances`
 compiles them with the globals of one plant and lane width (placeholders here).  This
 module's source is part of every kernel's cache fingerprint.
 """
@@ -18,7 +18,7 @@ module's source is part of every kernel's cache fingerprint.
 from __future__ import annotations
 
 from aiofl import layout as L
-from aiofl.engine.member import (
+from aiofl.engine.kernel.member import (
     Q_ITD_BC,
     Q_ITD_GAIN,
     SWITCH_RTOL,
@@ -27,14 +27,29 @@ from aiofl.engine.member import (
 FLOAT_MAX = 1.7976931348623157e308
 """The largest finite float64: ``abs(x) <= FLOAT_MAX`` is false for inf and NaN alike."""
 
-# Placeholders for what an instance binds (see aiofl.engine.instances).
-_W = 32
-_N = 1
-_PFG = _PH = _PBD = _PNF = _PAB = None  # the plant's functions, inlined, vector math
-_IOFL_COMMAND = _UNMANAGED = _COLUMN = _SIN = _COS = None
+# Placeholders: stand-ins so this module imports.  Filled per instance by
+# aiofl/engine/build/instances.py:recipe (its ``ns.update``):
+_W = 32  # lane width: 32, or 1 for a lone member
+_N = 1  # the plant's number of states
+# the plant's functions f-g, h, b_d, normal form, α-β: inlined or through the plant table
+# (aiofl/engine/build/plant_table.py:direct_bindings or call_bindings)
+_PFG = _PH = _PBD = _PNF = _PAB = None
+_IOFL_COMMAND = None  # kernel.member._iofl_command, re-bound to the private components
+_COLUMN = None  # kernel.views.lane_column_intrinsic()
+_SIN = _COS = None  # the reference's sine and cosine: components.vecmath (lanes) or numpy
+# the component functions (aiofl/engine/build/bindings.py:component_functions)
 _HAN_TD = _ITD = _FAL = _FAL_POWER_NEEDED = _FAL_LINEAR = None
 _INLSEF_TERM = _INLSEF_LIMIT = _LINEAR_SEF = _INLESO = _AIOFL_LAW = _SATURATE = None
 _MODEL_ASSISTED_LAW = None
+PLACEHOLDERS = tuple(
+    """
+    _W _N _PFG _PH _PBD _PNF _PAB _IOFL_COMMAND _COLUMN _SIN _COS _HAN_TD _ITD _FAL
+    _FAL_POWER_NEEDED _FAL_LINEAR _INLSEF_TERM _INLSEF_LIMIT _LINEAR_SEF _INLESO _AIOFL_LAW
+    _SATURATE _MODEL_ASSISTED_LAW
+    """.split()  # noqa: SIM905 - the names as a reader scans them
+)
+"""The names of the placeholder block: what the compile factory checks a recipe binds
+when a template of this module reads one (:func:`aiofl.engine.build.compile.build`)."""
 
 
 def _blk_sine(t, a, w, phase, offset, with_cos, r, sn, cs, amp):  # pragma: no cover
@@ -281,7 +296,7 @@ def _blk_metrics(t, y, r, u, u_ref, itae, iae, ise, isu, iau):  # pragma: no cov
 
 def _blk_stage(z, zt, kd, acc, nza, first, last, h, w, scale):  # pragma: no cover
     """One stage of an explicit Runge-Kutta step (the stage tables of
-    :mod:`aiofl.engine.loop`), every lane: the weighted sum of the stage derivatives
+    :mod:`aiofl.engine.kernel.loop`), every lane: the weighted sum of the stage derivatives
     ``acc`` gains ``w kd`` (``first``: starts at it) and the next stage's state is
     ``z + h kd``; after the ``last`` stage ``z += scale acc`` (forward Euler is one stage,
     both first and last: ``z += dt kd``)."""

@@ -1,13 +1,13 @@
 """Engine instances: every compiled kernel the engine runs, and running a batch on them.
 
-An *instance* is the time loop of :mod:`aiofl.engine.loop` compiled for one plant, or for
+An *instance* is the time loop of :mod:`aiofl.engine.kernel.loop` compiled for one plant, or for
 every plant of a number of states (:func:`plant_independent`), with compile-time choices
-(:func:`recipe`, built by :mod:`aiofl.engine.compile`):
+(:func:`recipe`, built by :mod:`aiofl.engine.build.compile`):
 
 - the lane width ``W``: 32 (groups of members, one per SIMD lane) or 1 (a lone member);
 - the timing: continuous (the controller's blocks in the stage right-hand side,
-  :mod:`aiofl.engine.continuous`) or sampled (the discrete controller at the samples,
-  :mod:`aiofl.engine.sampled`);
+  :mod:`aiofl.engine.kernel.continuous`) or sampled (the discrete controller at the samples,
+  :mod:`aiofl.engine.kernel.sampled`);
 - the variant: ``"lanes"`` (the default engine: branch-free vector math, strict IEEE
   arithmetic, so a member's numbers are bitwise the same at any width), ``"scalar"``
   (``engine="scalar"``: width 1 with libm and the components' fast-math flags, a
@@ -17,18 +17,18 @@ every plant of a number of states (:func:`plant_independent`), with compile-time
 In the lane variant the plant's f, g, h, b_d and the controller's component functions are
 compiled *inlined* into the lane blocks (numba IR inlining) with ``exp``/``log``/``sin``/
 ``cos`` rebound to :mod:`aiofl.components.vecmath`
-(:func:`aiofl.engine.bindings.vector_math_globals`), so the loops over lanes vectorize.
+(:func:`aiofl.engine.build.bindings.vector_math_globals`), so the loops over lanes vectorize.
 Every width-1 instance but the diagnostic one is compiled without the plant and calls its
-functions through the batch's plant table (:mod:`aiofl.engine.plant_table`; :func:`run`
+functions through the batch's plant table (:mod:`aiofl.engine.build.plant_table`; :func:`run`
 writes the plant's table into the batch), so one compiled loop serves every plant of its
 size.  :func:`instance_for` builds an instance on first use (one per plant, or per size,
-and choice per process; across processes the disk cache of :mod:`aiofl.engine.compile`
+and choice per process; across processes the disk cache of :mod:`aiofl.engine.build.compile`
 skips the compile); only the instances a batch needs are built.
 
 :func:`plan_groups` splits a batch into groups with uniform component kinds (ESO, TD, SEF and
 law kinds, ρ, the feedback length, the ESO start and the reference kind), in batch order
 (sampled members: by sample time first; lanes of one group may sample at different
-periods, :mod:`aiofl.engine.sampled`), padding the last group of each kind with -1;
+periods, :mod:`aiofl.engine.kernel.sampled`), padding the last group of each kind with -1;
 :func:`run_groups` runs them on ``numba.get_num_threads()`` threads: the compiled loop
 releases the GIL and each thread claims the next unclaimed group, so a group that diverges
 early frees its core at once.  Members are independent, so a member's numbers do not depend
@@ -43,7 +43,7 @@ function numba cannot compile, or one that returns complex numbers, is a
 traceback.  At run time a division by zero or a math domain error in a plant function gives
 inf/NaN (numba's ``numpy`` error model), which the loop reports as the member diverging at
 that time.  A plant function that *raises* stops the run (in a plant-independent
-instance as :class:`~aiofl.engine.plant_table.PlantCallFailed`): :func:`run_groups` then
+instance as :class:`~aiofl.engine.kernel.plant_calls.PlantCallFailed`): :func:`run_groups` then
 replays the group's members one by one in the guarded instance, calls the function that
 raised once more from Python at the state (and parameters) it reports, and raises a
 PlantError ``plant function f failed at state x = [...]: ValueError: ...``.
@@ -64,19 +64,11 @@ from numpy.typing import NDArray
 
 from aiofl import layout as L
 from aiofl.cache import cache_enabled
-from aiofl.engine import (
-    bindings,
-    continuous,
-    lane_blocks,
-    loop,
-    member,
-    plant_table,
-    sampled,
-    views,
-)
-from aiofl.engine import compile as compile_
-from aiofl.engine.bindings import PLANT_FUNCTIONS, PlantFailure
-from aiofl.engine.sampled import N_CS
+from aiofl.engine.build import bindings, plant_table
+from aiofl.engine.build import compile as compile_
+from aiofl.engine.build.bindings import PLANT_FUNCTIONS, PlantFailure
+from aiofl.engine.kernel import continuous, lane_blocks, loop, member, plant_calls, sampled, views
+from aiofl.engine.kernel.sampled import N_CS
 from aiofl.plants.base import Plant, PlantError
 
 __all__ = [
@@ -141,15 +133,16 @@ _LIGHT = {"inline": "always"}
 
 def _sources(sampled_data: bool) -> tuple[str, ...]:
     """Source files of an instance: every kernel's, the loop, the lane blocks, the
-    controller's module, this module, the plant table (how it calls the plant) and the
-    vector math (and, sampled, the discrete components and coefficient rows)."""
+    controller's module, this module, the plant calls and their bindings (how it calls the
+    plant) and the vector math (and, sampled, the discrete controller and its coefficient
+    rows)."""
     from aiofl.components import vecmath, vecmath_tables
-    from aiofl.engine import discrete
+    from aiofl.engine import discrete_rows
 
     here = sys.modules[__name__]
-    mods = [loop, lane_blocks, continuous, here, plant_table, vecmath, vecmath_tables]
+    mods = [loop, lane_blocks, continuous, here, plant_table, plant_calls, vecmath, vecmath_tables]
     if sampled_data:
-        mods += [sampled, discrete]
+        mods += [sampled, discrete_rows]
     return (*bindings.engine_sources(), *(m.__file__ for m in mods))
 
 
@@ -165,7 +158,7 @@ def _imported(obj: Any) -> bool:
 
 def plant_independent(width: int, variant: str) -> bool:
     """Whether the instance of ``width`` and ``variant`` calls the plant's functions through
-    the batch's plant table (:mod:`aiofl.engine.plant_table`), compiled once per number of
+    the batch's plant table (:mod:`aiofl.engine.build.plant_table`), compiled once per number of
     plant states and shared by every plant of that size: every width-1 instance but the
     diagnostic one.  A new or edited plant then costs its table's entries (under a
     second), not a time loop (12-16 s), and a plant of a size the cache has seen runs
@@ -209,9 +202,10 @@ def recipe(
     fastmath = loop.LANE_FASTMATH if lanes else FASTMATH
     opts = {"fastmath": fastmath, "error_model": "numpy"}
     tpl = compile_.Template
-    # the per-member setup and the laws (aiofl.engine.member), compiled against this
-    # variant's private components (nothing shared with another variant's instances)
-    ns_member = dict(vars(member))
+    # the per-member setup and the laws (aiofl.engine.kernel.member), compiled against this
+    # variant's private components (nothing shared with another variant's instances); its
+    # placeholders bound below
+    ns_member = compile_.template_globals(member)
     bindings.bind_private(ns_member, private)
     n, n_p = plant.n_states, len(plant.params)
     independent = plant_independent(width, variant)
@@ -232,9 +226,10 @@ def recipe(
                 for k, fn in enumerate(fns)
             )
         plant_fns = plant_table.direct_bindings(own, tag)
-    # the templates' modules' globals (layout constants, placeholders), without the modules
-    # and compiled functions they import: an instance calls only what is bound below
-    merged = {**vars(lane_blocks), **vars(continuous), **vars(sampled), **vars(loop)}
+    # the templates' modules' globals (layout constants) without their placeholders (bound
+    # below; the factory checks that every one a template reads is) and the modules and
+    # compiled functions they import: an instance calls only what is bound below
+    merged = compile_.template_globals(lane_blocks, continuous, sampled, loop)
     ns = {k: v for k, v in merged.items() if not _imported(v)}
     sin, cos = (vecmath.vsin, vecmath.vcos) if lanes else (np.sin, np.cos)
     nza = n + L.N_METRIC
@@ -284,7 +279,7 @@ def recipe(
         # the controller's update, compiled as the blocks are, in the members' namespace
         ns_ctrl = dict(ns_member)
         ns_ctrl["_PAB"] = plant_fns["_PAB"]
-        sampled._bind(ns_ctrl, bindings.private_components(private)["discrete"])
+        bindings.bind_discrete(ns_ctrl, bindings.private_components(private)["discrete"])
         ns_ctrl["_DELAY_REFERENCE"] = compile_.instantiate(
             sampled._tpl_delay_reference, ns_ctrl, tag, **opts
         )
@@ -300,6 +295,8 @@ def recipe(
             tpl("_STORE_CONTROLLER", sampled._tpl_store_controller, inline),
         ]
     else:
+        # the loop's sampled-only calls, in branches on _SAMPLED that numba prunes
+        ns.update(_SAMPLE=None, _CONTROLLER_BAD=None, _DELAY_OUTPUT=None, _DELAY_INPUT=None)
         templates += [
             tpl("_SETUP", continuous._tpl_setup, opts),
             tpl("_RHS", continuous._tpl_deriv, inline),
@@ -371,7 +368,7 @@ def _instance_key(
 
 def set_plant_table(plant: Plant, batch: Any, variant: str = "lanes") -> None:
     """Write the addresses of ``plant``'s functions, compiled for the instances of
-    ``variant``, into ``batch.plant_table`` (:func:`aiofl.engine.plant_table.plant_table`)."""
+    ``variant``, into ``batch.plant_table`` (:func:`aiofl.engine.build.plant_table.plant_table`)."""
     batch.plant_table[:] = plant_table.plant_table(plant, variant, cache=cache_enabled())
 
 
@@ -440,7 +437,7 @@ def group_members(
     width: int = loop.WIDTH,
     steps: NDArray[np.float64] | None = None,
 ) -> NDArray[np.int64]:
-    """Groups of :data:`~aiofl.engine.loop.WIDTH` members with uniform kinds.
+    """Groups of :data:`~aiofl.engine.kernel.loop.WIDTH` members with uniform kinds.
 
     Parameters
     ----------
@@ -477,7 +474,7 @@ def plan_groups(
     steps: NDArray[np.float64] | None = None,
 ) -> dict[int, NDArray[np.int64]]:
     """The groups to run, by lane width: members of a kind that fill at least half a group
-    of :data:`~aiofl.engine.loop.WIDTH` run in such groups (the last one padded), the
+    of :data:`~aiofl.engine.kernel.loop.WIDTH` run in such groups (the last one padded), the
     others in groups of one lane.  Either way a member's numbers are the same (bitwise).
     ``steps``: as for :func:`group_members` (sampled members).
 
@@ -582,7 +579,7 @@ def _explain_failure(
     the group's members are replayed one by one in the guarded instance, which reports the
     function and the state (and parameters) it raised at; the function is then called there
     once more from Python for its exception (a plant-independent instance knows only that
-    one raised, :class:`~aiofl.engine.plant_table.PlantCallFailed`).  Returns otherwise,
+    one raised, :class:`~aiofl.engine.kernel.plant_calls.PlantCallFailed`).  Returns otherwise,
     so the caller re-raises ``exc`` with its traceback."""
     if not bindings.user_functions(plant):
         return
