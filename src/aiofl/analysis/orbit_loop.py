@@ -45,6 +45,7 @@ from numba import njit
 from numpy.typing import NDArray
 
 from aiofl.analysis.closed_loop import ClosedLoop, is_complex
+from aiofl.analysis.loop_radau import LoopIntegrator
 from aiofl.components.differentiators import han_td_rhs
 from aiofl.components.feedback import fal, inlsef_limit, inlsef_term
 from aiofl.components.observers import inleso_injection
@@ -152,6 +153,9 @@ class OrbitLoop(ClosedLoop):
     """
 
     NL_MODE = 1
+    compiled_integrator = True
+    """Integrate compiled (:class:`aiofl.analysis.loop_radau.LoopIntegrator`, Radau IIA);
+    False: scipy's BDF calls :meth:`field`'s F and J from Python (the reference)."""
 
     def __init__(
         self, plant: Plant, controller: Controller, scenario: Scenario, *, dt: float = 1e-4
@@ -339,6 +343,8 @@ class OrbitLoop(ClosedLoop):
             rd, dd = inputs(t)
             return self.jacobian_at(z, rd, dd)
 
+        if self.compiled_integrator:  # the integrations run compiled, F and J in them
+            f.integrator = LoopIntegrator(self, hold=hold, d=d)  # type: ignore[attr-defined]
         return f, jac
 
     def tangent_batch(self, z: NDArray[np.float64]) -> NDArray[np.complex128]:

@@ -24,12 +24,13 @@ closes, :math:`z(t_0 + T) \approx z(t_0)` (optionally Newton shooting steps
 :math:`z_0 \leftarrow z_0 + (I - \Phi)^{-1}(z(t_0 + T) - z_0)`; with a non-smooth loop whose
 Φ depends sharply on the orbit they need not converge, so the default is the plain return
 map); the multipliers are those of the last pass, and the range of the largest over the
-passes is reported.  z is integrated by :func:`scipy.integrate.solve_ivp`, method BDF with
-the exact Jacobian (the loops are stiff: observer poles near :math:`-\omega_0 \approx
--2000`); Φ by the exponential midpoint rule on the solver's steps,
-:math:`\Phi_{k+1} = \exp(h_k J(t_k + h_k/2))\,\Phi_k` (Magnus' method of order 2), in the
-coordinates z / (typical magnitudes) so that the observer's couplings (up to
-:math:`\omega_0^5 \approx 10^{16}`) do not overflow the exponential.  Not finite
+passes is reported.  z is integrated with the exact Jacobian (the loops are stiff:
+observer poles near :math:`-\omega_0 \approx -2000`): the closed loop by the compiled
+Radau IIA of :mod:`aiofl.analysis.loop_radau` (z and Φ in one compiled call), any other
+F by :func:`scipy.integrate.solve_ivp`, method BDF; Φ by the exponential midpoint rule
+on the solver's steps, :math:`\Phi_{k+1} = \exp(h_k J(t_k + h_k/2))\,\Phi_k` (Magnus'
+method of order 2), in the coordinates z / (typical magnitudes) so that the observer's
+couplings (:math:`\omega_0^5 \approx 10^{16}`) do not overflow the exponential.  Not finite
 differences of the flow: a difference quotient of a stiff flow with non-smooth elements
 depends on its step (25.7 or 214 for one design, where the variational equation gives
 about 0.7).
@@ -165,14 +166,17 @@ def trajectory(
     scipy.integrate.OdeResult
         With dense output ``sol``.
     """
+    z0 = np.asarray(z0, dtype=np.float64)
+    sc = np.abs(z0) if scale is None else np.asarray(scale, dtype=np.float64)
+    compiled = _compiled(f, z0)
+    if compiled is not None:
+        return compiled.integrate(z0, t0, t1, atol=_atol(sc, rtol), rtol=rtol)[0]
     from scipy.integrate import solve_ivp
 
     def budgeted(t: float, z: Vector) -> Vector:
         check_budget()
         return f(t, z)
 
-    z0 = np.asarray(z0, dtype=np.float64)
-    sc = np.abs(z0) if scale is None else np.asarray(scale, dtype=np.float64)
     sol = solve_ivp(
         budgeted,
         (t0, t1),
@@ -231,11 +235,28 @@ def variational_flow(
     z1, phi1
         :math:`z(t_1)` and :math:`\Phi(t_1)`.
     """
-    sol = trajectory(f, jac, z0, t0, t1, scale=scale, rtol=rtol)
     n = np.asarray(z0).size
     d = np.ones(n) if scale is None else np.maximum(np.asarray(scale, dtype=np.float64), 1e-300)
     # Φ in the coordinates z / scale (balanced: the observer's couplings span 1e16)
     phi = np.eye(n) if phi0 is None else np.asarray(phi0, dtype=np.float64) / d[:, None]
+    if (compiled := _compiled(f, np.asarray(z0, dtype=np.float64))) is not None:
+        sc = np.abs(np.asarray(z0, dtype=np.float64)) if scale is None else scale
+        sol, phi = compiled.integrate(  # z and Φ in one compiled integration
+            z0, t0, t1, atol=_atol(sc, rtol), rtol=rtol, phi=phi, dscale=d, split=split
+        )
+    else:
+        sol = trajectory(f, jac, z0, t0, t1, scale=scale, rtol=rtol)
+        phi = _midpoint_flow(jac, sol, phi, d, split)
+    if phi0 is None:
+        return sol.y[:, -1], phi * d[:, None] / d[None, :]
+    return sol.y[:, -1], phi * d[:, None]
+
+
+def _midpoint_flow(
+    jac: Jac, sol: Any, phi: NDArray[np.float64], d: Vector, split: int
+) -> NDArray[np.float64]:
+    """Φ (scaled by d) advanced by the exponential midpoint rule over the steps of ``sol``,
+    each cut into ``split`` parts (:func:`variational_flow`)."""
     grid = np.asarray(sol.t, dtype=np.float64)
     fine = (
         grid
@@ -250,9 +271,16 @@ def variational_flow(
         tm = 0.5 * (a + b)
         jw = jac(tm, sol.sol(tm)) * d[None, :] / d[:, None]
         phi = expm_small((b - a) * jw) @ phi
-    if phi0 is None:
-        return sol.y[:, -1], phi * d[:, None] / d[None, :]
-    return sol.y[:, -1], phi * d[:, None]
+    return phi
+
+
+def _compiled(f: Rhs, z0: Vector) -> Any:
+    """``f.integrator`` (:class:`aiofl.analysis.loop_radau.LoopIntegrator`) when it applies
+    at z0, else None (scipy integrates)."""
+    integrator = getattr(f, "integrator", None)
+    if integrator is None or not integrator.usable(z0):
+        return None
+    return integrator
 
 
 class OrbitDiverges(ArithmeticError):
