@@ -295,11 +295,43 @@ def _predict_factor(h_abs, h_abs_old, err, err_old):  # fmt: skip
 def run_slice(jets, kernel, ints, ints_bd, flt, p_true, p_nom, spec_i, spec_f, tab, n_rows,
          n_cols, n_out, z0, t0, t1, rtol, atol, st, phi, dscale, split, ts_out, ys_out,
          qs_out):  # fmt: skip
-    """Integrate from (t0, z0) towards t1 (plain Python: compiled with its signature by
-    :func:`aiofl.analysis.loop_radau.compiled_slice`), at most ``ts_out.size - 1`` steps (module
-    docstring); the solver's state in ``st`` = (h, h_old, error_old, t reached, status),
-    negative h for none yet; Φ (scaled by ``dscale``) advanced in place when it has
-    columns.  Returns the number of steps stored in ts_out / ys_out / qs_out."""
+    """Integrate the loop from (t0, z0) towards t1 by Radau IIA, at most ``ts_out.size - 1``
+    steps (module docstring).
+
+    Plain Python: compiled with its signature by
+    :func:`aiofl.analysis.loop_radau.compiled_slice`.
+
+    Parameters
+    ----------
+    jets, kernel
+        The plant's compiled jets (:func:`aiofl.analysis.plant_jets.plant_jets`) and the
+        loop kernel (:func:`aiofl.analysis.loop_kernel.loop_eval`), first-class functions.
+    ints, ints_bd, flt, p_true, p_nom
+        The loop kernel's integer settings (with and without the disturbance input's
+        column), its float settings, the true and the nominal plant parameters.
+    spec_i, spec_f, tab
+        The inputs' kind and sizes, their float settings (``SF_*``) and their table (the
+        reference's samples or Han's precomputed outputs).
+    n_rows, n_cols, n_out
+        The jets' rows and columns and the loop kernel's outputs (workspace sizes).
+    z0, t0, t1
+        The start state, the start time and the end time [s].
+    rtol, atol
+        The relative tolerance and the absolute one per state.
+    st
+        The solver's state, carried between slices: (h, h_old, error_old, t reached,
+        status); a non-positive h selects the first step as scipy does.
+    phi, dscale, split
+        Φ in the scaled coordinates z / ``dscale``, advanced in place when it has columns,
+        by ``split`` exponential-midpoint parts per step.
+    ts_out, ys_out, qs_out
+        The steps' times, states and collocation coefficients (dense output), filled.
+
+    Returns
+    -------
+    int
+        The number of steps stored in ``ts_out`` / ``ys_out`` / ``qs_out``.
+    """
     nz = z0.size
     wk = _workspace(spec_i, n_rows, n_cols, n_out)
     args = (jets, kernel, ints, ints_bd, flt, p_true, p_nom, spec_i, spec_f, tab, wk)
