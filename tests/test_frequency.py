@@ -257,3 +257,17 @@ def test_cli_json_carries_margins_and_writes_a_figure(tmp_path: object) -> None:
     res = runner.invoke(app, ["analyze", "slfjm", "--figure", str(out / "y.png")])
     assert res.exit_code == 2 and "--closed-loop" in res.stderr
     assert sorted(p.name for p in out.iterdir()) == ["loop.png"]
+
+
+def test_a_loop_with_an_unbounded_gain_margin_is_reported_not_a_crash():
+    """The model-based IOFL loop (iofl-s1) cancels the plant exactly: its disk margin is
+    α = 2 (the unit disk of perturbations), whose gain margin (1 + α/2)/(1 − α/2) has no
+    bound.  ``analyze --closed-loop`` said so with a TypeError; it prints ∞."""
+    from typer.testing import CliRunner
+
+    from aiofl.cli.app import app
+
+    res = CliRunner().invoke(app, ["analyze", "iofl-s1", "--closed-loop"])
+    assert res.exit_code == 0, res.output
+    line = next(s for s in res.stdout.splitlines() if "disk margin (continuous loop" in s)
+    assert "α = 2," in line and "gain ×/÷ ∞ dB" in line and "phase ± 90°" in line

@@ -360,11 +360,18 @@ def _loop_extras(
     lines: list[str] = []
     disk = continuous_disk_margin(lin)
     info.update(disk)
-    if disk["disk_margin"] is not None:
+    if disk["disk_margin"] is not None:  # a margin without bound (α ≥ 2: gain) is None
+        alpha, gain, phase = (
+            "∞" if v is None else f"{v:.4g}"
+            for v in (
+                disk["disk_margin"],
+                disk["disk_gain_margin_db"],
+                disk["disk_phase_margin_deg"],
+            )
+        )
         lines.append(
-            f"  disk margin (continuous loop, skew 0): α = {disk['disk_margin']:.4g}, gain "
-            f"×/÷ {disk['disk_gain_margin_db']:.4g} dB and phase ± "
-            f"{disk['disk_phase_margin_deg']:.4g}° at once"
+            f"  disk margin (continuous loop, skew 0): α = {alpha}, gain "
+            f"×/÷ {gain} dB and phase ± {phase}° at once"
         )
     if view:
         v = loop_view(
