@@ -63,7 +63,10 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 """The layers, lowest first."""
 
 FACADE = "aiofl"  # the top-level package: names imported lazily, by string, on first use
-MAX_LINES = 650
+MAX_LINES = 1000
+"""A module is one concept, however long that takes; this bound only catches a module that
+has grown into several.  (It was 650 lines, which split concepts over files to fit: issue
+37.)"""
 
 
 def _module_name(path: Path) -> str:
