@@ -48,6 +48,39 @@ def _mappingproxy(d: dict[str, Any]) -> types.MappingProxyType[str, Any]:
 copyreg.pickle(types.MappingProxyType, lambda m: (_mappingproxy, (dict(m),)))
 
 
+REPRODUCE_GROUP = "reproduce"
+"""The xdist group of the test files that read the session's reproduce run."""
+
+
+@pytest.hookimpl(tryfirst=True)  # before xdist's hook, which names the groups in node ids
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Group the tests for ``--dist loadgroup`` (``make test``): a test file is one group,
+    so its module fixtures are built once, as with ``loadfile``; the files that read the
+    session's reproduce run (the ``reproduced`` fixture, the suite's longest setup) are one
+    group together, queued first, so one worker runs it and the other never waits for its
+    lock.  The other groups follow, those with the most tests first (xdist's own order;
+    ``--no-loadscope-reorder`` keeps this one)."""
+    readers = {it.path for it in items if "reproduced" in getattr(it, "fixturenames", ())}
+    group = {
+        it.nodeid: REPRODUCE_GROUP if it.path in readers else it.nodeid.split("::")[0]
+        for it in items
+    }
+    for it in items:
+        it.add_marker(pytest.mark.xdist_group(group[it.nodeid]))
+    size: dict[str, int] = {}
+    for g in group.values():
+        size[g] = size.get(g, 0) + 1
+    order = {it.nodeid: i for i, it in enumerate(items)}
+    items.sort(
+        key=lambda it: (
+            group[it.nodeid] != REPRODUCE_GROUP,
+            -size[group[it.nodeid]],
+            group[it.nodeid],
+            order[it.nodeid],
+        )
+    )
+
+
 @dataclass(frozen=True)
 class ReproduceRun:
     """The output directory of one ``aiofl reproduce`` run, its CLI result and the

@@ -197,17 +197,12 @@ class SampledLoop:
         jac, _, _ = self._jacobian(dc, c, rr)
         nc = c.size
         jcc, jcy, juc, juy = jac[:nc, :nc], jac[:nc, nc], jac[nc, :nc], jac[nc, nc]
-        eye = np.eye(nc)
-        inert = [
-            i
-            for i in range(nc)
-            if np.allclose(jcc[:, i], eye[:, i], atol=1e-9, rtol=0)
-            and np.allclose(jcc[i, :], eye[i, :], atol=1e-9, rtol=0)
-            and abs(juc[i]) < 1e-12
-            and abs(jcy[i]) < 1e-12
-            and i != C_UPREV
-        ]
-        keep = np.array([i for i in range(nc) if i not in inert], dtype=int)
+        # a state is inert (dropped) when its row and column of jcc are the identity's, u
+        # does not depend on it and y does not act on it; u_{k-1} is always kept
+        near = np.abs(jcc - np.eye(nc)) <= 1e-9
+        inert = near.all(axis=0) & near.all(axis=1) & (np.abs(juc) < 1e-12) & (np.abs(jcy) < 1e-12)
+        inert[C_UPREV] = False
+        keep = np.flatnonzero(~inert)
         i_uprev = int(np.nonzero(keep == C_UPREV)[0][0])
         out = (jcc[np.ix_(keep, keep)], jcy[keep], juc[keep], float(juy), keep, i_uprev)
         self._pieces[ts] = out
