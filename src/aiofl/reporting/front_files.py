@@ -26,7 +26,7 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Generic, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -34,6 +34,7 @@ from numpy.typing import NDArray
 __all__ = [
     "FRONT_SCENARIOS",
     "STRUCTURES",
+    "FoundFronts",
     "FrontFile",
     "FrontFileError",
     "ShippedFront",
@@ -87,14 +88,24 @@ class ShippedFront(FrontFile):
     scenario: int
 
 
-@dataclass(frozen=True)
-class ShippedFronts:
-    """Every front found (by (scenario, structure)) and the files that were missing."""
+FrontT = TypeVar("FrontT", bound=FrontFile)
+KeyT = TypeVar("KeyT")
 
-    fronts: dict[tuple[int, str], ShippedFront]
+
+@dataclass(frozen=True)
+class FoundFronts(Generic[KeyT, FrontT]):
+    """The fronts read from a folder, by key, the files that were missing and the files
+    that were not read (file -> why): :data:`ShippedFronts` and
+    :data:`aiofl.reporting.noise_front.NoiseFronts`."""
+
+    fronts: dict[KeyT, FrontT]
     missing: list[str]
     folder: str
-    errors: dict[str, str] = field(default_factory=dict)  # file -> why it was not read
+    errors: dict[str, str] = field(default_factory=dict)
+
+
+ShippedFronts = FoundFronts[tuple[int, str], ShippedFront]
+"""The ITAE/ISU fronts found, by (scenario, structure) (:func:`load_fronts`)."""
 
 
 def _float(text: str, where: str, col: str) -> float:
@@ -239,35 +250,43 @@ def checked_rows(
     return np.array(values, dtype=np.float64), arrays, chosen.index(True)
 
 
-def parse_robust(text: str, front: ShippedFront, *, name: str) -> ShippedFront:
+def parse_robust(text: str, front: FrontT, *, name: str, required: Sequence[str] = ()) -> FrontT:
     """Attach a companion robust file to ``front`` (rows matched by parameter values,
-    relative tolerance 1e-9); raises :class:`FrontFileError` for a malformed file or one
-    whose first columns are not the front's parameters.
+    relative tolerance 1e-9); raises :class:`FrontFileError` for a malformed file, one
+    whose first columns are not the front's parameters, one with no statistic after them
+    or without one of ``required``.
 
     Parameters
     ----------
     text
         The robust file's text.
     front
-        The front it belongs to.
+        The front it belongs to (a :class:`ShippedFront` or a
+        :class:`~aiofl.reporting.noise_front.NoiseFront`).
     name
         The file's name, for messages.
+    required
+        Statistics the file must hold (the noise fronts need ``itae_q95``).
 
     Returns
     -------
-    ShippedFront
+    FrontFile
         ``front`` with the robust statistics.
     """
     header, body = read_rows(text, name)
     k = len(front.names)
-    if tuple(header[:k]) != front.names or len(header) == k:
+    stats = header[k:]
+    if tuple(header[:k]) != front.names or not stats or any(r not in stats for r in required):
+        need = (
+            f"hold {', '.join(required)}"
+            if required
+            else "add statistics such as itae_q50, itae_q95, stable_fraction"
+        )
         raise FrontFileError(
             f"{name}: the header must start with the front's parameters "
-            f"({', '.join(front.names)}) and add statistics such as itae_q50, itae_q95, "
-            f"stable_fraction; got {', '.join(header)}"
+            f"({', '.join(front.names)}) and {need}; got {', '.join(header)}"
         )
-    stats = match_rows(header, body, k, front.values, name)
-    return replace(front, robust=stats, robust_path=name)
+    return replace(front, robust=match_rows(header, body, k, front.values, name), robust_path=name)
 
 
 def match_rows(

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -34,11 +34,12 @@ from numpy.typing import NDArray
 
 from aiofl.reporting.cases import Reproduction
 from aiofl.reporting.front_files import (
+    FoundFronts,
     FrontFile,
     FrontFileError,
     checked_rows,
     front_folder,
-    match_rows,
+    parse_robust,
     read_rows,
 )
 from aiofl.reporting.section import TableSection
@@ -62,7 +63,6 @@ __all__ = [
     "noise_notes",
     "noise_rows",
     "parse_noise_front",
-    "parse_noise_robust",
     "winner",
 ]
 
@@ -105,14 +105,8 @@ class NoiseFront(FrontFile):
         return self.robust.get("stable_fraction", np.full(len(self.itae), np.nan))
 
 
-@dataclass(frozen=True)
-class NoiseFronts:
-    """The noise fronts found (by structure), the files missing, the files not read."""
-
-    fronts: dict[str, NoiseFront]
-    missing: list[str]
-    folder: str
-    errors: dict[str, str] = field(default_factory=dict)
+NoiseFronts = FoundFronts[str, NoiseFront]
+"""The noise fronts found, by structure (:func:`load_noise_fronts`)."""
 
 
 def _col(header: Sequence[str], want: str, name: str) -> int:
@@ -167,35 +161,6 @@ def parse_noise_front(text: str, *, name: str, structure: str, label: str = "") 
     )
 
 
-def parse_noise_robust(text: str, front: NoiseFront, *, name: str) -> NoiseFront:
-    """Attach a companion robust file (rows matched to the front's by parameter values,
-    relative tolerance 1e-9); raises :class:`FrontFileError`.
-
-    Parameters
-    ----------
-    text
-        The robust file's text.
-    front
-        The front it belongs to.
-    name
-        The file's name, for messages.
-
-    Returns
-    -------
-    NoiseFront
-        ``front`` with the robust statistics.
-    """
-    header, body = read_rows(text, name)
-    k = len(front.names)
-    if tuple(header[:k]) != front.names or "itae_q95" not in header[k:]:
-        raise FrontFileError(
-            f"{name}: the header must start with the front's parameters "
-            f"({', '.join(front.names)}) and hold itae_q95; got {', '.join(header)}"
-        )
-    stats = match_rows(header, body, k, front.values, name)
-    return replace(front, robust=stats, robust_path=name)
-
-
 def load_noise_fronts(folder: str | Path | None = None) -> NoiseFronts:
     """Read every ``s3-noise-{structure}.csv`` (and ``-robust.csv``) in ``folder``
     (default: the package's ``presets/fronts``); missing files are listed, malformed ones
@@ -219,7 +184,8 @@ def load_noise_fronts(folder: str | Path | None = None) -> NoiseFronts:
         r = base / f"s{NOISE_SCENARIO}-noise-{st}-robust.csv"
         if r.is_file():
             try:
-                front = parse_noise_robust(r.read_text(encoding="utf-8"), front, name=r.name)
+                text = r.read_text(encoding="utf-8")
+                front = parse_robust(text, front, name=r.name, required=("itae_q95",))
             except (FrontFileError, UnicodeDecodeError) as exc:
                 errors[r.name] = str(exc)
         else:
