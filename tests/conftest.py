@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import copyreg
 import fcntl
+import functools
 import json
 import os
 import pickle
+import re
 import types
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,6 +24,7 @@ from typing import Any
 
 import pytest
 from hypothesis import settings
+from xdist.scheduler import LoadFileScheduling
 
 from aiofl.blas_threads import one_blas_thread
 
@@ -49,33 +52,62 @@ copyreg.pickle(types.MappingProxyType, lambda m: (_mappingproxy, (dict(m),)))
 
 
 REPRODUCE_GROUP = "reproduce"
-"""The xdist group of the test files that read the session's reproduce run."""
+"""The scope (pytest-xdist's unit of work) of the test files that read the session's
+reproduce run."""
 
 
-@pytest.hookimpl(tryfirst=True)  # before xdist's hook, which names the groups in node ids
+@functools.cache
+def _reads_reproduce(path: Path) -> bool:
+    """Whether a test or fixture of the file at ``path`` takes the session's ``reproduced``
+    fixture (a parameter of that name)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError:
+        return False
+    return re.search(r"def \w+\([^)]*\breproduced\b", text) is not None
+
+
+def _scope(rootpath: Path, nodeid: str) -> str:
+    """A test's scope under ``--dist loadfile``: its file, or :data:`REPRODUCE_GROUP` for
+    every file that reads the reproduce run."""
+    file = nodeid.split("::", 1)[0]
+    return REPRODUCE_GROUP if _reads_reproduce(rootpath / file) else file
+
+
+class ReproduceFirstScheduling(LoadFileScheduling):
+    """``--dist loadfile`` (a test file runs on one worker, so its module fixtures are built
+    once) with one change: the files that read the session's reproduce run (the suite's
+    longest setup) are one scope, so one worker runs it and the other never waits on its
+    lock.  (``--dist loadgroup`` with ``xdist_group`` marks would say the same, but with
+    pytest 9.2 and pytest-xdist 3.8 it silently stops grouping: pytest-xdist issue #1386.)
+    """
+
+    def _split_scope(self, nodeid: str) -> str:
+        return _scope(self.config.rootpath, nodeid)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config: pytest.Config, log: Any) -> Any:
+    """:class:`ReproduceFirstScheduling` for ``--dist loadfile`` (``make test``)."""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    return ReproduceFirstScheduling(config, log)
+
+
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Group the tests for ``--dist loadgroup`` (``make test``): a test file is one group,
-    so its module fixtures are built once, as with ``loadfile``; the files that read the
-    session's reproduce run (the ``reproduced`` fixture, the suite's longest setup) are one
-    group together, queued first, so one worker runs it and the other never waits for its
-    lock.  The other groups follow, those with the most tests first (xdist's own order;
-    ``--no-loadscope-reorder`` keeps this one)."""
-    readers = {it.path for it in items if "reproduced" in getattr(it, "fixturenames", ())}
-    group = {
-        it.nodeid: REPRODUCE_GROUP if it.path in readers else it.nodeid.split("::")[0]
-        for it in items
-    }
-    for it in items:
-        it.add_marker(pytest.mark.xdist_group(group[it.nodeid]))
+    """The reproduce run's readers first (:class:`ReproduceFirstScheduling` queues the
+    scopes in this order with ``--no-loadscope-reorder``), then the other files, those with
+    the most tests first (xdist's own order), each file's tests in their order."""
+    scope = {it.nodeid: _scope(config.rootpath, it.nodeid) for it in items}
     size: dict[str, int] = {}
-    for g in group.values():
-        size[g] = size.get(g, 0) + 1
+    for sc in scope.values():
+        size[sc] = size.get(sc, 0) + 1
     order = {it.nodeid: i for i, it in enumerate(items)}
     items.sort(
         key=lambda it: (
-            group[it.nodeid] != REPRODUCE_GROUP,
-            -size[group[it.nodeid]],
-            group[it.nodeid],
+            scope[it.nodeid] != REPRODUCE_GROUP,
+            -size[scope[it.nodeid]],
+            scope[it.nodeid],
             order[it.nodeid],
         )
     )
