@@ -22,12 +22,12 @@ run: $(STAMP)
 	$(BIN)/aiofl reproduce --out $(OUT) --force
 
 # the tests run on every core (pytest-xdist; a test file stays on one worker, so its
-# fixtures are built once, and the files reading the session's reproduce run share one,
-# queued first: tests/conftest.py); they share one kernel cache (tests/conftest.py); the 25
+# fixtures are built once, and the files reading the session's reproduce run share one:
+# tests/conftest.py); they share one kernel cache (tests/conftest.py); the 25
 # slowest tests are listed at the end (where the suite's time goes)
 test: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks examples docs/conf.py docs/_ext
-	$(BIN)/python -m pytest -n auto --dist loadfile --no-loadscope-reorder --durations=25
+	$(BIN)/python -m pytest -n auto --dist loadfile --durations=25
 
 # the manual (docs/): strict, warnings are errors, the gallery's examples executed;
 # open docs/_build/html/index.html.  The examples use the tests' kernel cache (tests/conftest.py)
